@@ -1,0 +1,1 @@
+//! Derivative reconstruction (work in progress).

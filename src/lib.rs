@@ -1,0 +1,24 @@
+//! # ctsid: continuous-time sparse identification
+//!
+//! ctsid finds continuous-time models `y^(n) = P(y, y', ..., y^(n-1), u)` of real machines from
+//! short, noisy, uniformly sampled input/output runs, with P a sparse multivariate polynomial.
+//! The modules follow the pipeline:
+//!
+//! | stage | module | what it assumes |
+//! |---|---|---|
+//! | records | [`records`] | runs uniformly sampled at tau, named channels |
+//! | derivatives | [`derivatives`] | a smooth signal plus white measurement noise, per run |
+//! | candidate basis | [`basis`] | monomials of degree <= 12 in <= 32 variables |
+//! | sweep engines | [`engine`] | CPU (rayon) or GPU (wgpu compute shaders) |
+//! | sparse regression | [`regression`] | LARS / LassoLars written once against [`engine::SweepEngine`] |
+//!
+//! Errors are typed ([`Error`]); nothing in the library panics on bad input.
+
+pub mod basis;
+pub mod derivatives;
+pub mod engine;
+pub mod error;
+pub mod records;
+pub mod regression;
+
+pub use error::{Error, Result};

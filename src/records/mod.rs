@@ -1,0 +1,1 @@
+//! Record sets (work in progress).

@@ -1,0 +1,1 @@
+//! Sparse regression (work in progress).
