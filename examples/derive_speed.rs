@@ -1,0 +1,31 @@
+//! Timing of the speed targets (single thread): 100 runs x 1000 samples, orders 0..6,
+//! and one run of 1,000,000 samples. Prints wall time; the criterion bench is benches/derivatives.rs.
+use ctsid::derivatives::{differentiate_runs, DerivativeOptions};
+fn signal(n: usize, seed: u64, tau: f64) -> Vec<f64> {
+    let mut s = seed;
+    let mut rnd = || {
+        s = s.wrapping_add(0x9E3779B97F4A7C15);
+        let mut z = s;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let w: Vec<(f64, f64)> = (0..5).map(|i| (0.5 + i as f64 * 1.3, rnd() * 6.0)).collect();
+    (0..n)
+        .map(|i| {
+            let t = i as f64 * tau;
+            w.iter().map(|(f, p)| (f * t + p).sin()).sum::<f64>() + 0.03 * (rnd() - 0.5) * 3.46
+        })
+        .collect()
+}
+fn main() {
+    let runs: Vec<Vec<f64>> = (0..100).map(|r| signal(1000, r, 0.01)).collect();
+    let refs: Vec<&[f64]> = runs.iter().map(|r| r.as_slice()).collect();
+    let t = std::time::Instant::now();
+    let d = differentiate_runs(&refs, 0.01, 6, &DerivativeOptions::default()).unwrap();
+    println!("100 runs x 1000 samples, orders 0..6: {:.3} s (h = {:.4})", t.elapsed().as_secs_f64(), d[0].h);
+    let long = signal(1_000_000, 7, 0.001);
+    let t = std::time::Instant::now();
+    let d = differentiate_runs(&[&long], 0.001, 6, &DerivativeOptions::default()).unwrap();
+    println!("1 run x 1,000,000 samples, orders 0..6: {:.3} s (h = {:.4})", t.elapsed().as_secs_f64(), d[0].h);
+}
