@@ -1,6 +1,8 @@
 //! Prints the derivative comparison table on shared/signals (experiment overrides by env vars).
 fn main() {
-    let dir = std::env::args().nth(1).unwrap_or_else(|| "../shared/signals".into());
+    let dir = std::env::args()
+        .nth(1)
+        .unwrap_or_else(|| "../shared/signals".into());
     let env = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f64>().ok());
     let opts = ctsid::derivatives::DerivativeOptions {
         states: env("CTSID_M").map(|v| v as usize),

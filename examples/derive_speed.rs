@@ -10,7 +10,9 @@ fn signal(n: usize, seed: u64, tau: f64) -> Vec<f64> {
         z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
         ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
     };
-    let w: Vec<(f64, f64)> = (0..5).map(|i| (0.5 + i as f64 * 1.3, rnd() * 6.0)).collect();
+    let w: Vec<(f64, f64)> = (0..5)
+        .map(|i| (0.5 + i as f64 * 1.3, rnd() * 6.0))
+        .collect();
     (0..n)
         .map(|i| {
             let t = i as f64 * tau;
@@ -23,9 +25,17 @@ fn main() {
     let refs: Vec<&[f64]> = runs.iter().map(|r| r.as_slice()).collect();
     let t = std::time::Instant::now();
     let d = differentiate_runs(&refs, 0.01, 6, &DerivativeOptions::default()).unwrap();
-    println!("100 runs x 1000 samples, orders 0..6: {:.3} s (h = {:.4})", t.elapsed().as_secs_f64(), d[0].h);
+    println!(
+        "100 runs x 1000 samples, orders 0..6: {:.3} s (h = {:.4})",
+        t.elapsed().as_secs_f64(),
+        d[0].h
+    );
     let long = signal(1_000_000, 7, 0.001);
     let t = std::time::Instant::now();
     let d = differentiate_runs(&[&long], 0.001, 6, &DerivativeOptions::default()).unwrap();
-    println!("1 run x 1,000,000 samples, orders 0..6: {:.3} s (h = {:.4})", t.elapsed().as_secs_f64(), d[0].h);
+    println!(
+        "1 run x 1,000,000 samples, orders 0..6: {:.3} s (h = {:.4})",
+        t.elapsed().as_secs_f64(),
+        d[0].h
+    );
 }

@@ -9,41 +9,82 @@ pub type Result<T> = std::result::Result<T, Error>;
 /// Everything that can go wrong in ctsid, typed so library callers can react to it.
 #[derive(Debug, Error)]
 pub enum Error {
-    #[error("cannot read {path}: {message}")]
+    #[error("{path}: {message}")]
     Io { path: String, message: String },
 
     #[error("{path}: CSV error at row {row}: {message}")]
-    Csv { path: String, row: usize, message: String },
+    Csv {
+        path: String,
+        row: usize,
+        message: String,
+    },
 
     #[error("{path}: no column named '{column}' (columns are: {available})")]
-    MissingColumn { path: String, column: String, available: String },
+    MissingColumn {
+        path: String,
+        column: String,
+        available: String,
+    },
 
     #[error("{path}: row {row}, column '{column}': '{value}' is not a finite number; remove or repair that sample")]
-    NonFinite { path: String, row: usize, column: String, value: String },
+    NonFinite {
+        path: String,
+        row: usize,
+        column: String,
+        value: String,
+    },
 
     #[error("{path}: row {row}, column '{column}': time does not increase ({prev} then {value}); sort the rows or give a run column")]
-    TimeNotIncreasing { path: String, row: usize, column: String, prev: f64, value: f64 },
+    TimeNotIncreasing {
+        path: String,
+        row: usize,
+        column: String,
+        prev: f64,
+        value: f64,
+    },
 
     #[error("{path}: row {row}, column '{column}': non-uniform sampling (step {step} s, expected {tau} s within 1e-6 relative); resample the record to a uniform grid")]
-    TimeNonUniform { path: String, row: usize, column: String, step: f64, tau: f64 },
+    TimeNonUniform {
+        path: String,
+        row: usize,
+        column: String,
+        step: f64,
+        tau: f64,
+    },
 
     #[error("tau must be a positive finite number of seconds, got {0}")]
     InvalidTau(f64),
 
     #[error("--tau {given} disagrees with the time column '{column}' (step {from_time}); drop --tau or fix it")]
-    TauMismatch { given: f64, from_time: f64, column: String },
+    TauMismatch {
+        given: f64,
+        from_time: f64,
+        column: String,
+    },
 
     #[error("no sampling period: give --tau or a --time-column")]
     MissingTau,
 
     #[error("run '{run}' has {len} samples but {what} needs at least {min}; use longer runs or a lower order")]
-    RunTooShort { run: String, len: usize, min: usize, what: String },
+    RunTooShort {
+        run: String,
+        len: usize,
+        min: usize,
+        what: String,
+    },
 
     #[error("invalid setting '{name}': {reason}")]
     InvalidParameter { name: String, reason: String },
 
-    #[error("{what} needs about {needed_mib:.0} MiB, over the budget of {budget_mib:.0} MiB; {hint}")]
-    TooLarge { what: String, needed_mib: f64, budget_mib: f64, hint: String },
+    #[error(
+        "{what} needs about {needed_mib:.0} MiB, over the budget of {budget_mib:.0} MiB; {hint}"
+    )]
+    TooLarge {
+        what: String,
+        needed_mib: f64,
+        budget_mib: f64,
+        hint: String,
+    },
 
     #[error("{0}")]
     InvalidData(String),
@@ -61,12 +102,19 @@ pub enum Error {
     Model { path: String, message: String },
 
     #[error("simulation diverged at t = {time} s (run '{run}', state {state}); the model is unstable there or the step is too large")]
-    Diverged { run: String, time: f64, state: String },
+    Diverged {
+        run: String,
+        time: f64,
+        state: String,
+    },
 }
 
 impl Error {
     /// Shorthand for an [`Error::InvalidParameter`].
     pub fn param(name: impl Into<String>, reason: impl Into<String>) -> Self {
-        Error::InvalidParameter { name: name.into(), reason: reason.into() }
+        Error::InvalidParameter {
+            name: name.into(),
+            reason: reason.into(),
+        }
     }
 }

@@ -69,7 +69,10 @@ impl Code {
         for (v, &e) in exps.iter().enumerate() {
             for _ in 0..e {
                 if c.degree() >= MAX_DEGREE || v >= MAX_VARS {
-                    return Err(Error::param("exponents", format!("degree above {MAX_DEGREE} or more than {MAX_VARS} variables")));
+                    return Err(Error::param(
+                        "exponents",
+                        format!("degree above {MAX_DEGREE} or more than {MAX_VARS} variables"),
+                    ));
                 }
                 c = c.times(v);
             }
@@ -109,7 +112,9 @@ pub struct BasisLimits {
 impl Default for BasisLimits {
     fn default() -> Self {
         // 5e6 candidates keep the basis tables and per-candidate statistics well under 1 GiB.
-        BasisLimits { max_candidates: 5_000_000 }
+        BasisLimits {
+            max_candidates: 5_000_000,
+        }
     }
 }
 
@@ -145,10 +150,16 @@ impl Basis {
             return Err(Error::param("features", "at least one variable is needed"));
         }
         if n > MAX_VARS {
-            return Err(Error::param("features", format!("{n} variables; at most {MAX_VARS} are supported")));
+            return Err(Error::param(
+                "features",
+                format!("{n} variables; at most {MAX_VARS} are supported"),
+            ));
         }
         if degree > MAX_DEGREE {
-            return Err(Error::param("degree", format!("{degree}; at most {MAX_DEGREE} is supported")));
+            return Err(Error::param(
+                "degree",
+                format!("{degree}; at most {MAX_DEGREE} is supported"),
+            ));
         }
         let total = count(n, degree).unwrap_or(u64::MAX);
         if total > limits.max_candidates {
@@ -157,7 +168,10 @@ impl Basis {
                 what: format!("the basis of degree {degree} in {n} variables ({total} candidates)"),
                 needed_mib: mib(total),
                 budget_mib: mib(limits.max_candidates),
-                hint: format!("lower the degree or the number of features (limit: {} candidates)", limits.max_candidates),
+                hint: format!(
+                    "lower the degree or the number of features (limit: {} candidates)",
+                    limits.max_candidates
+                ),
             });
         }
         let total = total as usize;
@@ -170,7 +184,11 @@ impl Basis {
             let prev_end = codes.len();
             for p in prev_start..prev_end {
                 let pc = codes[p];
-                let first = if pc.degree() == 0 { 0 } else { pc.var(pc.degree() - 1) };
+                let first = if pc.degree() == 0 {
+                    0
+                } else {
+                    pc.var(pc.degree() - 1)
+                };
                 for v in first..n {
                     codes.push(pc.times(v));
                     parents.push(p as u32);
@@ -179,7 +197,12 @@ impl Basis {
             prev_start = prev_end;
         }
         debug_assert_eq!(codes.len(), total);
-        Ok(Basis { names: names.to_vec(), degree, codes, parents })
+        Ok(Basis {
+            names: names.to_vec(),
+            degree,
+            codes,
+            parents,
+        })
     }
 
     pub fn len(&self) -> usize {
@@ -229,11 +252,16 @@ impl Basis {
         if d > self.degree {
             return None;
         }
-        let start = count(self.n_vars(), d.wrapping_sub(1)).filter(|_| d > 0).unwrap_or(0) as usize;
+        let start = count(self.n_vars(), d.wrapping_sub(1))
+            .filter(|_| d > 0)
+            .unwrap_or(0) as usize;
         let end = count(self.n_vars(), d).unwrap() as usize;
         let key = |c: Code| c.vars().collect::<Vec<_>>();
         let target = key(code);
-        self.codes[start..end].binary_search_by(|c| key(*c).cmp(&target)).ok().map(|i| start + i)
+        self.codes[start..end]
+            .binary_search_by(|c| key(*c).cmp(&target))
+            .ok()
+            .map(|i| start + i)
     }
 
     /// The monomial as people write it: `y_d1^2*u`, `1` for the constant.
@@ -252,7 +280,13 @@ pub fn monomial_name(code: Code, names: &[String]) -> String {
         .iter()
         .enumerate()
         .filter(|(_, &k)| k > 0)
-        .map(|(v, &k)| if k == 1 { names[v].clone() } else { format!("{}^{}", names[v], k) })
+        .map(|(v, &k)| {
+            if k == 1 {
+                names[v].clone()
+            } else {
+                format!("{}^{}", names[v], k)
+            }
+        })
         .collect();
     parts.join("*")
 }
@@ -272,7 +306,12 @@ mod tests {
         assert_eq!(count(11, 6), Some(12376));
         assert_eq!(count(13, 9), Some(497420));
         for (n, d) in [(1, 0), (3, 3), (5, 4), (11, 6)] {
-            assert_eq!(Basis::new(&names(n), d, BasisLimits::default()).unwrap().len() as u64, count(n, d).unwrap());
+            assert_eq!(
+                Basis::new(&names(n), d, BasisLimits::default())
+                    .unwrap()
+                    .len() as u64,
+                count(n, d).unwrap()
+            );
         }
     }
 

@@ -1,10 +1,17 @@
-//! Subcommand definitions and dispatch.
+//! Subcommand definitions and dispatch. Each subcommand lives in its own file.
+
+mod derive;
+mod score;
 
 use clap::{Parser, Subcommand};
 use ctsid::Result;
 
 #[derive(Parser, Debug)]
-#[command(name = "ctsid", version, about = "Continuous-time sparse identification of machines from noisy input/output records")]
+#[command(
+    name = "ctsid",
+    version,
+    about = "Continuous-time sparse identification of machines from noisy input/output records"
+)]
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
@@ -12,15 +19,15 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
-    /// Print the library version and the available engines.
-    Info,
+    /// Derivatives of one column (per run), with a per-sample standard deviation.
+    Derive(derive::DeriveArgs),
+    /// Score the derivative method on the shared test signals against the reference anchors.
+    ScoreDerivatives(score::ScoreArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
-        Command::Info => {
-            println!("ctsid {}", env!("CARGO_PKG_VERSION"));
-            Ok(())
-        }
+        Command::Derive(a) => derive::run(a),
+        Command::ScoreDerivatives(a) => score::run(a),
     }
 }

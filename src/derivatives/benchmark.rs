@@ -14,18 +14,58 @@ pub const NOISES: [u32; 3] = [1, 3, 5];
 /// (signal, noise %) -> (ml-derivatives trimmed p95, Kalman trimmed p95, ml-derivatives full p100), orders 1..4.
 pub fn anchors(signal: &str, noise: u32) -> Option<([f64; 4], [f64; 4], Option<[f64; 4]>)> {
     let t = match (signal, noise) {
-        ("sys3_multisine", 1) => ([0.0464, 0.141, 1.59, 4.82], [0.0356, 0.0789, 0.216, 0.538], Some([0.068, 0.589, 2.77, 7.31])),
-        ("sys3_multisine", 3) => ([0.128, 0.461, 2.25, 5.1], [0.0934, 0.22, 0.553, 1.34], Some([0.485, 1.03, 3.65, 7.77])),
-        ("sys3_multisine", 5) => ([0.395, 0.885, 2.54, 5.73], [0.18, 0.426, 1.15, 2.67], Some([0.686, 1.36, 3.78, 13.5])),
-        ("sines", 1) => ([0.0942, 0.158, 0.444, 0.817], [0.0555, 0.0815, 0.14, 0.211], Some([0.187, 0.74, 1.14, 0.902])),
-        ("sines", 3) => ([0.205, 0.276, 0.643, 0.915], [0.104, 0.148, 0.213, 0.253], Some([1.07, 1.61, 1.3, 1.47])),
-        ("sines", 5) => ([0.255, 0.407, 0.953, 1.05], [0.118, 0.155, 0.227, 0.281], Some([1.2, 2.31, 1.73, 1.19])),
-        ("chirp", 1) => ([0.06, 0.627, 4.74, 10.3], [0.0222, 0.0543, 0.172, 0.604], Some([1.13, 5.42, 13.5, 20.2])),
-        ("chirp", 3) => ([0.06, 0.637, 4.73, 10.3], [0.0338, 0.0933, 0.281, 0.849], Some([1.17, 5.56, 13.6, 20.3])),
-        ("chirp", 5) => ([0.0705, 1.48, 5.48, 11.2], [0.048, 0.111, 0.306, 0.855], Some([1.22, 5.62, 13.7, 21.7])),
+        ("sys3_multisine", 1) => (
+            [0.0464, 0.141, 1.59, 4.82],
+            [0.0356, 0.0789, 0.216, 0.538],
+            Some([0.068, 0.589, 2.77, 7.31]),
+        ),
+        ("sys3_multisine", 3) => (
+            [0.128, 0.461, 2.25, 5.1],
+            [0.0934, 0.22, 0.553, 1.34],
+            Some([0.485, 1.03, 3.65, 7.77]),
+        ),
+        ("sys3_multisine", 5) => (
+            [0.395, 0.885, 2.54, 5.73],
+            [0.18, 0.426, 1.15, 2.67],
+            Some([0.686, 1.36, 3.78, 13.5]),
+        ),
+        ("sines", 1) => (
+            [0.0942, 0.158, 0.444, 0.817],
+            [0.0555, 0.0815, 0.14, 0.211],
+            Some([0.187, 0.74, 1.14, 0.902]),
+        ),
+        ("sines", 3) => (
+            [0.205, 0.276, 0.643, 0.915],
+            [0.104, 0.148, 0.213, 0.253],
+            Some([1.07, 1.61, 1.3, 1.47]),
+        ),
+        ("sines", 5) => (
+            [0.255, 0.407, 0.953, 1.05],
+            [0.118, 0.155, 0.227, 0.281],
+            Some([1.2, 2.31, 1.73, 1.19]),
+        ),
+        ("chirp", 1) => (
+            [0.06, 0.627, 4.74, 10.3],
+            [0.0222, 0.0543, 0.172, 0.604],
+            Some([1.13, 5.42, 13.5, 20.2]),
+        ),
+        ("chirp", 3) => (
+            [0.06, 0.637, 4.73, 10.3],
+            [0.0338, 0.0933, 0.281, 0.849],
+            Some([1.17, 5.56, 13.6, 20.3]),
+        ),
+        ("chirp", 5) => (
+            [0.0705, 1.48, 5.48, 11.2],
+            [0.048, 0.111, 0.306, 0.855],
+            Some([1.22, 5.62, 13.7, 21.7]),
+        ),
         ("etc_s1", 1) => ([0.165, 4.2, 41.5, 60.7], [0.179, 4.45, 16.1, 63.6], None),
         ("etc_s1", 3) => ([1.27, 48.1, 161.0, 956.0], [0.255, 4.72, 12.8, 44.0], None),
-        ("etc_s1", 5) => ([10.1, 1320.0, 27500.0, 594000.0], [0.351, 5.84, 17.5, 39.4], None),
+        ("etc_s1", 5) => (
+            [10.1, 1320.0, 27500.0, 594000.0],
+            [0.351, 5.84, 17.5, 39.4],
+            None,
+        ),
         _ => return None,
     };
     Some(t)
@@ -42,18 +82,55 @@ pub struct Signal {
 pub fn load_signal(dir: &Path, name: &str) -> Result<Signal> {
     let path = dir.join(format!("{name}.csv"));
     let p = path.display().to_string();
-    let mut rdr = csv::Reader::from_path(&path).map_err(|e| Error::Io { path: p.clone(), message: e.to_string() })?;
-    let header: Vec<String> = rdr.headers().map_err(|e| Error::Csv { path: p.clone(), row: 1, message: e.to_string() })?.iter().map(String::from).collect();
-    let col = |n: &str| header.iter().position(|h| h == n).ok_or_else(|| Error::MissingColumn { path: p.clone(), column: n.into(), available: header.join(", ") });
+    let mut rdr = csv::Reader::from_path(&path).map_err(|e| Error::Io {
+        path: p.clone(),
+        message: e.to_string(),
+    })?;
+    let header: Vec<String> = rdr
+        .headers()
+        .map_err(|e| Error::Csv {
+            path: p.clone(),
+            row: 1,
+            message: e.to_string(),
+        })?
+        .iter()
+        .map(String::from)
+        .collect();
+    let col = |n: &str| {
+        header
+            .iter()
+            .position(|h| h == n)
+            .ok_or_else(|| Error::MissingColumn {
+                path: p.clone(),
+                column: n.into(),
+                available: header.join(", "),
+            })
+    };
     let tcol = col("t")?;
-    let ycols: Vec<usize> = (0..5).map(|k| col(&format!("y{k}"))).collect::<Result<_>>()?;
-    let ncols: Vec<(u32, usize)> = NOISES.iter().map(|&n| Ok((n, col(&format!("ym_{n}pct"))?))).collect::<Result<_>>()?;
+    let ycols: Vec<usize> = (0..5)
+        .map(|k| col(&format!("y{k}")))
+        .collect::<Result<_>>()?;
+    let ncols: Vec<(u32, usize)> = NOISES
+        .iter()
+        .map(|&n| Ok((n, col(&format!("ym_{n}pct"))?)))
+        .collect::<Result<_>>()?;
     let mut t = Vec::new();
     let mut truth = vec![Vec::new(); 5];
     let mut noisy: Vec<(u32, Vec<f64>)> = ncols.iter().map(|&(n, _)| (n, Vec::new())).collect();
     for (r, rec) in rdr.records().enumerate() {
-        let rec = rec.map_err(|e| Error::Csv { path: p.clone(), row: r + 2, message: e.to_string() })?;
-        let num = |c: usize| rec[c].parse::<f64>().map_err(|_| Error::NonFinite { path: p.clone(), row: r + 2, column: header[c].clone(), value: rec[c].into() });
+        let rec = rec.map_err(|e| Error::Csv {
+            path: p.clone(),
+            row: r + 2,
+            message: e.to_string(),
+        })?;
+        let num = |c: usize| {
+            rec[c].parse::<f64>().map_err(|_| Error::NonFinite {
+                path: p.clone(),
+                row: r + 2,
+                column: header[c].clone(),
+                value: rec[c].into(),
+            })
+        };
         t.push(num(tcol)?);
         for k in 0..5 {
             truth[k].push(num(ycols[k])?);
@@ -65,7 +142,12 @@ pub fn load_signal(dir: &Path, name: &str) -> Result<Signal> {
     if t.len() < 2 {
         return Err(Error::InvalidData(format!("{p}: fewer than two rows")));
     }
-    Ok(Signal { name: name.into(), tau: t[1] - t[0], truth, noisy })
+    Ok(Signal {
+        name: name.into(),
+        tau: t[1] - t[0],
+        truth,
+        noisy,
+    })
 }
 
 /// Our scores for one (signal, noise): per order 1..4.
@@ -84,12 +166,21 @@ pub struct Row {
 pub fn score_one(sig: &Signal, d: &Derivatives, noise: u32) -> Row {
     let n = sig.truth[0].len();
     let (a, b) = trimmed_range(n);
-    let mut row = Row { signal: sig.name.clone(), noise, trimmed_p95: [0.0; 4], full_p100: [0.0; 4], coverage2: [0.0; 4], rank_corr: [0.0; 4] };
+    let mut row = Row {
+        signal: sig.name.clone(),
+        noise,
+        trimmed_p95: [0.0; 4],
+        full_p100: [0.0; 4],
+        coverage2: [0.0; 4],
+        rank_corr: [0.0; 4],
+    };
     for k in 1..=4 {
         row.trimmed_p95[k - 1] = normalised_percentile(&d.values[k], &sig.truth[k], 95.0, a, b);
         row.full_p100[k - 1] = normalised_percentile(&d.values[k], &sig.truth[k], 100.0, 0, n);
         row.coverage2[k - 1] = coverage(&d.values[k], &sig.truth[k], &d.sigma[k], 2.0);
-        let err: Vec<f64> = (0..n).map(|i| (d.values[k][i] - sig.truth[k][i]).abs()).collect();
+        let err: Vec<f64> = (0..n)
+            .map(|i| (d.values[k][i] - sig.truth[k][i]).abs())
+            .collect();
         row.rank_corr[k - 1] = spearman(&d.sigma[k], &err);
     }
     row
@@ -114,14 +205,19 @@ pub fn run_with(dir: &Path, opts: &DerivativeOptions) -> Result<Vec<Row>> {
 }
 
 fn fmt4(v: &[f64; 4]) -> String {
-    v.iter().map(|x| format!("{:.3}", x)).collect::<Vec<_>>().join("/")
+    v.iter()
+        .map(|x| format!("{:.3}", x))
+        .collect::<Vec<_>>()
+        .join("/")
 }
 
 /// The comparison table as Markdown, with a verdict per row against the gates.
 pub fn table(rows: &[Row]) -> String {
     let mut s = String::from("| signal | noise | ours trimmed p95 | ml-derivatives | Kalman 6-state | ours full p100 | ml-der. full p100 | 2-sigma coverage | rank corr | gates |\n|---|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
-        let Some((ml, kal, mlfull)) = anchors(&r.signal, r.noise) else { continue };
+        let Some((ml, kal, mlfull)) = anchors(&r.signal, r.noise) else {
+            continue;
+        };
         let ok = gates_pass(r);
         s += &format!(
             "| {} | {}% | {} | {} | {} | {} | {} | {} | {} | {} |\n",
@@ -132,8 +228,16 @@ pub fn table(rows: &[Row]) -> String {
             fmt4(&kal),
             fmt4(&r.full_p100),
             mlfull.map(|v| fmt4(&v)).unwrap_or_else(|| "-".into()),
-            r.coverage2.iter().map(|x| format!("{:.2}", x)).collect::<Vec<_>>().join("/"),
-            r.rank_corr.iter().map(|x| format!("{:.2}", x)).collect::<Vec<_>>().join("/"),
+            r.coverage2
+                .iter()
+                .map(|x| format!("{:.2}", x))
+                .collect::<Vec<_>>()
+                .join("/"),
+            r.rank_corr
+                .iter()
+                .map(|x| format!("{:.2}", x))
+                .collect::<Vec<_>>()
+                .join("/"),
             if ok { "pass" } else { "FAIL" }
         );
     }
@@ -142,12 +246,17 @@ pub fn table(rows: &[Row]) -> String {
 
 /// The accuracy gates for one row.
 pub fn gates_pass(r: &Row) -> bool {
-    let Some((ml, kal, mlfull)) = anchors(&r.signal, r.noise) else { return true };
+    let Some((ml, kal, mlfull)) = anchors(&r.signal, r.noise) else {
+        return true;
+    };
     (0..4).all(|k| {
         let t = r.trimmed_p95[k];
         if r.signal == "etc_s1" {
             if r.noise == 1 {
-                t <= ml[k].max(kal[k]).min(ml[k].min(kal[k]).max(0.0)).max(ml[k].min(kal[k]))
+                t <= ml[k]
+                    .max(kal[k])
+                    .min(ml[k].min(kal[k]).max(0.0))
+                    .max(ml[k].min(kal[k]))
             } else {
                 t <= 0.5 * ml[k]
             }

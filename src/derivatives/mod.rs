@@ -40,6 +40,10 @@ pub const MAX_ORDER: usize = 8;
 /// Smoothing levels tried locally, in octaves above the globally tuned one.
 const LADDER: [f64; 5] = [0.0, 0.5, 1.0, 2.0, 3.0];
 
+/// Largest scaled step: beyond a few units the smoother interpolates the samples and the
+/// integrator chain's transition matrix only loses precision.
+const H_MAX: f64 = 4.0;
+
 /// Optional overrides; the defaults self-tune everything.
 #[derive(Debug, Clone)]
 pub struct DerivativeOptions {
@@ -59,7 +63,14 @@ pub struct DerivativeOptions {
 
 impl Default for DerivativeOptions {
     fn default() -> Self {
-        DerivativeOptions { states: None, h: None, end_lambda: 0.5, adaptive: true, window: 2.0, end_blend: true }
+        DerivativeOptions {
+            states: None,
+            h: None,
+            end_lambda: 0.5,
+            adaptive: true,
+            window: 2.0,
+            end_blend: true,
+        }
     }
 }
 
@@ -89,21 +100,41 @@ pub fn differentiate(y: &[f64], tau: f64, max_order: usize) -> Result<Derivative
 }
 
 /// One run, with overrides.
-pub fn differentiate_with(y: &[f64], tau: f64, max_order: usize, opts: &DerivativeOptions) -> Result<Derivatives> {
+pub fn differentiate_with(
+    y: &[f64],
+    tau: f64,
+    max_order: usize,
+    opts: &DerivativeOptions,
+) -> Result<Derivatives> {
     Ok(differentiate_runs(&[y], tau, max_order, opts)?.remove(0))
 }
 
 /// Several runs of one record set, tuned jointly and smoothed separately.
-pub fn differentiate_runs(runs: &[&[f64]], tau: f64, max_order: usize, opts: &DerivativeOptions) -> Result<Vec<Derivatives>> {
+pub fn differentiate_runs(
+    runs: &[&[f64]],
+    tau: f64,
+    max_order: usize,
+    opts: &DerivativeOptions,
+) -> Result<Vec<Derivatives>> {
     if !(tau.is_finite() && tau > 0.0) {
         return Err(Error::InvalidTau(tau));
     }
     if max_order > MAX_ORDER {
-        return Err(Error::param("order", format!("{max_order}; at most {MAX_ORDER} is supported")));
+        return Err(Error::param(
+            "order",
+            format!("{max_order}; at most {MAX_ORDER} is supported"),
+        ));
     }
     let m = opts.states.unwrap_or((max_order + 3).max(5));
     if m <= max_order || !(kernel::MIN_STATES..=kernel::MAX_STATES).contains(&m) {
-        return Err(Error::param("states", format!("{m} states cannot give order {max_order}; use {}..={}", max_order + 1, kernel::MAX_STATES)));
+        return Err(Error::param(
+            "states",
+            format!(
+                "{m} states cannot give order {max_order}; use {}..={}",
+                max_order + 1,
+                kernel::MAX_STATES
+            ),
+        ));
     }
     if runs.is_empty() {
         return Err(Error::InvalidData("no runs to differentiate".into()));
@@ -111,10 +142,18 @@ pub fn differentiate_runs(runs: &[&[f64]], tau: f64, max_order: usize, opts: &De
     let min = min_samples(max_order);
     for (r, y) in runs.iter().enumerate() {
         if y.len() < min {
-            return Err(Error::RunTooShort { run: r.to_string(), len: y.len(), min, what: format!("derivatives up to order {max_order}") });
+            return Err(Error::RunTooShort {
+                run: r.to_string(),
+                len: y.len(),
+                min,
+                what: format!("derivatives up to order {max_order}"),
+            });
         }
         if let Some(i) = y.iter().position(|v| !v.is_finite()) {
-            return Err(Error::InvalidData(format!("run {r}, sample {i} is not a finite number ({})", y[i])));
+            return Err(Error::InvalidData(format!(
+                "run {r}, sample {i} is not a finite number ({})",
+                y[i]
+            )));
         }
     }
     if let Some(h) = opts.h {
@@ -123,10 +162,19 @@ pub fn differentiate_runs(runs: &[&[f64]], tau: f64, max_order: usize, opts: &De
         }
     }
 
-    let means: Vec<f64> = runs.iter().map(|y| y.iter().sum::<f64>() / y.len() as f64).collect();
-    let centred: Vec<Vec<f64>> = runs.iter().zip(&means).map(|(y, m)| y.iter().map(|v| v - m).collect()).collect();
+    let means: Vec<f64> = runs
+        .iter()
+        .map(|y| y.iter().sum::<f64>() / y.len() as f64)
+        .collect();
+    let centred: Vec<Vec<f64>> = runs
+        .iter()
+        .zip(&means)
+        .map(|(y, m)| y.iter().map(|v| v - m).collect())
+        .collect();
     // Constant runs carry no information for tuning; they are returned exactly.
-    let live: Vec<usize> = (0..runs.len()).filter(|&r| centred[r].iter().any(|v| *v != 0.0)).collect();
+    let live: Vec<usize> = (0..runs.len())
+        .filter(|&r| centred[r].iter().any(|v| *v != 0.0))
+        .collect();
     let live_y: Vec<&[f64]> = live.iter().map(|&r| centred[r].as_slice()).collect();
 
     let mut out: Vec<Derivatives> = runs
@@ -136,7 +184,14 @@ pub fn differentiate_runs(runs: &[&[f64]], tau: f64, max_order: usize, opts: &De
             let n = y.len();
             let mut values = vec![vec![0.0; n]; max_order + 1];
             values[0] = vec![mu; n];
-            Derivatives { tau, values, sigma: vec![vec![0.0; n]; max_order + 1], noise_sd: 0.0, h: 1.0, states: m }
+            Derivatives {
+                tau,
+                values,
+                sigma: vec![vec![0.0; n]; max_order + 1],
+                noise_sd: 0.0,
+                h: 1.0,
+                states: m,
+            }
         })
         .collect();
     if live.is_empty() {
@@ -145,9 +200,18 @@ pub fn differentiate_runs(runs: &[&[f64]], tau: f64, max_order: usize, opts: &De
 
     let (h, fit) = match opts.h {
         Some(h) => (h, tune::evaluate(m, h, 0.0, &live_y)),
-        None => tune::best_h(m, &live_y, (1e-4f64).ln(), (4.0f64).ln()),
+        None => tune::best_h(m, &live_y, (1e-4f64).ln(), H_MAX.ln()),
     };
-    let levels: Vec<f64> = if opts.adaptive { LADDER.iter().map(|o| h * 2f64.powf(*o)).collect() } else { vec![h] };
+    let mut levels: Vec<f64> = if opts.adaptive {
+        LADDER
+            .iter()
+            .map(|o| h * 2f64.powf(*o))
+            .filter(|&l| l == h || l <= H_MAX)
+            .collect()
+    } else {
+        vec![h]
+    };
+    levels.dedup();
 
     // Covariances per (level, run length), shared by all runs of that length.
     let mut lengths: Vec<usize> = live_y.iter().map(|y| y.len()).collect();
@@ -155,17 +219,31 @@ pub fn differentiate_runs(runs: &[&[f64]], tau: f64, max_order: usize, opts: &De
     lengths.dedup();
     let cov_for = |hl: f64, lambda: f64| -> Vec<(usize, Cov)> {
         let d = statespace::discretise(m, hl, lambda);
-        lengths.iter().map(|&n| (n, Cov::new(&d, n, true))).collect()
+        lengths
+            .iter()
+            .map(|&n| (n, Cov::new(&d, n, true)))
+            .collect()
     };
-    let pick = |covs: &'_ [(usize, Cov)], n: usize| -> usize { covs.iter().position(|(l, _)| *l == n).unwrap() };
+    let pick = |covs: &'_ [(usize, Cov)], n: usize| -> usize {
+        covs.iter().position(|(l, _)| *l == n).unwrap()
+    };
     let level_covs: Vec<Vec<(usize, Cov)>> = levels.iter().map(|&hl| cov_for(hl, 0.0)).collect();
     let end_covs = opts.end_blend.then(|| cov_for(h, opts.end_lambda));
-    let end_sigma2 = opts.end_blend.then(|| tune::evaluate(m, h, opts.end_lambda, &live_y).sigma2);
+    let end_sigma2 = opts
+        .end_blend
+        .then(|| tune::evaluate(m, h, opts.end_lambda, &live_y).sigma2);
 
     for (li, &r) in live.iter().enumerate() {
         let y = live_y[li];
         let n = y.len();
-        let weights = level_weights(&levels, &level_covs, y, fit.sigma2, (opts.window / h).round() as usize, pick);
+        let weights = level_weights(
+            &levels,
+            &level_covs,
+            y,
+            fit.sigma2,
+            (opts.window / h).round() as usize,
+            pick,
+        );
         // Accumulate mean and second moment of the blend, order by order.
         let mut mean = vec![vec![0.0; n]; max_order + 1];
         let mut second = vec![vec![0.0; n]; max_order + 1];
@@ -198,8 +276,13 @@ pub fn differentiate_runs(runs: &[&[f64]], tau: f64, max_order: usize, opts: &De
                 let var = cov.var(i);
                 for k in 0..=max_order {
                     let v = x[k] * scale[k];
-                    mean[k][i] = (1.0 - b) * mean[k][i] + b * v;
-                    second[k][i] = (1.0 - b) * second[k][i] + b * (var[k] * s2 * scale[k] * scale[k] + v * v);
+                    let vm = var[k] * s2 * scale[k] * scale[k];
+                    // Trust the stationary prior only as far as the chain is less certain than it
+                    // (an exact polynomial keeps the chain's estimate).
+                    let vi = (second[k][i] - mean[k][i] * mean[k][i]).max(0.0);
+                    let bk = b * vi / (vi + vm).max(1e-300);
+                    mean[k][i] = (1.0 - bk) * mean[k][i] + bk * v;
+                    second[k][i] = (1.0 - bk) * second[k][i] + bk * (vm + v * v);
                 }
             });
         }
@@ -231,7 +314,14 @@ fn end_weight(dist: f64, width: f64) -> f64 {
 
 /// Soft weights of the smoothing levels at every sample: softmax of windowed sums of the
 /// innovation log-likelihood, then averaged over half a window so that switches are gradual.
-fn level_weights(levels: &[f64], covs: &[Vec<(usize, Cov)>], y: &[f64], sigma2: f64, half: usize, pick: impl Fn(&[(usize, Cov)], usize) -> usize) -> Vec<Vec<f64>> {
+fn level_weights(
+    levels: &[f64],
+    covs: &[Vec<(usize, Cov)>],
+    y: &[f64],
+    sigma2: f64,
+    half: usize,
+    pick: impl Fn(&[(usize, Cov)], usize) -> usize,
+) -> Vec<Vec<f64>> {
     let n = y.len();
     if levels.len() == 1 {
         return vec![vec![1.0; n]];
@@ -270,5 +360,7 @@ fn window_sum(v: &[f64], half: usize) -> Vec<f64> {
     for i in 0..n {
         pre[i + 1] = pre[i] + v[i];
     }
-    (0..n).map(|i| pre[(i + half + 1).min(n)] - pre[i.saturating_sub(half)]).collect()
+    (0..n)
+        .map(|i| pre[(i + half + 1).min(n)] - pre[i.saturating_sub(half)])
+        .collect()
 }

@@ -20,7 +20,10 @@ pub fn percentile(values: &[f64], q: f64) -> f64 {
 /// Normalised error percentile p_q on samples [from, to).
 pub fn normalised_percentile(est: &[f64], truth: &[f64], q: f64, from: usize, to: usize) -> f64 {
     let err: Vec<f64> = (from..to).map(|i| (est[i] - truth[i]).abs()).collect();
-    let med = percentile(&truth[from..to].iter().map(|v| v.abs()).collect::<Vec<_>>(), 50.0);
+    let med = percentile(
+        &truth[from..to].iter().map(|v| v.abs()).collect::<Vec<_>>(),
+        50.0,
+    );
     percentile(&err, q) / (1e-12 + med)
 }
 
@@ -32,7 +35,12 @@ pub fn trimmed_range(n: usize) -> (usize, usize) {
 
 /// Share of samples whose error is within `k` sigma.
 pub fn coverage(est: &[f64], truth: &[f64], sigma: &[f64], k: f64) -> f64 {
-    let inside = est.iter().zip(truth).zip(sigma).filter(|((e, t), s)| (*e - *t).abs() <= k * **s).count();
+    let inside = est
+        .iter()
+        .zip(truth)
+        .zip(sigma)
+        .filter(|((e, t), s)| (*e - *t).abs() <= k * **s)
+        .count();
     inside as f64 / est.len() as f64
 }
 

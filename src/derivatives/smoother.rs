@@ -67,7 +67,9 @@ fn sym<const M: usize>(p: &mut Mat<M>) {
 
 /// Converged when every entry moved less than `tol` relative to the diagonal scales.
 fn close<const M: usize>(a: &Mat<M>, b: &Mat<M>, tol: f64) -> bool {
-    (0..M).all(|i| (0..M).all(|j| (a[i][j] - b[i][j]).abs() <= tol * (a[i][i] * a[j][j]).abs().sqrt() + 1e-300))
+    (0..M).all(|i| {
+        (0..M).all(|j| (a[i][j] - b[i][j]).abs() <= tol * (a[i][i] * a[j][j]).abs().sqrt() + 1e-300)
+    })
 }
 
 fn to_mat<const M: usize>(v: &[f64]) -> Mat<M> {
@@ -124,7 +126,8 @@ impl<const M: usize> Covariances<M> {
         let a: Mat<M> = to_mat(&d.a);
         let q: Mat<M> = to_mat(&d.q);
         let mut pp: Mat<M> = to_mat(&d.p0);
-        let (mut pps, mut pfs, mut gains, mut ss) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut pps, mut pfs, mut gains, mut ss) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         let mut next;
         loop {
             let k = pps.len();
@@ -159,10 +162,22 @@ impl<const M: usize> Covariances<M> {
         }
         let last = pps.len() - 1;
         if !with_smoother {
-            return Covariances { n, a, diffuse: d.diffuse, gain: gains, s: ss, rts: Vec::new(), head: Vec::new(), tail: Vec::new(), steady: [0.0; M] };
+            return Covariances {
+                n,
+                a,
+                diffuse: d.diffuse,
+                gain: gains,
+                s: ss,
+                rts: Vec::new(),
+                head: Vec::new(),
+                tail: Vec::new(),
+                steady: [0.0; M],
+            };
         }
         let pp_after = if last + 1 < n { next } else { pps[last] };
-        let rts: Vec<Mat<M>> = (0..=last).map(|k| rts_gain(&pfs[k], &a, if k < last { &pps[k + 1] } else { &pp_after })).collect();
+        let rts: Vec<Mat<M>> = (0..=last)
+            .map(|k| rts_gain(&pfs[k], &a, if k < last { &pps[k + 1] } else { &pp_after }))
+            .collect();
         let fidx = |k: usize| k.min(last);
 
         // Backward covariance recursion; steady stretches are skipped once converged.
@@ -215,12 +230,26 @@ impl<const M: usize> Covariances<M> {
         }
         head_rev.reverse();
         let head = head_rev;
-        Covariances { n, a, diffuse: d.diffuse, gain: gains, s: ss, rts, head, tail, steady }
+        Covariances {
+            n,
+            a,
+            diffuse: d.diffuse,
+            gain: gains,
+            s: ss,
+            rts,
+            head,
+            tail,
+            steady,
+        }
     }
 
     /// Forward pass: profile log-likelihood terms (sum e^2/S, sum log S, count).
     pub fn loglik_terms(&self, y: &[f64]) -> (f64, f64, usize) {
-        let skip = if self.diffuse { M.min(y.len().saturating_sub(1)) } else { 0 };
+        let skip = if self.diffuse {
+            M.min(y.len().saturating_sub(1))
+        } else {
+            0
+        };
         let last = self.gain.len() - 1;
         let mut x = [0.0; M];
         let (mut e2s, mut logs) = (0.0, 0.0);
@@ -230,7 +259,11 @@ impl<const M: usize> Covariances<M> {
             let e = yk - x[0];
             if k >= skip {
                 e2s += e * e / self.s[i];
-                logs += if i == last { log_steady } else { self.s[i].ln() };
+                logs += if i == last {
+                    log_steady
+                } else {
+                    self.s[i].ln()
+                };
             }
             let g = &self.gain[i];
             for r in 0..M {
@@ -249,7 +282,11 @@ impl<const M: usize> Covariances<M> {
             let i = self.fidx(k);
             let e = yk - x[0];
             let s = self.s[i] * sigma2;
-            out[k] = if k >= skip { -0.5 * (s.ln() + e * e / s) } else { 0.0 };
+            out[k] = if k >= skip {
+                -0.5 * (s.ln() + e * e / s)
+            } else {
+                0.0
+            };
             let g = &self.gain[i];
             for r in 0..M {
                 x[r] += g[r] * e;
@@ -306,7 +343,11 @@ fn rts_gain<const M: usize>(pf: &Mat<M>, a: &Mat<M>, pp: &Mat<M>) -> Mat<M> {
             for k in 0..j {
                 s -= l[i][k] * l[j][k];
             }
-            l[i][j] = if i == j { s.max(1e-300).sqrt() } else { s / l[j][j] };
+            l[i][j] = if i == j {
+                s.max(1e-300).sqrt()
+            } else {
+                s / l[j][j]
+            };
         }
     }
     // P_p G^T = B^T  <=>  C (D G^T) = D^-1 B^T; solve column by column.

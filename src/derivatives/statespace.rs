@@ -59,7 +59,8 @@ pub fn discretise(m: usize, h: f64, lambda: f64) -> Discrete {
             }
             for j in 0..m {
                 let p = 2 * m - 1 - i - j;
-                q[i * m + j] = h.powi(p as i32) / (p as f64 * factorial(m - 1 - i) * factorial(m - 1 - j));
+                q[i * m + j] =
+                    h.powi(p as i32) / (p as f64 * factorial(m - 1 - i) * factorial(m - 1 - j));
             }
         }
         (a, q)
@@ -89,8 +90,18 @@ pub fn discretise(m: usize, h: f64, lambda: f64) -> Discrete {
         }
         (a, q)
     };
-    let (p0, diffuse) = if lambda == 0.0 { (diffuse_prior(m), true) } else { (stationary_cov(m, lambda), false) };
-    Discrete { m, a, q, p0, diffuse }
+    let (p0, diffuse) = if lambda == 0.0 {
+        (diffuse_prior(m), true)
+    } else {
+        (stationary_cov(m, lambda), false)
+    };
+    Discrete {
+        m,
+        a,
+        q,
+        p0,
+        diffuse,
+    }
 }
 
 fn diffuse_prior(m: usize) -> Vec<f64> {
@@ -119,7 +130,10 @@ pub fn stationary_cov(m: usize, lambda: f64) -> Vec<f64> {
     }
     let mut rhs = nalgebra::DVector::zeros(n);
     rhs[(m - 1) + (m - 1) * m] = -1.0;
-    let sol = k.lu().solve(&rhs).expect("stationary covariance of a stable damped chain exists");
+    let sol = k
+        .lu()
+        .solve(&rhs)
+        .expect("stationary covariance of a stable damped chain exists");
     let mut p = vec![0.0; n];
     for i in 0..m {
         for j in 0..m {
@@ -140,8 +154,16 @@ mod tests {
         let exact = discretise(m, h, 0.0);
         let damped = discretise(m, h, 1e-7);
         for i in 0..m * m {
-            assert!((exact.a[i] - damped.a[i]).abs() < 1e-5 * (1.0 + exact.a[i].abs()), "A[{i}]");
-            assert!((exact.q[i] - damped.q[i]).abs() < 1e-5 * (1e-3 + exact.q[i].abs()), "Q[{i}]: {} {}", exact.q[i], damped.q[i]);
+            assert!(
+                (exact.a[i] - damped.a[i]).abs() < 1e-5 * (1.0 + exact.a[i].abs()),
+                "A[{i}]"
+            );
+            assert!(
+                (exact.q[i] - damped.q[i]).abs() < 1e-5 * (1e-3 + exact.q[i].abs()),
+                "Q[{i}]: {} {}",
+                exact.q[i],
+                damped.q[i]
+            );
         }
     }
 

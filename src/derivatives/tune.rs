@@ -35,7 +35,10 @@ pub fn evaluate(m: usize, h: f64, lambda: f64, runs: &[&[f64]]) -> Fit {
     }
     let count = count.max(1) as f64;
     let sigma2 = (e2s / count).max(1e-300);
-    Fit { sigma2, loglik: -0.5 * count * sigma2.ln() - 0.5 * logs - 0.5 * count }
+    Fit {
+        sigma2,
+        loglik: -0.5 * count * sigma2.ln() - 0.5 * logs - 0.5 * count,
+    }
 }
 
 /// Best h on [exp(lo), exp(hi)], by a coarse grid then golden section on log h.

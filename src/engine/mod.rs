@@ -27,9 +27,16 @@ pub struct Features {
 impl Features {
     pub fn new(names: Vec<String>, columns: Vec<Vec<f64>>) -> Features {
         let n_samples = columns.first().map_or(0, |c| c.len());
-        assert!(columns.iter().all(|c| c.len() == n_samples), "feature columns must have equal length");
+        assert!(
+            columns.iter().all(|c| c.len() == n_samples),
+            "feature columns must have equal length"
+        );
         let data = columns.concat();
-        Features { n_samples, names, data }
+        Features {
+            n_samples,
+            names,
+            data,
+        }
     }
 
     pub fn n_vars(&self) -> usize {

@@ -60,28 +60,48 @@ impl RecordSet {
         check_tau(tau)?;
         for r in &runs {
             if r.channels.len() != channel_names.len() {
-                return Err(Error::InvalidData(format!("run '{}' has {} channels, expected {}", r.id, r.channels.len(), channel_names.len())));
+                return Err(Error::InvalidData(format!(
+                    "run '{}' has {} channels, expected {}",
+                    r.id,
+                    r.channels.len(),
+                    channel_names.len()
+                )));
             }
             let n = r.len();
             for (c, ch) in r.channels.iter().enumerate() {
                 if ch.len() != n {
-                    return Err(Error::InvalidData(format!("run '{}': channel '{}' has {} samples, expected {n}", r.id, channel_names[c], ch.len())));
+                    return Err(Error::InvalidData(format!(
+                        "run '{}': channel '{}' has {} samples, expected {n}",
+                        r.id,
+                        channel_names[c],
+                        ch.len()
+                    )));
                 }
                 if let Some(i) = ch.iter().position(|v| !v.is_finite()) {
-                    return Err(Error::InvalidData(format!("run '{}': channel '{}' sample {i} is not a finite number ({})", r.id, channel_names[c], ch[i])));
+                    return Err(Error::InvalidData(format!(
+                        "run '{}': channel '{}' sample {i} is not a finite number ({})",
+                        r.id, channel_names[c], ch[i]
+                    )));
                 }
             }
         }
-        Ok(RecordSet { tau, channel_names, runs })
+        Ok(RecordSet {
+            tau,
+            channel_names,
+            runs,
+        })
     }
 
     /// Index of a channel by name, with an error that lists the available ones.
     pub fn channel_index(&self, name: &str) -> Result<usize> {
-        self.channel_names.iter().position(|c| c == name).ok_or_else(|| Error::MissingColumn {
-            path: "record set".into(),
-            column: name.into(),
-            available: self.channel_names.join(", "),
-        })
+        self.channel_names
+            .iter()
+            .position(|c| c == name)
+            .ok_or_else(|| Error::MissingColumn {
+                path: "record set".into(),
+                column: name.into(),
+                available: self.channel_names.join(", "),
+            })
     }
 
     /// Samples of one channel in one run.
@@ -94,7 +114,12 @@ impl RecordSet {
     pub fn require_min_len(&self, min: usize, what: &str) -> Result<()> {
         for r in &self.runs {
             if r.len() < min {
-                return Err(Error::RunTooShort { run: r.id.clone(), len: r.len(), min, what: what.into() });
+                return Err(Error::RunTooShort {
+                    run: r.id.clone(),
+                    len: r.len(),
+                    min,
+                    what: what.into(),
+                });
             }
         }
         Ok(())
@@ -104,36 +129,57 @@ impl RecordSet {
     pub fn from_csv(path: impl AsRef<Path>, spec: &CsvSpec) -> Result<RecordSet> {
         let path = path.as_ref();
         let p = path.display().to_string();
-        let file = std::fs::File::open(path).map_err(|e| Error::Io { path: p.clone(), message: e.to_string() })?;
+        let file = std::fs::File::open(path).map_err(|e| Error::Io {
+            path: p.clone(),
+            message: e.to_string(),
+        })?;
         Self::from_reader(file, &p, spec)
     }
 
     /// Loads from any reader; `label` names the source in messages.
-    pub fn from_reader<R: std::io::Read>(reader: R, label: &str, spec: &CsvSpec) -> Result<RecordSet> {
+    pub fn from_reader<R: std::io::Read>(
+        reader: R,
+        label: &str,
+        spec: &CsvSpec,
+    ) -> Result<RecordSet> {
         if let Some(t) = spec.tau {
             check_tau(t)?;
         }
         if spec.tau.is_none() && spec.time_column.is_none() {
             return Err(Error::MissingTau);
         }
-        let mut rdr = csv::ReaderBuilder::new().trim(csv::Trim::All).flexible(false).from_reader(reader);
+        let mut rdr = csv::ReaderBuilder::new()
+            .trim(csv::Trim::All)
+            .flexible(false)
+            .from_reader(reader);
         let header: Vec<String> = rdr
             .headers()
-            .map_err(|e| Error::Csv { path: label.into(), row: 1, message: e.to_string() })?
+            .map_err(|e| Error::Csv {
+                path: label.into(),
+                row: 1,
+                message: e.to_string(),
+            })?
             .iter()
             .map(|s| s.to_string())
             .collect();
         let find = |name: &str| -> Result<usize> {
-            header.iter().position(|h| h == name).ok_or_else(|| Error::MissingColumn {
-                path: label.into(),
-                column: name.into(),
-                available: header.join(", "),
-            })
+            header
+                .iter()
+                .position(|h| h == name)
+                .ok_or_else(|| Error::MissingColumn {
+                    path: label.into(),
+                    column: name.into(),
+                    available: header.join(", "),
+                })
         };
         if spec.columns.is_empty() {
             return Err(Error::param("columns", "name at least one column to load"));
         }
-        let cols: Vec<usize> = spec.columns.iter().map(|c| find(c)).collect::<Result<_>>()?;
+        let cols: Vec<usize> = spec
+            .columns
+            .iter()
+            .map(|c| find(c))
+            .collect::<Result<_>>()?;
         let run_col = spec.run_column.as_deref().map(find).transpose()?;
         let time_col = spec.time_column.as_deref().map(find).transpose()?;
 
@@ -148,15 +194,31 @@ impl RecordSet {
         let parse = |s: &str, row: usize, col: &str| -> Result<f64> {
             match s.parse::<f64>() {
                 Ok(v) if v.is_finite() => Ok(v),
-                _ => Err(Error::NonFinite { path: label.into(), row, column: col.into(), value: s.into() }),
+                _ => Err(Error::NonFinite {
+                    path: label.into(),
+                    row,
+                    column: col.into(),
+                    value: s.into(),
+                }),
             }
         };
         for (i, rec) in rdr.records().enumerate() {
             let row = i + 2;
-            let rec = rec.map_err(|e| Error::Csv { path: label.into(), row, message: e.to_string() })?;
-            let id = run_col.map(|c| rec[c].to_string()).unwrap_or_else(|| "0".into());
+            let rec = rec.map_err(|e| Error::Csv {
+                path: label.into(),
+                row,
+                message: e.to_string(),
+            })?;
+            let id = run_col
+                .map(|c| rec[c].to_string())
+                .unwrap_or_else(|| "0".into());
             let k = *index.entry(id.clone()).or_insert_with(|| {
-                runs.push(Acc { id: id.clone(), channels: vec![Vec::new(); cols.len()], times: Vec::new(), rows: Vec::new() });
+                runs.push(Acc {
+                    id: id.clone(),
+                    channels: vec![Vec::new(); cols.len()],
+                    times: Vec::new(),
+                    rows: Vec::new(),
+                });
                 runs.len() - 1
             });
             let acc = &mut runs[k];
@@ -164,7 +226,8 @@ impl RecordSet {
                 acc.channels[c].push(parse(&rec[col], row, &spec.columns[c])?);
             }
             if let Some(tc) = time_col {
-                acc.times.push(parse(&rec[tc], row, spec.time_column.as_deref().unwrap())?);
+                acc.times
+                    .push(parse(&rec[tc], row, spec.time_column.as_deref().unwrap())?);
             }
             acc.rows.push(row);
         }
@@ -175,19 +238,32 @@ impl RecordSet {
         let mut tau = spec.tau;
         if let Some(tname) = spec.time_column.as_deref() {
             // tau from the first run with two samples; every step of every run must agree.
-            let from_time = runs.iter().find(|r| r.times.len() >= 2).map(|r| r.times[1] - r.times[0]);
+            let from_time = runs
+                .iter()
+                .find(|r| r.times.len() >= 2)
+                .map(|r| r.times[1] - r.times[0]);
             for r in &runs {
                 for w in 1..r.times.len() {
                     let (a, b) = (r.times[w - 1], r.times[w]);
                     if b <= a {
-                        return Err(Error::TimeNotIncreasing { path: label.into(), row: r.rows[w], column: tname.into(), prev: a, value: b });
+                        return Err(Error::TimeNotIncreasing {
+                            path: label.into(),
+                            row: r.rows[w],
+                            column: tname.into(),
+                            prev: a,
+                            value: b,
+                        });
                     }
                 }
             }
             if let Some(ft) = from_time {
                 match tau {
                     Some(t) if ((t - ft) / t).abs() > TAU_RTOL => {
-                        return Err(Error::TauMismatch { given: t, from_time: ft, column: tname.into() })
+                        return Err(Error::TauMismatch {
+                            given: t,
+                            from_time: ft,
+                            column: tname.into(),
+                        })
                     }
                     None => tau = Some(ft),
                     _ => {}
@@ -198,8 +274,16 @@ impl RecordSet {
                         let step = r.times[w] - r.times[w - 1];
                         // Compare absolute times with the grid, so slow drift is caught too.
                         let expect = r.times[0] + w as f64 * t;
-                        if ((step - t) / t).abs() > TAU_RTOL && ((r.times[w] - expect) / t).abs() > TAU_RTOL * (w as f64).max(1.0) {
-                            return Err(Error::TimeNonUniform { path: label.into(), row: r.rows[w], column: tname.into(), step, tau: t });
+                        if ((step - t) / t).abs() > TAU_RTOL
+                            && ((r.times[w] - expect) / t).abs() > TAU_RTOL * (w as f64).max(1.0)
+                        {
+                            return Err(Error::TimeNonUniform {
+                                path: label.into(),
+                                row: r.rows[w],
+                                column: tname.into(),
+                                step,
+                                tau: t,
+                            });
                         }
                     }
                 }
@@ -209,9 +293,18 @@ impl RecordSet {
         check_tau(tau)?;
         let runs = runs
             .into_iter()
-            .map(|a| Run { id: a.id, t0: a.times.first().copied().unwrap_or(0.0), channels: a.channels, rows: a.rows })
+            .map(|a| Run {
+                id: a.id,
+                t0: a.times.first().copied().unwrap_or(0.0),
+                channels: a.channels,
+                rows: a.rows,
+            })
             .collect();
-        Ok(RecordSet { tau, channel_names: spec.columns.clone(), runs })
+        Ok(RecordSet {
+            tau,
+            channel_names: spec.columns.clone(),
+            runs,
+        })
     }
 }
 
@@ -254,24 +347,58 @@ mod tests {
 
     #[test]
     fn each_bad_input_names_row_and_column() {
-        let e = load("t,y\n0,1\n", spec(&["z"], None, Some("t"), None)).unwrap_err().to_string();
-        assert!(e.contains("no column named 'z'") && e.contains("t, y"), "{e}");
-        let e = load("t,y\n0,1\n0.1,nan\n", spec(&["y"], None, Some("t"), None)).unwrap_err().to_string();
+        let e = load("t,y\n0,1\n", spec(&["z"], None, Some("t"), None))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("no column named 'z'") && e.contains("t, y"),
+            "{e}"
+        );
+        let e = load("t,y\n0,1\n0.1,nan\n", spec(&["y"], None, Some("t"), None))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("row 3") && e.contains("'y'"), "{e}");
-        let e = load("t,y\n0,1\n0.1,abc\n", spec(&["y"], None, Some("t"), None)).unwrap_err().to_string();
+        let e = load("t,y\n0,1\n0.1,abc\n", spec(&["y"], None, Some("t"), None))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("row 3") && e.contains("abc"), "{e}");
-        let e = load("t,y\n0,1\n0.1,2\n0.05,3\n", spec(&["y"], None, Some("t"), None)).unwrap_err().to_string();
-        assert!(e.contains("row 4") && e.contains("does not increase"), "{e}");
-        let e = load("t,y\n0,1\n0.1,2\n0.25,3\n", spec(&["y"], None, Some("t"), None)).unwrap_err().to_string();
+        let e = load(
+            "t,y\n0,1\n0.1,2\n0.05,3\n",
+            spec(&["y"], None, Some("t"), None),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("row 4") && e.contains("does not increase"),
+            "{e}"
+        );
+        let e = load(
+            "t,y\n0,1\n0.1,2\n0.25,3\n",
+            spec(&["y"], None, Some("t"), None),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("row 4") && e.contains("non-uniform"), "{e}");
-        let e = load("t,y\n0,1\n0.1,2\n", spec(&["y"], None, Some("t"), Some(0.2))).unwrap_err().to_string();
+        let e = load(
+            "t,y\n0,1\n0.1,2\n",
+            spec(&["y"], None, Some("t"), Some(0.2)),
+        )
+        .unwrap_err()
+        .to_string();
         assert!(e.contains("disagrees"), "{e}");
-        let e = load("y\n1\n", spec(&["y"], None, None, Some(-1.0))).unwrap_err().to_string();
+        let e = load("y\n1\n", spec(&["y"], None, None, Some(-1.0)))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("tau must be"), "{e}");
-        let e = load("y\n1\n", spec(&["y"], None, None, None)).unwrap_err().to_string();
+        let e = load("y\n1\n", spec(&["y"], None, None, None))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("--tau"), "{e}");
         let rs = load("y\n1\n2\n", spec(&["y"], None, None, Some(0.1))).unwrap();
-        let e = rs.require_min_len(10, "order 2 derivatives").unwrap_err().to_string();
+        let e = rs
+            .require_min_len(10, "order 2 derivatives")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("2 samples") && e.contains("at least 10"), "{e}");
     }
 }

@@ -1,0 +1,113 @@
+//! The `derive` subcommand end to end: output columns, row order across interleaved runs, and
+//! one-line errors with a non-zero exit for bad input.
+
+use std::process::Command;
+
+fn ctsid(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ctsid"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
+fn temp(name: &str, text: &str) -> String {
+    let dir = std::env::temp_dir().join(format!("ctsid-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p.display().to_string()
+}
+
+#[test]
+fn derive_writes_columns_in_file_order() {
+    // Two interleaved runs; y = t^2 in run a, y = 3 t in run b.
+    let mut text = String::from("run,t,y\n");
+    for i in 0..200 {
+        let t = i as f64 * 0.01;
+        text += &format!("a,{t},{}\n", t * t);
+        text += &format!("b,{t},{}\n", 3.0 * t);
+    }
+    let input = temp("two_runs.csv", &text);
+    let (ok, out, err) = ctsid(&[
+        "derive",
+        &input,
+        "--column",
+        "y",
+        "--order",
+        "2",
+        "--time-column",
+        "t",
+        "--run-column",
+        "run",
+    ]);
+    assert!(ok, "{err}");
+    let mut lines = out.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "run,t,y,y_d0,y_d1,y_d2,y_sigma0,y_sigma1,y_sigma2"
+    );
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(String::from).collect())
+        .collect();
+    assert_eq!(rows.len(), 400);
+    for (j, r) in rows.iter().enumerate().skip(40).take(300) {
+        let t: f64 = r[1].parse().unwrap();
+        let d1: f64 = r[4].parse().unwrap();
+        let expect = if r[0] == "a" { 2.0 * t } else { 3.0 };
+        assert!((d1 - expect).abs() < 1e-3, "row {j}: {d1} vs {expect}");
+    }
+}
+
+#[test]
+fn derive_bad_input_is_one_line_and_non_zero() {
+    let cases = [
+        (
+            "t,y\n0,1\n0.1,2\n",
+            vec!["--column", "z", "--order", "1", "--time-column", "t"],
+            "no column named 'z'",
+        ),
+        (
+            "t,y\n0,1\n0.1,x\n",
+            vec!["--column", "y", "--order", "1", "--time-column", "t"],
+            "row 3",
+        ),
+        (
+            "t,y\n0,1\n0.2,2\n0.1,3\n",
+            vec!["--column", "y", "--order", "1", "--time-column", "t"],
+            "does not increase",
+        ),
+        (
+            "y\n1\n2\n3\n",
+            vec!["--column", "y", "--order", "1", "--tau", "0.1"],
+            "needs at least",
+        ),
+        (
+            "y\n1\n2\n3\n",
+            vec!["--column", "y", "--order", "1", "--tau", "0"],
+            "tau must be",
+        ),
+        (
+            "y\n1\n2\n3\n",
+            vec!["--column", "y", "--order", "1"],
+            "--tau",
+        ),
+    ];
+    for (i, (text, args, want)) in cases.iter().enumerate() {
+        let input = temp(&format!("bad{i}.csv"), text);
+        let mut all = vec!["derive", input.as_str()];
+        all.extend(args.iter().copied());
+        let (ok, _, err) = ctsid(&all);
+        assert!(!ok, "case {i} should fail");
+        assert_eq!(
+            err.trim().lines().count(),
+            1,
+            "case {i}: one line expected, got {err}"
+        );
+        assert!(err.contains(want), "case {i}: '{want}' not in {err}");
+    }
+}
