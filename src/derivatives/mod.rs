@@ -343,6 +343,15 @@ fn level_weights(
             w[j][i] = (sums[j][i] - best).exp() / z;
         }
     }
+    // Within one window of an end the local evidence rests on few samples and chance favours
+    // the rougher levels; keep the tuned level there (the stationary-prior blend takes over).
+    for i in 0..n {
+        if i.min(n - 1 - i) < half {
+            for (j, wj) in w.iter_mut().enumerate() {
+                wj[i] = if j == 0 { 1.0 } else { 0.0 };
+            }
+        }
+    }
     let cnt = window_sum(&vec![1.0; n], half / 2);
     for wj in w.iter_mut() {
         let s = window_sum(wj, half / 2);
