@@ -1,0 +1,83 @@
+//! Error profiles and order selection.
+//!
+//! The paper's error profile of a model on some runs: p_q = percentile(|e|, q) / median(|label|)
+//! for q in {50, 80, 90, 95, 98, 99, 100}, with e = label - P(z). The eta-rule picks, among
+//! candidate orders whose p100 is within eta (default 1.2) of the best p100, the one with the
+//! smallest p95: robust to a single bad fit and to heavy tails at once.
+
+use crate::derivatives::score::percentile;
+use serde::{Deserialize, Serialize};
+
+/// The percentiles reported everywhere.
+pub const QUANTILES: [f64; 7] = [50.0, 80.0, 90.0, 95.0, 98.0, 99.0, 100.0];
+
+/// Normalised error percentiles, aligned with [`QUANTILES`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Profile(pub [f64; 7]);
+
+impl Profile {
+    /// Profile of residuals `err` against labels `label`.
+    pub fn new(err: &[f64], label: &[f64]) -> Profile {
+        let abs_e: Vec<f64> = err.iter().map(|e| e.abs()).collect();
+        let abs_l: Vec<f64> = label.iter().map(|l| l.abs()).collect();
+        let med = percentile(&abs_l, 50.0).max(1e-300);
+        let mut p = [0.0; 7];
+        for (k, q) in QUANTILES.iter().enumerate() {
+            p[k] = percentile(&abs_e, *q) / med;
+        }
+        Profile(p)
+    }
+
+    pub fn p50(&self) -> f64 {
+        self.0[0]
+    }
+    pub fn p95(&self) -> f64 {
+        self.0[3]
+    }
+    pub fn p100(&self) -> f64 {
+        self.0[6]
+    }
+
+    /// `0.01/0.03/...` with 3 significant digits.
+    pub fn compact(&self) -> String {
+        self.0.iter().map(|v| format!("{:.3}", v)).collect::<Vec<_>>().join("/")
+    }
+}
+
+/// The eta-rule: index of the chosen candidate among `profiles` (None if empty or all NaN).
+pub fn eta_rule(profiles: &[Profile], eta: f64) -> Option<usize> {
+    let best100 = profiles.iter().map(|p| p.p100()).filter(|v| v.is_finite()).fold(f64::INFINITY, f64::min);
+    if !best100.is_finite() {
+        return None;
+    }
+    profiles
+        .iter()
+        .enumerate()
+        .filter(|(_, p)| p.p100().is_finite() && p.p100() <= eta * best100)
+        .min_by(|a, b| a.1.p95().total_cmp(&b.1.p95()))
+        .map(|(i, _)| i)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn eta_rule_trades_tail_for_bulk() {
+        let p = |p95: f64, p100: f64| Profile([0.0, 0.0, 0.0, p95, 0.0, 0.0, p100]);
+        // Candidate 1 has the best p100; candidate 2 is within 1.2x of it and has a smaller p95.
+        assert_eq!(eta_rule(&[p(0.5, 3.0), p(0.3, 1.0), p(0.2, 1.15)], 1.2), Some(2));
+        // Outside the eta band the smaller p95 does not count.
+        assert_eq!(eta_rule(&[p(0.5, 3.0), p(0.3, 1.0), p(0.2, 1.3)], 1.2), Some(1));
+        assert_eq!(eta_rule(&[], 1.2), None);
+    }
+
+    #[test]
+    fn profile_is_normalised_by_the_median_label() {
+        let label = [1.0, -2.0, 3.0, -4.0, 5.0];
+        let err = [0.0, 0.0, 0.0, 0.0, 6.0];
+        let p = Profile::new(&err, &label);
+        assert_eq!(p.p100(), 2.0);
+        assert_eq!(p.p50(), 0.0);
+    }
+}

@@ -1,0 +1,116 @@
+//! Run splits: which runs train, validate and test a model. Lists are written like `0-24,30`
+//! and name run ids as they appear in the record set (numeric ids may be given as ranges).
+
+use crate::error::{Error, Result};
+
+/// Parses `0-24,30,a7` into a list of run ids (ranges expand over integers).
+pub fn parse_runs(text: &str) -> Result<Vec<String>> {
+    let mut out = Vec::new();
+    for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        match part.split_once('-') {
+            Some((a, b)) if a.trim().parse::<i64>().is_ok() && b.trim().parse::<i64>().is_ok() => {
+                let (a, b) = (a.trim().parse::<i64>().unwrap(), b.trim().parse::<i64>().unwrap());
+                if b < a {
+                    return Err(Error::param("runs", format!("range '{part}' runs backwards; write {b}-{a}")));
+                }
+                if b - a > 10_000_000 {
+                    return Err(Error::param("runs", format!("range '{part}' is too long")));
+                }
+                out.extend((a..=b).map(|i| i.to_string()));
+            }
+            _ => out.push(part.to_string()),
+        }
+    }
+    if out.is_empty() {
+        return Err(Error::param("runs", format!("'{text}' names no run")));
+    }
+    Ok(out)
+}
+
+/// Indices of the named runs in `ids`, with an error naming the first unknown one.
+pub fn resolve(names: &[String], ids: &[String], what: &str) -> Result<Vec<usize>> {
+    names
+        .iter()
+        .map(|n| {
+            ids.iter().position(|id| id == n || id.parse::<f64>().ok().zip(n.parse::<f64>().ok()).is_some_and(|(a, b)| a == b)).ok_or_else(|| {
+                let shown: Vec<&str> = ids.iter().take(8).map(String::as_str).collect();
+                Error::param(what, format!("run '{n}' does not exist (runs are: {}{})", shown.join(", "), if ids.len() > 8 { ", ..." } else { "" }))
+            })
+        })
+        .collect()
+}
+
+/// A checked split into train, validation (optional: k-fold over train) and test runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Split {
+    pub train: Vec<usize>,
+    pub validation: Option<Vec<usize>>,
+    pub test: Vec<usize>,
+}
+
+impl Split {
+    /// Validates that the lists are non-empty where required and do not overlap.
+    pub fn new(train: Vec<usize>, validation: Option<Vec<usize>>, test: Vec<usize>, ids: &[String]) -> Result<Split> {
+        if train.is_empty() {
+            return Err(Error::param("train", "no training runs"));
+        }
+        let groups: [(&str, &[usize]); 3] = [("train", &train), ("validation", validation.as_deref().unwrap_or(&[])), ("test", &test)];
+        for (a, (na, la)) in groups.iter().enumerate() {
+            for (nb, lb) in groups.iter().skip(a + 1) {
+                if let Some(r) = la.iter().find(|r| lb.contains(r)) {
+                    return Err(Error::param("split", format!("run '{}' is in both {na} and {nb}; splits must not overlap", ids[*r])));
+                }
+            }
+            let mut seen = std::collections::HashSet::new();
+            if let Some(r) = la.iter().find(|r| !seen.insert(**r)) {
+                return Err(Error::param(*na, format!("run '{}' is listed twice", ids[*r])));
+            }
+        }
+        Ok(Split { train, validation, test })
+    }
+
+    /// Deterministic k folds over the training runs (run i goes to fold i mod k).
+    pub fn folds(&self, k: usize) -> Vec<(Vec<usize>, Vec<usize>)> {
+        let k = k.clamp(2, self.train.len().max(2));
+        (0..k)
+            .map(|f| {
+                let (val, fit): (Vec<(usize, usize)>, Vec<(usize, usize)>) = self.train.iter().copied().enumerate().partition(|(i, _)| i % k == f);
+                (fit.into_iter().map(|x| x.1).collect(), val.into_iter().map(|x| x.1).collect())
+            })
+            .filter(|(fit, val)| !fit.is_empty() && !val.is_empty())
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ids(n: usize) -> Vec<String> {
+        (0..n).map(|i| i.to_string()).collect()
+    }
+
+    #[test]
+    fn parses_ranges_and_lists() {
+        assert_eq!(parse_runs("0-3,7").unwrap(), ["0", "1", "2", "3", "7"]);
+        assert_eq!(parse_runs(" a, b ").unwrap(), ["a", "b"]);
+        assert!(parse_runs("5-2").is_err());
+        assert!(parse_runs(",").is_err());
+    }
+
+    #[test]
+    fn split_errors_name_the_run() {
+        let id = ids(10);
+        let e = resolve(&parse_runs("3,12").unwrap(), &id, "test").unwrap_err().to_string();
+        assert!(e.contains("'12' does not exist"), "{e}");
+        let e = Split::new(vec![0, 1, 2], None, vec![2, 3], &id).unwrap_err().to_string();
+        assert!(e.contains("run '2' is in both train and test"), "{e}");
+        let s = Split::new(vec![0, 1, 2, 3, 4, 5], None, vec![7], &id).unwrap();
+        let folds = s.folds(5);
+        assert_eq!(folds.len(), 5);
+        for (fit, val) in &folds {
+            assert!(val.iter().all(|v| !fit.contains(v)));
+            assert_eq!(fit.len() + val.len(), 6);
+        }
+    }
+}
