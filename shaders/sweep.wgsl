@@ -96,18 +96,19 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid
     for (var c0 = s_begin; c0 < s_end; c0 += CHUNK) {
         let ns = min(CHUNK, s_end - c0);
         // Degree 0 and 1 factors straight from Z; samples past the end become 0 with weight 0.
-        for (var e = t; e < CHUNK * LEVEL_END1; e += WG) {
-            let s = e / LEVEL_END1;
-            let k = e % LEVEL_END1;
-            var val = 0.0;
-            if s < ns {
-                if k == 0u {
-                    val = 1.0;
-                } else {
-                    val = z[(c0 + s) * NZ + (k - 1u)];
+        // (Loops are sample-outer so that no invocation divides by a runtime count.)
+        for (var s = 0u; s < CHUNK; s++) {
+            for (var k = t; k < LEVEL_END1; k += WG) {
+                var val = 0.0;
+                if s < ns {
+                    if k == 0u {
+                        val = 1.0;
+                    } else {
+                        val = z[(c0 + s) * NZ + (k - 1u)];
+                    }
                 }
+                tab[s * TS + k] = val;
             }
-            tab[s * TS + k] = val;
         }
         for (var s = t; s < CHUNK; s += WG) {
             var w = 0.0;
@@ -120,12 +121,13 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid
         // Degree 2..FD factors: each is a lower factor times one variable.
         for (var l = 2u; l <= FD; l++) {
             let f0 = level_end(l - 1u);
-            let cnt = level_end(l) - f0;
-            for (var e = t; e < CHUNK * cnt; e += WG) {
-                let s = e / cnt;
-                let f = f0 + e % cnt;
-                let rc = recipe[f];
-                tab[s * TS + f] = tab[s * TS + (rc & 0xffffu)] * tab[s * TS + 1u + (rc >> 16u)];
+            let f1 = level_end(l);
+            for (var s = 0u; s < CHUNK; s++) {
+                let row = s * TS;
+                for (var f = f0 + t; f < f1; f += WG) {
+                    let rc = recipe[f];
+                    tab[row + f] = tab[row + (rc & 0xffffu)] * tab[row + 1u + (rc >> 16u)];
+                }
             }
             workgroupBarrier();
         }
