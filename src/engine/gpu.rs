@@ -307,7 +307,7 @@ impl GpuEngine {
         }
         window = (window / tile).max(1) * tile;
         let align = limits.min_storage_buffer_offset_alignment as usize;
-        if (window * 8) % align != 0 {
+        if !(window * 8).is_multiple_of(align) {
             return Err(Error::Gpu(format!("storage offset alignment {align} does not divide the window size")));
         }
         let spans: Vec<(usize, usize)> = (0..n_c).step_by(window).map(|s| (s, window.min(n_c - s))).collect();
