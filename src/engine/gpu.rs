@@ -269,17 +269,7 @@ impl GpuEngine {
         }))
         .map_err(|e| Error::Gpu(format!("cannot open {}: {e}", info.name)))?;
 
-        let sink = Arc::new(ErrorSink::default());
-        {
-            let s = sink.clone();
-            device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
-                s.uncaptured.lock().unwrap_or_else(|p| p.into_inner()).push(e.to_string());
-            }));
-            let s = sink.clone();
-            device.set_device_lost_callback(move |reason, msg| {
-                *s.lost.lock().unwrap_or_else(|p| p.into_inner()) = Some(format!("{reason:?}: {msg}"));
-            });
-        }
+        let sink = install_sink(&device);
 
         // ---- plan ----
         let degree = basis.degree();
@@ -644,6 +634,21 @@ impl GpuEngine {
     }
 }
 
+/// Replaces wgpu's default uncaptured-error handler (which panics) with one that records, and
+/// records device loss; [`GpuEngine::check`] turns both into errors.
+fn install_sink(device: &wgpu::Device) -> Arc<ErrorSink> {
+    let sink = Arc::new(ErrorSink::default());
+    let s = sink.clone();
+    device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+        s.uncaptured.lock().unwrap_or_else(|p| p.into_inner()).push(e.to_string());
+    }));
+    let s = sink.clone();
+    device.set_device_lost_callback(move |reason, msg| {
+        *s.lost.lock().unwrap_or_else(|p| p.into_inner()) = Some(if msg.is_empty() { format!("{reason:?}") } else { format!("{reason:?}: {msg}") });
+    });
+    sink
+}
+
 fn one_line(s: &str) -> String {
     s.split_whitespace().collect::<Vec<_>>().join(" ")
 }
@@ -742,6 +747,53 @@ impl SweepEngine for GpuEngine {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn require_gpu() -> bool {
+        std::env::var("CTSID_REQUIRE_GPU").as_deref() == Ok("1")
+    }
+
+    fn tiny_engine() -> Option<GpuEngine> {
+        let cols = (0..3).map(|k| (0..200).map(|i| ((i * 7 + k * 3) % 11) as f64 / 5.0 - 1.0).collect()).collect();
+        let f = Features::new(vec!["a".into(), "b".into(), "c".into()], cols);
+        let b = Basis::new(&f.names, 3, Default::default()).unwrap();
+        match GpuEngine::new(&f, &b, GpuOptions::default()) {
+            Ok(e) => Some(e),
+            Err(Error::NoGpu(m)) if !require_gpu() => {
+                println!("skipping: no GPU adapter ({m})");
+                None
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    #[test]
+    fn validation_errors_are_caught_or_recorded_never_a_panic() {
+        let Some(eng) = tiny_engine() else { return };
+        let bad = || wgpu::ShaderModuleDescriptor { label: Some("bad"), source: wgpu::ShaderSource::Wgsl("fn main( {".into()) };
+        // Inside an error scope: the scope gets it, the recorder does not.
+        let val = eng.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let _m = eng.device.create_shader_module(bad());
+        assert!(pollster::block_on(val.pop()).is_some());
+        assert!(eng.check().is_ok());
+        // Outside any scope: recorded (wgpu's default handler would panic here), then reported.
+        let _m = eng.device.create_shader_module(bad());
+        let e = eng.check().unwrap_err();
+        assert!(matches!(e, Error::Gpu(_)), "{e}");
+        assert!(!e.to_string().contains('\n'));
+    }
+
+    #[test]
+    fn a_lost_device_is_an_error_not_a_panic() {
+        let Some(mut eng) = tiny_engine() else { return };
+        let mut out = vec![f64::NAN; eng.n_candidates()];
+        eng.sweep(&[1.0; 200], &mut out).unwrap();
+        assert!((out[0] - 200.0).abs() < 1e-9);
+        eng.device.destroy();
+        let _ = eng.device.poll(wgpu::PollType::Poll);
+        let r = eng.sweep(&[1.0; 200], &mut out);
+        assert!(matches!(r, Err(Error::Gpu(_))), "{r:?}");
+        println!("after destroy: {}", r.unwrap_err());
+    }
 
     #[test]
     fn factor_plan_prefers_few_loads_within_shared_memory() {
