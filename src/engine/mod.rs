@@ -16,6 +16,9 @@
 
 use crate::error::Result;
 
+pub mod gpu;
+pub mod select;
+
 /// Feature rows Z, stored column-major (variable k is `data[k*n_samples..(k+1)*n_samples]`).
 #[derive(Debug, Clone)]
 pub struct Features {

@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# GPU sweep report: correctness at full size and speed on a machine with a real GPU.
+#
+#   benches/gpu_report.sh                 build (release) here, run the GPU tests, print the table
+#   benches/gpu_report.sh --stage         only build, and copy the binaries to .gpu-bin/ so they can
+#                                         travel to a machine without cargo (e.g. the device tool's
+#                                         `carry`), together with the Vulkan loader debs in .gl/
+#   benches/gpu_report.sh --small         a quick run at small sizes (works on lavapipe)
+#
+# On a machine without cargo the script uses the binaries in $CTSID_GPU_BIN_DIR (default
+# .gpu-bin). If the Vulkan loader is missing and .gl/*.deb exist, it unpacks them first
+# (see the device README); if the NVIDIA ICD file exists and no driver is set, it uses it.
+# The report requires a real (non-CPU) adapter unless --small is given. Extra arguments go to
+# the report binary (e.g. --samples 25000 --sizes 11:6,17:6,13:9 --reps 20).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+BIN_DIR=${CTSID_GPU_BIN_DIR:-.gpu-bin}
+
+mode=full
+if [[ "${1:-}" == "--stage" ]]; then mode=stage; shift; fi
+if [[ "${1:-}" == "--small" ]]; then mode=small; shift; fi
+
+if command -v cargo >/dev/null 2>&1; then
+    cargo build --release --example gpu_report
+    cargo test --release --test gpu_sweep --no-run
+    tdir=${CARGO_TARGET_DIR:-target}
+    report="$tdir/release/examples/gpu_report"
+    gputest=$(ls -t "$tdir"/release/deps/gpu_sweep-* | grep -v '\.d$' | head -1)
+    if [[ $mode == stage ]]; then
+        mkdir -p "$BIN_DIR"
+        cp "$report" "$BIN_DIR/gpu_report"
+        cp "$gputest" "$BIN_DIR/gpu_sweep_test"
+        # A self-ignoring folder: git never sees it, and the device tool can carry it.
+        echo '*' > "$BIN_DIR/.gitignore"
+        echo "staged $BIN_DIR/gpu_report and $BIN_DIR/gpu_sweep_test"
+        exit 0
+    fi
+else
+    report="$BIN_DIR/gpu_report"
+    gputest="$BIN_DIR/gpu_sweep_test"
+    [[ -x "$report" ]] || { echo "gpu_report.sh: no cargo and no $report; run 'benches/gpu_report.sh --stage' on a build machine" >&2; exit 2; }
+fi
+
+# Vulkan loader and driver on a bare GPU machine.
+if ! ldconfig -p 2>/dev/null | grep -q libvulkan.so.1 && compgen -G ".gl/*.deb" >/dev/null; then
+    for f in .gl/*.deb; do dpkg -x "$f" /; done
+    ldconfig
+fi
+nv_icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
+if [[ -z "${VK_DRIVER_FILES:-}" && -f $nv_icd ]]; then export VK_DRIVER_FILES=$nv_icd; fi
+
+if [[ $mode == small ]]; then
+    "$report" --samples 5000 --sizes 11:4,8:6,6:9 --reps 5 --check 500 "$@"
+    exit
+fi
+
+echo "== GPU correctness tests (CTSID_REQUIRE_GPU=1) =="
+CTSID_REQUIRE_GPU=1 "$gputest" --test-threads 1
+echo "== report: 25,000 samples x {12,376 (n_z=11,d=6), 100,947 (n_z=17,d=6), 497,420 (n_z=13,d=9)} =="
+"$report" --require-real-gpu --samples 25000 --sizes 11:6,17:6,13:9 --reps 20 --check 2000 "$@"

@@ -1,0 +1,171 @@
+// Correlation sweep and centred sums of squares over candidate monomials, generated on the fly.
+//
+// The host prepends a block of `const` declarations (see src/engine/gpu.rs, `shader_header`):
+//   WG      invocations per workgroup
+//   R       candidates per invocation
+//   CHUNK   samples staged in workgroup memory at a time
+//   NZ      number of feature variables
+//   TS      factors per sample row of the table (= C(NZ + FD, FD))
+//   FD      largest factor degree (1..3)
+//   NF      factors per candidate (= ceil(d / FD), at least 1)
+//   NW      u32 words per candidate (= ceil(NF / 2); 16-bit factor indices)
+//   MODE    0: raw sweep, sum_i x_ij v_i;  1: centred squares, sum_i v_i (x_ij - mean_j)^2
+//   LEVEL_END0..3  end (exclusive) of the factors of degree 0..3 in the table
+//
+// How a monomial value is built: for the CHUNK samples in flight the workgroup tabulates every
+// monomial of degree <= FD ("factors") once, in workgroup memory. Each candidate is a product of
+// NF table entries, so one sample-candidate pair costs NF loads, NF - 1 multiplies and one FMA
+// whatever its degree (a degree-9 monomial with FD = 3 is three loads, not nine). Neighbouring
+// invocations own neighbouring candidates; in graded-lex order these share their leading
+// factors (broadcast loads) and differ in the last one (consecutive table slots, distinct banks).
+//
+// Precision: products and the CHUNK-long inner sums are f32; each chunk's sum is added into a
+// Kahan-compensated (sum, compensation) pair, so a block of thousands of samples loses no more
+// than a few f32 ulps of sum_i |x_ij v_i|. The partial pair of every (block, candidate) is
+// written out and reduced by finalize.wgsl.
+
+struct Params {
+    window_start: u32,   // first candidate of this dispatch window (global index)
+    window_len: u32,     // candidates in this window
+    n_samples: u32,
+    block_samples: u32,  // samples per workgroup row (a multiple of CHUNK)
+    n_blocks: u32,
+    stride: u32,         // row stride of `partial` (candidates per block row)
+    _pad0: u32,
+    _pad1: u32,
+}
+
+@group(0) @binding(0) var<uniform> P: Params;
+// Feature rows, sample-major: z[i * NZ + k].
+@group(0) @binding(1) var<storage, read> z: array<f32>;
+// The sweep vector (MODE 0) or the weights (MODE 1), one per sample.
+@group(0) @binding(2) var<storage, read> v: array<f32>;
+// For every factor of degree >= 2: parent factor index (low 16 bits) | variable << 16.
+@group(0) @binding(3) var<storage, read> recipe: array<u32>;
+// NW words per candidate, 16-bit factor indices, low half first; unused slots are 0 (the factor 1).
+@group(0) @binding(4) var<storage, read> cand: array<u32>;
+// f32 mean of every candidate (MODE 1 only; MODE 0 binds it but never reads it).
+@group(0) @binding(5) var<storage, read> mean: array<f32>;
+// (sum, -compensation) per block row and window candidate.
+@group(0) @binding(6) var<storage, read_write> partial: array<vec2<f32>>;
+
+var<workgroup> tab: array<f32, CHUNK * TS>;
+var<workgroup> vv: array<f32, CHUNK>;
+
+fn level_end(l: u32) -> u32 {
+    switch l {
+        case 0u: { return LEVEL_END0; }
+        case 1u: { return LEVEL_END1; }
+        case 2u: { return LEVEL_END2; }
+        default: { return LEVEL_END3; }
+    }
+}
+
+@compute @workgroup_size(WG)
+fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid: vec3<u32>) {
+    let t = lid.x;
+    let tile0 = wid.x * (WG * R);
+    let b = wid.y;
+    let s_begin = b * P.block_samples;
+    let s_end = min(s_begin + P.block_samples, P.n_samples);
+
+    // Factor offsets of this invocation's candidates; padding candidates use factor 0 (= 1).
+    var fidx: array<u32, R * NF>;
+    var mu: array<f32, R>;
+    var sum: array<f32, R>;
+    var comp: array<f32, R>;
+    for (var r = 0u; r < R; r++) {
+        let local = tile0 + t + r * WG;
+        let ok = local < P.window_len;
+        let j = P.window_start + local;
+        for (var q = 0u; q < NF; q++) {
+            var f = 0u;
+            if ok {
+                f = (cand[j * NW + q / 2u] >> (16u * (q % 2u))) & 0xffffu;
+            }
+            fidx[r * NF + q] = f;
+        }
+        mu[r] = 0.0;
+        if MODE == 1u && ok {
+            mu[r] = mean[j];
+        }
+        sum[r] = 0.0;
+        comp[r] = 0.0;
+    }
+
+    for (var c0 = s_begin; c0 < s_end; c0 += CHUNK) {
+        let ns = min(CHUNK, s_end - c0);
+        // Degree 0 and 1 factors straight from Z; samples past the end become 0 with weight 0.
+        // (Loops are sample-outer so that no invocation divides by a runtime count.)
+        for (var s = 0u; s < CHUNK; s++) {
+            for (var k = t; k < LEVEL_END1; k += WG) {
+                var val = 0.0;
+                if s < ns {
+                    if k == 0u {
+                        val = 1.0;
+                    } else {
+                        val = z[(c0 + s) * NZ + (k - 1u)];
+                    }
+                }
+                tab[s * TS + k] = val;
+            }
+        }
+        for (var s = t; s < CHUNK; s += WG) {
+            var w = 0.0;
+            if s < ns {
+                w = v[c0 + s];
+            }
+            vv[s] = w;
+        }
+        workgroupBarrier();
+        // Degree 2..FD factors: each is a lower factor times one variable.
+        for (var l = 2u; l <= FD; l++) {
+            let f0 = level_end(l - 1u);
+            let f1 = level_end(l);
+            for (var s = 0u; s < CHUNK; s++) {
+                let row = s * TS;
+                for (var f = f0 + t; f < f1; f += WG) {
+                    let rc = recipe[f];
+                    tab[row + f] = tab[row + (rc & 0xffffu)] * tab[row + 1u + (rc >> 16u)];
+                }
+            }
+            workgroupBarrier();
+        }
+
+        var acc: array<f32, R>;
+        for (var r = 0u; r < R; r++) {
+            acc[r] = 0.0;
+        }
+        for (var s = 0u; s < CHUNK; s++) {
+            let row = s * TS;
+            let ws = vv[s];
+            for (var r = 0u; r < R; r++) {
+                var p = tab[row + fidx[r * NF]];
+                for (var q = 1u; q < NF; q++) {
+                    p = p * tab[row + fidx[r * NF + q]];
+                }
+                if MODE == 0u {
+                    acc[r] = fma(p, ws, acc[r]);
+                } else {
+                    let dlt = p - mu[r];
+                    acc[r] = fma(ws * dlt, dlt, acc[r]);
+                }
+            }
+        }
+        // Kahan: comp carries the low-order part lost by sum.
+        for (var r = 0u; r < R; r++) {
+            let y = acc[r] - comp[r];
+            let tt = sum[r] + y;
+            comp[r] = (tt - sum[r]) - y;
+            sum[r] = tt;
+        }
+        workgroupBarrier();
+    }
+
+    for (var r = 0u; r < R; r++) {
+        let local = tile0 + t + r * WG;
+        if local < P.window_len {
+            partial[b * P.stride + local] = vec2<f32>(sum[r], -comp[r]);
+        }
+    }
+}

@@ -1,0 +1,812 @@
+//! GPU sweep engine: WGSL compute shaders (wgpu, Vulkan) that generate monomial values on the fly.
+//!
+//! # What runs where
+//! * [`GpuEngine::new`] picks a Vulkan adapter, requests a device with the adapter's own limits,
+//!   plans the work (below), checks the memory it will need (refusing with the numbers), and
+//!   uploads Z (as f32, sample-major) and the factor codes of every candidate once.
+//! * [`SweepEngine::sweep`] uploads v (f32), runs `shaders/sweep.wgsl` (MODE 0) and
+//!   `shaders/finalize.wgsl` over every candidate window, and reads back one (hi, lo) f32 pair per
+//!   candidate, which the host adds in f64.
+//! * [`SweepEngine::column_stats`] is two passes: a sweep with the weights gives the means; then
+//!   `sweep.wgsl` in MODE 1 sums `w (x - mean32)^2` around the f32-rounded mean, and the host
+//!   removes the (exact) bias of that rounded centre: `sum w (x-m)^2 = sum w (x-m32)^2 - W (m32-m)^2`.
+//!   Centring on the GPU is what keeps the norm when the mean is large; a one-pass
+//!   `sum w x^2 - W m^2` in f32 would cancel it away.
+//! * [`SweepEngine::columns`] is computed on the host, exactly, from the f64 features (a few
+//!   columns per LARS step; cheaper than a round trip and bit-identical to `Code::eval`).
+//!
+//! # Factor tables (why a sweep costs a few loads per pair, not d)
+//! Every candidate is written as a product of at most NF "factors": monomials of degree <= FD
+//! (FD = 1..3 chosen per problem), its sorted variables cut into groups of FD from the front.
+//! For the samples in flight, a workgroup tabulates all C(n_z + FD, FD) factors in workgroup
+//! memory; a pair then costs NF loads and NF multiplies whatever its degree. See the header of
+//! `shaders/sweep.wgsl` for the memory layout.
+//!
+//! # Limits and tiling
+//! Work is a grid of (candidate tile of WG*R, sample block) workgroups. Candidates are cut into
+//! windows so that every binding stays within `max_storage_buffer_binding_size`, every dispatch
+//! within `max_compute_workgroups_per_dimension`, and no dispatch exceeds a bounded number of
+//! sample-candidate pairs (GPU watchdogs kill long dispatches). Each window is its own command
+//! buffer. Sums over a block are Kahan-compensated f32; blocks are reduced by the finalize shader.
+//!
+//! # Errors
+//! wgpu's default error handler panics; this engine installs one that records, wraps device work
+//! in validation and out-of-memory error scopes, records device loss, and turns all of these into
+//! [`Error::Gpu`]. No adapter is [`Error::NoGpu`]. The caller decides about falling back (see
+//! [`crate::engine::select`]); this engine never falls back silently.
+
+use std::collections::HashMap;
+use std::sync::{mpsc, Arc, Mutex};
+use std::time::Duration;
+
+use wgpu::util::DeviceExt as _;
+
+use crate::basis::{count, Basis, Code};
+use crate::engine::{ColumnStats, Features, SweepEngine};
+use crate::error::{Error, Result};
+
+/// Invocations per workgroup (64 is valid on every adapter and a multiple of every warp size).
+pub const WG: u32 = 64;
+/// Candidates per invocation.
+pub const R: u32 = 8;
+/// Candidates per workgroup tile.
+pub const TILE: u32 = WG * R;
+
+const SWEEP_WGSL: &str = include_str!("../../shaders/sweep.wgsl");
+const FINALIZE_WGSL: &str = include_str!("../../shaders/finalize.wgsl");
+
+/// Settings of the GPU engine; the defaults suit real use, the `max_*` fields exist so tests can
+/// force several windows and blocks on tiny problems.
+#[derive(Debug, Clone)]
+pub struct GpuOptions {
+    /// Accept a CPU (software) adapter such as lavapipe. `--engine gpu` allows it; `auto` never
+    /// gets here with one (see [`crate::engine::select`]).
+    pub allow_cpu_adapter: bool,
+    /// Upper bound on candidates per window (rounded down to a multiple of [`TILE`]).
+    pub max_window_candidates: Option<usize>,
+    /// Upper bound on samples per block (the span of one Kahan-compensated f32 sum).
+    pub max_block_samples: usize,
+    /// Upper bound on sample-candidate pairs per dispatch (watchdog safety).
+    pub max_pairs_per_dispatch: u64,
+    /// Refuse problems whose device buffers would exceed this many bytes.
+    pub memory_budget_bytes: u64,
+    /// How long to wait for one submission before calling the device hung.
+    pub timeout: Duration,
+}
+
+impl Default for GpuOptions {
+    fn default() -> Self {
+        GpuOptions {
+            allow_cpu_adapter: true,
+            max_window_candidates: None,
+            max_block_samples: 2048,
+            // About 2 ms on an H100 at the design rate; far below any watchdog.
+            max_pairs_per_dispatch: 4_000_000_000,
+            memory_budget_bytes: 4 << 30,
+            timeout: Duration::from_secs(300),
+        }
+    }
+}
+
+/// One Vulkan adapter as seen by the selection logic.
+#[derive(Debug, Clone)]
+pub struct AdapterSummary {
+    pub name: String,
+    pub device_type: wgpu::DeviceType,
+    pub driver: String,
+}
+
+fn new_instance() -> wgpu::Instance {
+    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+    desc.backends = wgpu::Backends::VULKAN;
+    wgpu::Instance::new(desc)
+}
+
+fn type_rank(t: wgpu::DeviceType) -> u32 {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => 0,
+        wgpu::DeviceType::IntegratedGpu => 1,
+        wgpu::DeviceType::VirtualGpu => 2,
+        wgpu::DeviceType::Other => 3,
+        wgpu::DeviceType::Cpu => 4,
+    }
+}
+
+/// Every Vulkan adapter, best first (discrete, integrated, virtual, other, CPU).
+pub fn probe_adapters() -> Vec<AdapterSummary> {
+    let instance = new_instance();
+    let mut v: Vec<AdapterSummary> = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN))
+        .iter()
+        .map(|a| {
+            let i = a.get_info();
+            AdapterSummary { name: i.name, device_type: i.device_type, driver: format!("{} {}", i.driver, i.driver_info) }
+        })
+        .collect();
+    v.sort_by_key(|a| type_rank(a.device_type));
+    v
+}
+
+/// How a problem is cut into factor tables, blocks and windows (public for tests and reports).
+#[derive(Debug, Clone)]
+pub struct GpuLayout {
+    pub adapter: String,
+    pub device_type: wgpu::DeviceType,
+    /// Largest factor degree tabulated in workgroup memory.
+    pub factor_degree: usize,
+    /// Factors per sample row of the table.
+    pub table_len: usize,
+    /// Factors per candidate (loads per sample-candidate pair).
+    pub factors_per_candidate: usize,
+    /// Samples staged in workgroup memory at a time.
+    pub chunk: usize,
+    pub n_blocks: usize,
+    pub block_samples: usize,
+    /// Candidate windows `(start, len)`, each one dispatch of sweep + finalize.
+    pub windows: Vec<(usize, usize)>,
+    /// Bytes of device memory the engine allocated.
+    pub device_bytes: u64,
+}
+
+#[derive(Default)]
+struct ErrorSink {
+    uncaptured: Mutex<Vec<String>>,
+    lost: Mutex<Option<String>>,
+}
+
+struct Window {
+    start: usize,
+    len: usize,
+    sweep_bg: wgpu::BindGroup,
+    finalize_bg: wgpu::BindGroup,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Mode {
+    Sweep,
+    Centred,
+}
+
+/// Sweep engine on a wgpu (Vulkan) device; see the module docs.
+pub struct GpuEngine {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    sink: Arc<ErrorSink>,
+    sweep_pipe: wgpu::ComputePipeline,
+    centred_pipe: wgpu::ComputePipeline,
+    finalize_pipe: wgpu::ComputePipeline,
+    v_buf: wgpu::Buffer,
+    mean_buf: wgpu::Buffer,
+    out_buf: wgpu::Buffer,
+    staging: wgpu::Buffer,
+    windows: Vec<Window>,
+    layout: GpuLayout,
+    features: Features,
+    codes: Vec<Code>,
+    timeout: Duration,
+    n_samples: usize,
+    n_candidates: usize,
+}
+
+/// Factor degree, table length, factors per candidate and chunk for a problem (pure; see docs).
+fn plan_factors(n_z: usize, degree: usize, shared_bytes: u32) -> Result<(usize, usize, usize, usize)> {
+    let shared_floats = shared_bytes as usize / 4;
+    let mut best: Option<(f64, usize, usize, usize, usize)> = None;
+    for fd in 1..=3usize.min(degree.max(1)) {
+        let ts = count(n_z, fd).unwrap_or(u64::MAX) as usize;
+        if ts > 0xffff {
+            continue;
+        }
+        let chunk = (shared_floats / (ts + 1)).min(32);
+        if chunk < 4 {
+            continue;
+        }
+        let nf = degree.div_ceil(fd).max(1);
+        // Per-pair cost: nf loads + one weight load shared by R candidates, plus building the
+        // table (ts multiplies per sample) spread over a tile.
+        let cost = nf as f64 + 1.0 / R as f64 + ts as f64 / TILE as f64;
+        if best.is_none_or(|b| cost < b.0) {
+            best = Some((cost, fd, ts, nf, chunk));
+        }
+    }
+    let (_, fd, ts, nf, chunk) = best.ok_or_else(|| {
+        Error::Gpu(format!(
+            "workgroup memory of {shared_bytes} bytes cannot hold the factor table of {n_z} variables; use --engine cpu"
+        ))
+    })?;
+    Ok((fd, ts, nf, chunk))
+}
+
+fn shader_header(consts: &[(&str, u32)]) -> String {
+    consts.iter().map(|(k, v)| format!("const {k}: u32 = {v}u;\n")).collect()
+}
+
+fn mib(b: u64) -> f64 {
+    b as f64 / 1048576.0
+}
+
+impl GpuEngine {
+    /// Builds the engine for all candidates of `basis` on the rows of `features`.
+    pub fn new(features: &Features, basis: &Basis, options: GpuOptions) -> Result<GpuEngine> {
+        let n_s = features.n_samples;
+        let n_z = features.n_vars();
+        let n_c = basis.len();
+        if n_z != basis.n_vars() {
+            return Err(Error::param("features", format!("{n_z} feature columns but the basis has {} variables", basis.n_vars())));
+        }
+        if n_s == 0 || n_c == 0 {
+            return Err(Error::param("features", "the GPU engine needs at least one sample and one candidate"));
+        }
+        if n_s > u32::MAX as usize / 64 || n_c > u32::MAX as usize / 64 {
+            return Err(Error::param("features", "more samples or candidates than the GPU engine indexes (u32)"));
+        }
+        if let Some(k) = features.data.iter().position(|x| !x.is_finite()) {
+            return Err(Error::InvalidData(format!("feature '{}' has a non-finite value at sample {}", features.names[k / n_s], k % n_s)));
+        }
+
+        let instance = new_instance();
+        let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
+        adapters.sort_by_key(|a| type_rank(a.get_info().device_type));
+        let seen: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+        let adapter = adapters
+            .into_iter()
+            .find(|a| options.allow_cpu_adapter || a.get_info().device_type != wgpu::DeviceType::Cpu)
+            .ok_or_else(|| {
+                if seen.is_empty() {
+                    Error::NoGpu("no Vulkan adapter found (is a Vulkan driver installed?); use --engine cpu".into())
+                } else {
+                    Error::NoGpu(format!("only CPU (software) Vulkan adapters found ({}); use --engine cpu", seen.join(", ")))
+                }
+            })?;
+        let info = adapter.get_info();
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("ctsid"),
+            required_features: wgpu::Features::empty(),
+            required_limits: limits.clone(),
+            experimental_features: wgpu::ExperimentalFeatures::disabled(),
+            memory_hints: wgpu::MemoryHints::Performance,
+            trace: wgpu::Trace::Off,
+        }))
+        .map_err(|e| Error::Gpu(format!("cannot open {}: {e}", info.name)))?;
+
+        let sink = install_sink(&device);
+
+        // ---- plan ----
+        let degree = basis.degree();
+        let (fd, ts, nf, chunk) = plan_factors(n_z, degree, limits.max_compute_workgroup_storage_size)?;
+        let nw = nf.div_ceil(2);
+        let tiles_total = n_c.div_ceil(TILE as usize);
+        let target_wg: usize = if info.device_type == wgpu::DeviceType::Cpu { 16 } else { 4096 };
+        let max_blocks = n_s.div_ceil(chunk).min(limits.max_compute_workgroups_per_dimension as usize);
+        let n_blocks = n_s
+            .div_ceil(options.max_block_samples.max(chunk))
+            .max(target_wg.div_ceil(tiles_total))
+            .clamp(1, max_blocks.max(1));
+        let block_samples = n_s.div_ceil(n_blocks).div_ceil(chunk) * chunk;
+        let n_blocks = n_s.div_ceil(block_samples);
+
+        let max_bind = limits.max_storage_buffer_binding_size;
+        let tile = TILE as usize;
+        let mut window = n_c.div_ceil(tile) * tile;
+        window = window.min((max_bind / (8 * n_blocks as u64)) as usize);
+        window = window.min(limits.max_compute_workgroups_per_dimension as usize * tile);
+        window = window.min(limits.max_compute_workgroups_per_dimension as usize * WG as usize);
+        window = window.min((options.max_pairs_per_dispatch / n_s as u64).max(1) as usize);
+        if let Some(m) = options.max_window_candidates {
+            window = window.min(m);
+        }
+        window = (window / tile).max(1) * tile;
+        let align = limits.min_storage_buffer_offset_alignment as usize;
+        if !(window * 8).is_multiple_of(align) {
+            return Err(Error::Gpu(format!("storage offset alignment {align} does not divide the window size")));
+        }
+        let spans: Vec<(usize, usize)> = (0..n_c).step_by(window).map(|s| (s, window.min(n_c - s))).collect();
+
+        // ---- memory: estimate first, refuse with the numbers ----
+        let sizes: [(&str, u64, bool); 8] = [
+            ("features", (n_s * n_z * 4) as u64, true),
+            ("sweep vector", (n_s * 4) as u64, true),
+            ("factor recipes", (ts * 4) as u64, true),
+            ("candidate codes", (n_c * nw * 4) as u64, true),
+            ("means", (n_c * 4) as u64, true),
+            ("partial sums", (n_blocks * window * 8) as u64, true),
+            ("results", (n_c * 8) as u64, false),
+            ("read-back", (n_c * 8) as u64, false),
+        ];
+        let total: u64 = sizes.iter().map(|s| s.1).sum();
+        if total > options.memory_budget_bytes {
+            return Err(Error::TooLarge {
+                what: format!("the GPU engine for {n_s} samples x {n_c} candidates"),
+                needed_mib: mib(total),
+                budget_mib: mib(options.memory_budget_bytes),
+                hint: "use fewer samples, a lower degree, or --engine cpu".into(),
+            });
+        }
+        for (what, bytes, bound_whole) in sizes {
+            if bytes > limits.max_buffer_size || (bound_whole && bytes > max_bind) {
+                let cap = if bound_whole { max_bind.min(limits.max_buffer_size) } else { limits.max_buffer_size };
+                return Err(Error::TooLarge {
+                    what: format!("the GPU {what} buffer for {n_s} samples x {n_c} candidates"),
+                    needed_mib: mib(bytes),
+                    budget_mib: mib(cap),
+                    hint: format!("{} allows no larger buffer; use fewer samples or --engine cpu", info.name),
+                });
+            }
+        }
+
+        // ---- host-side tables ----
+        let fnames: Vec<String> = (0..n_z).map(|k| format!("z{k}")).collect();
+        let fbasis = Basis::new(&fnames, fd, Default::default())?;
+        debug_assert_eq!(fbasis.len(), ts);
+        let findex: HashMap<Code, u32> = fbasis.codes().iter().enumerate().map(|(i, c)| (*c, i as u32)).collect();
+        let recipe: Vec<u32> = (0..ts)
+            .map(|f| match (fbasis.parent(f), fbasis.last_var(f)) {
+                (Some(p), Some(v)) => p as u32 | ((v as u32) << 16),
+                _ => 0,
+            })
+            .collect();
+        let mut cand = vec![0u32; n_c * nw];
+        for (j, code) in basis.codes().iter().enumerate() {
+            let vars: Vec<usize> = code.vars().collect();
+            for (q, group) in vars.chunks(fd).enumerate() {
+                let g = group.iter().fold(Code::ONE, |c, &v| c.times(v));
+                let f = findex[&g];
+                cand[j * nw + q / 2] |= f << (16 * (q % 2));
+            }
+        }
+        let mut z32 = vec![0f32; n_s * n_z];
+        for k in 0..n_z {
+            for (i, &x) in features.column(k).iter().enumerate() {
+                z32[i * n_z + k] = x as f32;
+            }
+        }
+        let mut level_end = [0u32; 4];
+        for (l, e) in level_end.iter_mut().enumerate() {
+            *e = count(n_z, l.min(fd)).unwrap() as u32;
+        }
+
+        // ---- device objects, inside error scopes ----
+        let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let val = device.push_error_scope(wgpu::ErrorFilter::Validation);
+
+        let storage = |label: &str, bytes: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            })
+        };
+        let z_buf = storage("z", bytemuck::cast_slice(&z32));
+        let recipe_buf = storage("recipe", bytemuck::cast_slice(&recipe));
+        let cand_buf = storage("cand", bytemuck::cast_slice(&cand));
+        let plain = |label: &str, size: u64, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage, mapped_at_creation: false })
+        };
+        let st = wgpu::BufferUsages::STORAGE;
+        let v_buf = plain("v", (n_s * 4) as u64, st | wgpu::BufferUsages::COPY_DST);
+        let mean_buf = plain("mean", (n_c * 4) as u64, st | wgpu::BufferUsages::COPY_DST);
+        let partial_buf = plain("partial", (n_blocks * window * 8) as u64, st);
+        let out_buf = plain("out", (n_c * 8) as u64, st | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST);
+        let staging = plain("staging", (n_c * 8) as u64, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+
+        let header = shader_header(&[
+            ("WG", WG),
+            ("R", R),
+            ("CHUNK", chunk as u32),
+            ("NZ", n_z as u32),
+            ("TS", ts as u32),
+            ("FD", fd as u32),
+            ("NF", nf as u32),
+            ("NW", nw as u32),
+            ("LEVEL_END0", level_end[0]),
+            ("LEVEL_END1", level_end[1]),
+            ("LEVEL_END2", level_end[2]),
+            ("LEVEL_END3", level_end[3]),
+        ]);
+        let module = |label: &str, src: String| {
+            device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(src.into()) })
+        };
+        let sweep_mod = module("sweep", format!("{header}const MODE: u32 = 0u;\n{SWEEP_WGSL}"));
+        let centred_mod = module("centred", format!("{header}const MODE: u32 = 1u;\n{SWEEP_WGSL}"));
+        let finalize_mod = module("finalize", format!("{}{FINALIZE_WGSL}", shader_header(&[("WG", WG)])));
+
+        let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
+            binding,
+            visibility: wgpu::ShaderStages::COMPUTE,
+            ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
+            count: None,
+        };
+        let ro = wgpu::BufferBindingType::Storage { read_only: true };
+        let rw = wgpu::BufferBindingType::Storage { read_only: false };
+        let uni = wgpu::BufferBindingType::Uniform;
+        let sweep_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("sweep"),
+            entries: &[entry(0, uni), entry(1, ro), entry(2, ro), entry(3, ro), entry(4, ro), entry(5, ro), entry(6, rw)],
+        });
+        let finalize_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("finalize"),
+            entries: &[entry(0, uni), entry(1, ro), entry(2, rw)],
+        });
+        let pipe = |bgl: &wgpu::BindGroupLayout, m: &wgpu::ShaderModule, label: &str| {
+            let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+                label: Some(label),
+                bind_group_layouts: &[Some(bgl)],
+                immediate_size: 0,
+            });
+            device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(label),
+                layout: Some(&pl),
+                module: m,
+                entry_point: Some("main"),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+        };
+        let sweep_pipe = pipe(&sweep_bgl, &sweep_mod, "sweep");
+        let centred_pipe = pipe(&sweep_bgl, &centred_mod, "centred");
+        let finalize_pipe = pipe(&finalize_bgl, &finalize_mod, "finalize");
+
+        fn whole(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
+            b.as_entire_binding()
+        }
+        let windows: Vec<Window> = spans
+            .iter()
+            .map(|&(start, len)| {
+                let params: [u32; 8] = [start as u32, len as u32, n_s as u32, block_samples as u32, n_blocks as u32, window as u32, 0, 0];
+                let pbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("params"),
+                    contents: bytemuck::cast_slice(&params),
+                    usage: wgpu::BufferUsages::UNIFORM,
+                });
+                let sweep_bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("sweep"),
+                    layout: &sweep_bgl,
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: whole(&pbuf) },
+                        wgpu::BindGroupEntry { binding: 1, resource: whole(&z_buf) },
+                        wgpu::BindGroupEntry { binding: 2, resource: whole(&v_buf) },
+                        wgpu::BindGroupEntry { binding: 3, resource: whole(&recipe_buf) },
+                        wgpu::BindGroupEntry { binding: 4, resource: whole(&cand_buf) },
+                        wgpu::BindGroupEntry { binding: 5, resource: whole(&mean_buf) },
+                        wgpu::BindGroupEntry { binding: 6, resource: whole(&partial_buf) },
+                    ],
+                });
+                let finalize_bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
+                    label: Some("finalize"),
+                    layout: &finalize_bgl,
+                    entries: &[
+                        wgpu::BindGroupEntry { binding: 0, resource: whole(&pbuf) },
+                        wgpu::BindGroupEntry { binding: 1, resource: whole(&partial_buf) },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                                buffer: &out_buf,
+                                offset: (start * 8) as u64,
+                                size: wgpu::BufferSize::new((len * 8) as u64),
+                            }),
+                        },
+                    ],
+                });
+                Window { start, len, sweep_bg, finalize_bg }
+            })
+            .collect();
+
+        let verr = pollster::block_on(val.pop());
+        let merr = pollster::block_on(oom.pop());
+        if let Some(e) = merr {
+            return Err(Error::Gpu(format!("out of device memory while uploading {n_s} x {n_c} ({:.0} MiB): {e}", mib(total))));
+        }
+        if let Some(e) = verr {
+            return Err(Error::Gpu(format!("setup failed validation: {}", one_line(&e.to_string()))));
+        }
+
+        let layout = GpuLayout {
+            adapter: info.name.clone(),
+            device_type: info.device_type,
+            factor_degree: fd,
+            table_len: ts,
+            factors_per_candidate: nf,
+            chunk,
+            n_blocks,
+            block_samples,
+            windows: spans,
+            device_bytes: total,
+        };
+        let engine = GpuEngine {
+            device,
+            queue,
+            sink,
+            sweep_pipe,
+            centred_pipe,
+            finalize_pipe,
+            v_buf,
+            mean_buf,
+            out_buf,
+            staging,
+            windows,
+            layout,
+            features: features.clone(),
+            codes: basis.codes().to_vec(),
+            timeout: options.timeout,
+            n_samples: n_s,
+            n_candidates: n_c,
+        };
+        engine.check()?;
+        Ok(engine)
+    }
+
+    /// How the problem was cut up (factor tables, blocks, windows).
+    pub fn layout(&self) -> &GpuLayout {
+        &self.layout
+    }
+
+    /// Whether the device has been lost (the caller should fall back to the CPU engine).
+    pub fn is_lost(&self) -> bool {
+        self.sink.lost.lock().map(|l| l.is_some()).unwrap_or(true)
+    }
+
+    fn check(&self) -> Result<()> {
+        if let Some(msg) = self.sink.lost.lock().unwrap_or_else(|p| p.into_inner()).as_ref() {
+            return Err(Error::Gpu(format!("device lost ({}); use --engine cpu", one_line(msg))));
+        }
+        if let Some(msg) = self.sink.uncaptured.lock().unwrap_or_else(|p| p.into_inner()).first() {
+            return Err(Error::Gpu(format!("device error: {}", one_line(msg))));
+        }
+        Ok(())
+    }
+
+    /// Runs MODE `mode` with per-sample vector `v` over every window; `out[j] = hi + lo`.
+    fn run(&mut self, mode: Mode, v: &[f32], out: &mut [f64]) -> Result<()> {
+        self.check()?;
+        let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let val = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        self.queue.write_buffer(&self.v_buf, 0, bytemuck::cast_slice(v));
+        let tiles_y = self.layout.n_blocks as u32;
+        let pipe = if mode == Mode::Sweep { &self.sweep_pipe } else { &self.centred_pipe };
+        // One command buffer per window: each is bounded in work (see GpuOptions).
+        let mut cbs = Vec::with_capacity(self.windows.len() + 1);
+        for w in &self.windows {
+            let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("window") });
+            {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("sweep"), timestamp_writes: None });
+                pass.set_pipeline(pipe);
+                pass.set_bind_group(0, &w.sweep_bg, &[]);
+                pass.dispatch_workgroups(w.len.div_ceil(TILE as usize) as u32, tiles_y, 1);
+                pass.set_pipeline(&self.finalize_pipe);
+                pass.set_bind_group(0, &w.finalize_bg, &[]);
+                pass.dispatch_workgroups(w.len.div_ceil(WG as usize) as u32, 1, 1);
+            }
+            debug_assert!(w.start + w.len <= self.n_candidates);
+            cbs.push(enc.finish());
+        }
+        let bytes = (self.n_candidates * 8) as u64;
+        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("read-back") });
+        enc.copy_buffer_to_buffer(&self.out_buf, 0, &self.staging, 0, bytes);
+        cbs.push(enc.finish());
+        let idx = self.queue.submit(cbs);
+
+        let slice = self.staging.slice(..);
+        let (tx, rx) = mpsc::channel();
+        slice.map_async(wgpu::MapMode::Read, move |r| {
+            let _ = tx.send(r);
+        });
+        let verr = pollster::block_on(val.pop());
+        let merr = pollster::block_on(oom.pop());
+        let polled = self.device.poll(wgpu::PollType::Wait { submission_index: Some(idx), timeout: Some(self.timeout) });
+        if let Some(e) = verr.or(merr) {
+            self.staging.unmap();
+            return Err(Error::Gpu(format!("sweep failed: {}", one_line(&e.to_string()))));
+        }
+        if let Err(e) = polled {
+            self.check()?;
+            return Err(Error::Gpu(format!("waiting for the sweep failed after {:?}: {e}", self.timeout)));
+        }
+        match rx.try_recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => {
+                self.check()?;
+                return Err(Error::Gpu(format!("cannot read the results back: {e}")));
+            }
+            Err(_) => {
+                self.check()?;
+                return Err(Error::Gpu("the results were not ready after the device finished".into()));
+            }
+        }
+        {
+            let view = slice.get_mapped_range().map_err(|e| Error::Gpu(format!("cannot map the results: {e:?}")))?;
+            match bytemuck::try_cast_slice::<u8, [f32; 2]>(&view) {
+                Ok(pairs) => {
+                    for (o, p) in out.iter_mut().zip(pairs) {
+                        *o = p[0] as f64 + p[1] as f64;
+                    }
+                }
+                Err(_) => {
+                    for (o, b) in out.iter_mut().zip(view.chunks_exact(8)) {
+                        let hi = f32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+                        let lo = f32::from_le_bytes([b[4], b[5], b[6], b[7]]);
+                        *o = hi as f64 + lo as f64;
+                    }
+                }
+            }
+        }
+        self.staging.unmap();
+        self.check()
+    }
+}
+
+/// Replaces wgpu's default uncaptured-error handler (which panics) with one that records, and
+/// records device loss; [`GpuEngine::check`] turns both into errors.
+fn install_sink(device: &wgpu::Device) -> Arc<ErrorSink> {
+    let sink = Arc::new(ErrorSink::default());
+    let s = sink.clone();
+    device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
+        s.uncaptured.lock().unwrap_or_else(|p| p.into_inner()).push(e.to_string());
+    }));
+    let s = sink.clone();
+    device.set_device_lost_callback(move |reason, msg| {
+        *s.lost.lock().unwrap_or_else(|p| p.into_inner()) = Some(if msg.is_empty() { format!("{reason:?}") } else { format!("{reason:?}: {msg}") });
+    });
+    sink
+}
+
+fn one_line(s: &str) -> String {
+    s.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+fn to_f32(what: &str, x: &[f64], n: usize) -> Result<Vec<f32>> {
+    if x.len() != n {
+        return Err(Error::param(what, format!("length {} but there are {n} samples", x.len())));
+    }
+    if let Some(i) = x.iter().position(|a| !a.is_finite() || a.abs() > f32::MAX as f64) {
+        return Err(Error::InvalidData(format!("{what}[{i}] = {} is not a finite f32 value", x[i])));
+    }
+    Ok(x.iter().map(|&a| a as f32).collect())
+}
+
+impl SweepEngine for GpuEngine {
+    fn describe(&self) -> String {
+        format!(
+            "gpu ({}, {:?}; f32 products, factor degree {}, {} blocks x {} windows, f64 final sum)",
+            self.layout.adapter,
+            self.layout.device_type,
+            self.layout.factor_degree,
+            self.layout.n_blocks,
+            self.layout.windows.len()
+        )
+    }
+
+    fn n_samples(&self) -> usize {
+        self.n_samples
+    }
+
+    fn n_candidates(&self) -> usize {
+        self.n_candidates
+    }
+
+    fn column_stats(&mut self, weights: Option<&[f64]>) -> Result<ColumnStats> {
+        let n = self.n_samples;
+        let w64: Vec<f64> = match weights {
+            Some(w) => w.to_vec(),
+            None => vec![1.0; n],
+        };
+        let w32 = to_f32("weights", &w64, n)?;
+        if w64.iter().any(|&a| a < 0.0) {
+            return Err(Error::param("weights", "must be non-negative"));
+        }
+        // The GPU sees the f32 weights; use exactly those on the host side too.
+        let wsum: f64 = w32.iter().map(|&a| a as f64).sum();
+        if wsum <= 0.0 {
+            return Err(Error::param("weights", "sum to zero; at least one sample needs a positive weight"));
+        }
+        let mut s1 = vec![0.0; self.n_candidates];
+        self.run(Mode::Sweep, &w32, &mut s1)?;
+        let mean: Vec<f64> = s1.iter().map(|s| s / wsum).collect();
+        let mean32: Vec<f32> = mean.iter().map(|&m| m as f32).collect();
+        self.queue.write_buffer(&self.mean_buf, 0, bytemuck::cast_slice(&mean32));
+        let mut q = vec![0.0; self.n_candidates];
+        self.run(Mode::Centred, &w32, &mut q)?;
+        let norm = q
+            .iter()
+            .zip(&mean)
+            .zip(&mean32)
+            .map(|((&q, &m), &m32)| {
+                let shift = m32 as f64 - m;
+                (q - wsum * shift * shift).max(0.0).sqrt()
+            })
+            .collect();
+        Ok(ColumnStats { mean, norm })
+    }
+
+    fn sweep(&mut self, v: &[f64], out: &mut [f64]) -> Result<()> {
+        if out.len() != self.n_candidates {
+            return Err(Error::param("out", format!("length {} but there are {} candidates", out.len(), self.n_candidates)));
+        }
+        let v32 = to_f32("v", v, self.n_samples)?;
+        self.run(Mode::Sweep, &v32, out)
+    }
+
+    fn columns(&mut self, idx: &[usize]) -> Result<Vec<Vec<f64>>> {
+        idx.iter()
+            .map(|&j| {
+                let code = *self.codes.get(j).ok_or_else(|| {
+                    Error::param("columns", format!("candidate {j} does not exist (there are {})", self.n_candidates))
+                })?;
+                // Same operation order as Code::eval, so the values are bit-identical to it.
+                let mut col = vec![1.0; self.n_samples];
+                for v in code.vars() {
+                    for (c, z) in col.iter_mut().zip(self.features.column(v)) {
+                        *c *= z;
+                    }
+                }
+                Ok(col)
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn require_gpu() -> bool {
+        std::env::var("CTSID_REQUIRE_GPU").as_deref() == Ok("1")
+    }
+
+    fn tiny_engine() -> Option<GpuEngine> {
+        let cols = (0..3).map(|k| (0..200).map(|i| ((i * 7 + k * 3) % 11) as f64 / 5.0 - 1.0).collect()).collect();
+        let f = Features::new(vec!["a".into(), "b".into(), "c".into()], cols);
+        let b = Basis::new(&f.names, 3, Default::default()).unwrap();
+        match GpuEngine::new(&f, &b, GpuOptions::default()) {
+            Ok(e) => Some(e),
+            Err(Error::NoGpu(m)) if !require_gpu() => {
+                println!("skipping: no GPU adapter ({m})");
+                None
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    #[test]
+    fn validation_errors_are_caught_or_recorded_never_a_panic() {
+        let Some(eng) = tiny_engine() else { return };
+        let bad = || wgpu::ShaderModuleDescriptor { label: Some("bad"), source: wgpu::ShaderSource::Wgsl("fn main( {".into()) };
+        // Inside an error scope: the scope gets it, the recorder does not.
+        let val = eng.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let _m = eng.device.create_shader_module(bad());
+        assert!(pollster::block_on(val.pop()).is_some());
+        assert!(eng.check().is_ok());
+        // Outside any scope: recorded (wgpu's default handler would panic here), then reported.
+        let _m = eng.device.create_shader_module(bad());
+        let e = eng.check().unwrap_err();
+        assert!(matches!(e, Error::Gpu(_)), "{e}");
+        assert!(!e.to_string().contains('\n'));
+    }
+
+    #[test]
+    fn a_lost_device_is_an_error_not_a_panic() {
+        let Some(mut eng) = tiny_engine() else { return };
+        let mut out = vec![f64::NAN; eng.n_candidates()];
+        eng.sweep(&[1.0; 200], &mut out).unwrap();
+        assert!((out[0] - 200.0).abs() < 1e-9);
+        eng.device.destroy();
+        let _ = eng.device.poll(wgpu::PollType::Poll);
+        let r = eng.sweep(&[1.0; 200], &mut out);
+        assert!(matches!(r, Err(Error::Gpu(_))), "{r:?}");
+        println!("after destroy: {}", r.unwrap_err());
+    }
+
+    #[test]
+    fn factor_plan_prefers_few_loads_within_shared_memory() {
+        // n_z = 13, d = 9 with 16 KiB: degree-3 factors (560 per sample), 3 per candidate.
+        let (fd, ts, nf, chunk) = plan_factors(13, 9, 16384).unwrap();
+        assert_eq!((fd, ts, nf), (3, 560, 3));
+        assert!(chunk >= 4 && (ts + 1) * chunk * 4 <= 16384);
+        // n_z = 32, d = 12: degree-3 tables would not fit; degree-2 ones (561) do.
+        let (fd, ts, nf, _) = plan_factors(32, 12, 16384).unwrap();
+        assert_eq!((fd, ts, nf), (2, 561, 6));
+        // Constant-only basis.
+        assert_eq!(plan_factors(4, 0, 16384).unwrap().2, 1);
+        // Impossibly small workgroup memory is an error, not a panic.
+        assert!(plan_factors(32, 12, 64).is_err());
+    }
+}
