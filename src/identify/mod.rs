@@ -1,0 +1,433 @@
+//! The identification workflow: from measured runs to `y_i^(n_i) = P_i(y, ..., u)`.
+//!
+//! For each candidate order n of an output: reconstruct y^(0..n) with their sigmas
+//! ([`crate::derivatives`]), build z = (y_j, ..., y_j^(n_j - 1) for every output j, inputs) and
+//! the label y_i^(n_i), fit the sparse polynomial on the training runs
+//! ([`crate::regression`]), and score it on validation runs (or k-fold over the training runs)
+//! by the normalised error percentiles of [`profile`]. The eta-rule picks the order. The chosen
+//! structure is refitted on all training runs, scored on the test runs against our own labels,
+//! and simulated free-run on the test runs ([`crate::simulate`]): the simulation error is the
+//! measure that does not depend on our own smoothing.
+//!
+//! # Weighting
+//! Samples whose label is uncertain must not steer the fit: each sample gets the weight
+//! 1 / (1 + (sigma_label / sigma_ref)^2), with sigma_ref the median label sigma over the training
+//! samples, and samples with sigma_label > 5 sigma_ref (the ends of runs, transients shorter than
+//! the sampling period) are left out. The report says how many.
+//!
+//! # MIMO
+//! Output i's features are the derivatives 0..n_j-1 of every output j and all inputs, so the
+//! orders are coupled. The search is coordinate-wise: every output starts at the largest
+//! candidate order, then each output in turn takes the order the eta-rule picks with the others
+//! fixed, until a sweep changes nothing (at most three sweeps).
+
+pub mod profile;
+pub mod split;
+
+use crate::derivatives::{differentiate_runs, DerivativeOptions, Derivatives};
+use crate::engine::Features;
+use crate::error::{Error, Result};
+use crate::model::{derivative_name, Model as ModelFile, OutputEquation, Term as ModelTerm};
+use crate::records::RecordSet;
+use crate::regression::{EngineChoice, Method, Regression};
+use crate::simulate::{rms_nrmse, simulate_model, SimOptions};
+use profile::{eta_rule, Profile};
+use serde::Serialize;
+pub use split::Split;
+
+/// Candidate orders: searched (per output, with the eta-rule) or fixed per output.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Orders {
+    Search(Vec<usize>),
+    Fixed(Vec<usize>),
+}
+
+/// Settings of an identification, checked by [`Settings::validate`].
+#[derive(Debug, Clone)]
+pub struct Settings {
+    pub outputs: Vec<String>,
+    pub inputs: Vec<String>,
+    pub orders: Orders,
+    pub degree: usize,
+    pub eta: f64,
+    pub folds: usize,
+    pub engine: EngineChoice,
+    pub max_terms: usize,
+    /// Weight samples by the confidence of their label (see the module docs).
+    pub weighting: bool,
+    /// Print progress lines to standard error.
+    pub progress: bool,
+}
+
+impl Settings {
+    pub fn new(outputs: Vec<String>, inputs: Vec<String>, degree: usize) -> Settings {
+        Settings { outputs, inputs, orders: Orders::Search(vec![1, 2, 3, 4]), degree, eta: 1.2, folds: 5, engine: EngineChoice::Auto, max_terms: 40, weighting: true, progress: false }
+    }
+
+    pub fn validate(&self) -> Result<()> {
+        if self.outputs.is_empty() {
+            return Err(Error::param("output", "name at least one output"));
+        }
+        let mut all: Vec<&String> = self.outputs.iter().chain(&self.inputs).collect();
+        all.sort();
+        if let Some(w) = all.windows(2).find(|w| w[0] == w[1]) {
+            return Err(Error::param("channels", format!("'{}' is named twice", w[0])));
+        }
+        match &self.orders {
+            Orders::Search(c) if c.is_empty() => return Err(Error::param("orders", "no candidate order")),
+            Orders::Search(c) | Orders::Fixed(c) => {
+                if let Some(o) = c.iter().find(|&&o| o == 0 || o > 6) {
+                    return Err(Error::param("orders", format!("order {o} is outside 1..=6")));
+                }
+            }
+        }
+        if let Orders::Fixed(c) = &self.orders {
+            if c.len() != self.outputs.len() {
+                return Err(Error::param("order", format!("{} orders for {} outputs; give one per output", c.len(), self.outputs.len())));
+            }
+        }
+        if !(self.eta >= 1.0 && self.eta.is_finite()) {
+            return Err(Error::param("eta", format!("{} must be >= 1", self.eta)));
+        }
+        if self.degree == 0 || self.degree > crate::basis::MAX_DEGREE {
+            return Err(Error::param("degree", format!("{} is outside 1..={}", self.degree, crate::basis::MAX_DEGREE)));
+        }
+        Ok(())
+    }
+
+    fn max_order(&self) -> usize {
+        match &self.orders {
+            Orders::Search(c) | Orders::Fixed(c) => *c.iter().max().unwrap(),
+        }
+    }
+}
+
+/// One candidate order of one output.
+#[derive(Debug, Clone, Serialize)]
+pub struct Candidate {
+    pub order: usize,
+    /// Error profile on validation runs (or k-fold over training runs).
+    pub validation: Profile,
+    /// Error profile on the training runs of the fit on all of them.
+    pub train: Profile,
+    pub equation: String,
+    pub n_terms: usize,
+}
+
+/// Selection and test results of one output.
+#[derive(Debug, Clone, Serialize)]
+pub struct OutputReport {
+    pub name: String,
+    pub candidates: Vec<Candidate>,
+    pub order: usize,
+    pub equation: String,
+    /// Test-run profile against our own labels (reconstructed derivatives).
+    pub test: Option<Profile>,
+    /// Samples weighted and samples left out for uncertain labels, on the training runs.
+    pub samples_used: usize,
+    pub samples_excluded: usize,
+    pub engine: String,
+}
+
+/// Free-run simulation of one test run.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunSimulation {
+    pub run: String,
+    /// Per output: RMS error and NRMSE (RMS over the standard deviation of the measurement).
+    pub rms: Vec<f64>,
+    pub nrmse: Vec<f64>,
+    /// Simulated outputs, per output.
+    #[serde(skip)]
+    pub simulated: Vec<Vec<f64>>,
+    /// Set when the simulation diverged.
+    pub error: Option<String>,
+}
+
+/// Everything an identification produces.
+#[derive(Debug, Clone)]
+pub struct Identification {
+    pub model: ModelFile,
+    pub outputs: Vec<OutputReport>,
+    pub simulations: Vec<RunSimulation>,
+    /// Derivatives of every output on every run: derivatives[output][run].
+    pub derivatives: Vec<Vec<Derivatives>>,
+    pub weighting: String,
+}
+
+impl Identification {
+    /// Overall free-run NRMSE per output over the simulated test runs (root of mean squares).
+    pub fn test_nrmse(&self) -> Vec<f64> {
+        let ok: Vec<&RunSimulation> = self.simulations.iter().filter(|s| s.error.is_none()).collect();
+        (0..self.outputs.len())
+            .map(|o| if ok.is_empty() { f64::NAN } else { (ok.iter().map(|s| s.nrmse[o].powi(2)).sum::<f64>() / ok.len() as f64).sqrt() })
+            .collect()
+    }
+}
+
+/// Channel data and derivatives shared by all fits.
+struct Prepared<'a> {
+    rs: &'a RecordSet,
+    settings: &'a Settings,
+    derivs: Vec<Vec<Derivatives>>,
+    inputs: Vec<usize>,
+    sigma_ref: Vec<f64>,
+}
+
+impl Prepared<'_> {
+    fn names(&self, ord: &[usize]) -> Vec<String> {
+        let mut names = Vec::new();
+        for (j, o) in self.settings.outputs.iter().enumerate() {
+            for k in 0..ord[j] {
+                names.push(derivative_name(o, k));
+            }
+        }
+        names.extend(self.settings.inputs.iter().cloned());
+        names
+    }
+
+    /// Features, label and weights of output i on the given runs.
+    fn design(&self, i: usize, ord: &[usize], runs: &[usize]) -> (Features, Vec<f64>, Vec<f64>, usize) {
+        let names = self.names(ord);
+        let mut cols: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
+        let mut label = Vec::new();
+        let mut weights = Vec::new();
+        let mut excluded = 0;
+        for &r in runs {
+            let n = self.rs.runs[r].len();
+            let mut c = 0;
+            for (j, _) in self.settings.outputs.iter().enumerate() {
+                for k in 0..ord[j] {
+                    cols[c].extend_from_slice(&self.derivs[j][r].values[k]);
+                    c += 1;
+                }
+            }
+            for &u in &self.inputs {
+                cols[c].extend_from_slice(&self.rs.runs[r].channels[u]);
+                c += 1;
+            }
+            let d = &self.derivs[i][r];
+            label.extend_from_slice(&d.values[ord[i]]);
+            for s in 0..n {
+                let ratio = d.sigma[ord[i]][s] / self.sigma_ref[i].max(1e-300);
+                let w = if !self.settings.weighting {
+                    1.0
+                } else if ratio > 5.0 {
+                    excluded += 1;
+                    0.0
+                } else {
+                    1.0 / (1.0 + ratio * ratio)
+                };
+                weights.push(w);
+            }
+        }
+        (Features::new(names, cols), label, weights, excluded)
+    }
+
+    fn regression(&self) -> Result<Regression> {
+        Regression::builder().degree(self.settings.degree).method(Method::LassoLars).max_terms(self.settings.max_terms).engine(self.settings.engine).build()
+    }
+
+    /// Fits output i with orders `ord` on `fit_runs` and returns the model.
+    fn fit(&self, i: usize, ord: &[usize], fit_runs: &[usize]) -> Result<crate::regression::Model> {
+        let (f, y, w, _) = self.design(i, ord, fit_runs);
+        let label = derivative_name(&self.settings.outputs[i], ord[i]);
+        self.regression()?.fit(&f, &y, &label, Some(&w))
+    }
+
+    /// Residuals and labels of a model on some runs (only samples with a usable label).
+    fn residuals(&self, model: &crate::regression::Model, i: usize, ord: &[usize], runs: &[usize]) -> Result<(Vec<f64>, Vec<f64>)> {
+        let (f, y, w, _) = self.design(i, ord, runs);
+        let pred = model.predict(&f)?;
+        let mut e = Vec::with_capacity(y.len());
+        let mut l = Vec::with_capacity(y.len());
+        for s in 0..y.len() {
+            if w[s] > 0.0 {
+                e.push(y[s] - pred[s]);
+                l.push(y[s]);
+            }
+        }
+        Ok((e, l))
+    }
+
+    /// Validation profile of output i at orders `ord`.
+    fn validate(&self, i: usize, ord: &[usize], split: &Split) -> Result<Profile> {
+        match &split.validation {
+            Some(val) => {
+                let m = self.fit(i, ord, &split.train)?;
+                let (e, l) = self.residuals(&m, i, ord, val)?;
+                Ok(Profile::new(&e, &l))
+            }
+            None => {
+                let (mut e, mut l) = (Vec::new(), Vec::new());
+                for (fit_runs, val) in split.folds(self.settings.folds) {
+                    let m = self.fit(i, ord, &fit_runs)?;
+                    let (ef, lf) = self.residuals(&m, i, ord, &val)?;
+                    e.extend(ef);
+                    l.extend(lf);
+                }
+                Ok(Profile::new(&e, &l))
+            }
+        }
+    }
+}
+
+/// Runs the whole workflow on a record set with a checked split.
+pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Identification> {
+    settings.validate()?;
+    let outputs: Vec<usize> = settings.outputs.iter().map(|o| rs.channel_index(o)).collect::<Result<_>>()?;
+    let inputs: Vec<usize> = settings.inputs.iter().map(|u| rs.channel_index(u)).collect::<Result<_>>()?;
+    let max_order = settings.max_order();
+    rs.require_min_len(crate::derivatives::min_samples(max_order), &format!("derivatives up to order {max_order}"))?;
+    let say = |msg: String| {
+        if settings.progress {
+            eprintln!("{msg}");
+        }
+    };
+
+    let t = std::time::Instant::now();
+    let mut derivs = Vec::new();
+    for (o, &c) in outputs.iter().enumerate() {
+        let runs: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[c].as_slice()).collect();
+        derivs.push(differentiate_runs(&runs, rs.tau, max_order, &DerivativeOptions::default())?);
+        say(format!("derivatives of '{}' up to order {max_order} on {} runs ({:.2} s)", settings.outputs[o], runs.len(), t.elapsed().as_secs_f64()));
+    }
+    // Reference label sigma per output, at its largest candidate order, over training samples.
+    let sigma_ref: Vec<f64> = (0..outputs.len())
+        .map(|o| {
+            let k = match &settings.orders {
+                Orders::Fixed(c) => c[o],
+                Orders::Search(c) => *c.iter().max().unwrap(),
+            };
+            let all: Vec<f64> = split.train.iter().flat_map(|&r| derivs[o][r].sigma[k].iter().copied()).collect();
+            crate::derivatives::score::percentile(&all, 50.0)
+        })
+        .collect();
+    let prep = Prepared { rs, settings, derivs, inputs, sigma_ref };
+
+    // Order selection.
+    let ny = outputs.len();
+    let mut candidates: Vec<Vec<Candidate>> = vec![Vec::new(); ny];
+    let ord: Vec<usize> = match &settings.orders {
+        Orders::Fixed(c) => {
+            for i in 0..ny {
+                candidates[i].push(candidate(&prep, i, c, split)?);
+            }
+            c.clone()
+        }
+        Orders::Search(cands) => {
+            let mut ord = vec![*cands.iter().max().unwrap(); ny];
+            for sweep in 0..3 {
+                let mut changed = false;
+                for i in 0..ny {
+                    let mut list = Vec::new();
+                    for &n in cands {
+                        let mut o = ord.clone();
+                        o[i] = n;
+                        let c = candidate(&prep, i, &o, split)?;
+                        say(format!("output '{}' order {n}: validation p50/p95/p100 = {:.4}/{:.4}/{:.4}, {} terms", settings.outputs[i], c.validation.p50(), c.validation.p95(), c.validation.p100(), c.n_terms));
+                        list.push(c);
+                    }
+                    let profiles: Vec<Profile> = list.iter().map(|c| c.validation).collect();
+                    let pick = eta_rule(&profiles, settings.eta).ok_or_else(|| Error::Numerical(format!("no candidate order of '{}' could be scored", settings.outputs[i])))?;
+                    if list[pick].order != ord[i] {
+                        changed = true;
+                        ord[i] = list[pick].order;
+                    }
+                    candidates[i] = list;
+                }
+                if !changed || ny == 1 || sweep == 2 {
+                    break;
+                }
+            }
+            ord
+        }
+    };
+
+    // Final fits on all training runs.
+    let mut reports = Vec::new();
+    let mut equations = Vec::new();
+    for i in 0..ny {
+        let (_, _, w, excluded) = prep.design(i, &ord, &split.train);
+        let m = prep.fit(i, &ord, &split.train)?;
+        let test = if split.test.is_empty() {
+            None
+        } else {
+            let (e, l) = prep.residuals(&m, i, &ord, &split.test)?;
+            Some(Profile::new(&e, &l))
+        };
+        let terms: Vec<ModelTerm> = m
+            .terms
+            .iter()
+            .map(|t| {
+                let ex: Vec<(&str, u32)> = t.exponents.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+                ModelTerm::new(&ex, t.coefficient)
+            })
+            .collect();
+        equations.push(OutputEquation::new(&settings.outputs[i], ord[i], terms));
+        reports.push(OutputReport {
+            name: settings.outputs[i].clone(),
+            candidates: std::mem::take(&mut candidates[i]),
+            order: ord[i],
+            equation: m.equation(),
+            test,
+            samples_used: w.iter().filter(|w| **w > 0.0).count(),
+            samples_excluded: excluded,
+            engine: m.diagnostics.engine.clone(),
+        });
+    }
+    let input_names: Vec<&str> = settings.inputs.iter().map(String::as_str).collect();
+    let mut model = ModelFile::new(&input_names, equations, Some(rs.tau));
+    model.degree = settings.degree;
+    model.validate()?;
+
+    let simulations = simulate_runs(&model, rs, &prep.derivs, &outputs, &prep.inputs, &split.test)?;
+    say(format!("identified in {:.2} s", t.elapsed().as_secs_f64()));
+    let weighting = if settings.weighting {
+        "samples weighted by 1/(1+(sigma_label/median sigma)^2); labels with sigma above 5x the median left out".into()
+    } else {
+        "all samples weighted equally".into()
+    };
+    Ok(Identification { model, outputs: reports, simulations, derivatives: prep.derivs, weighting })
+}
+
+fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<Candidate> {
+    let validation = prep.validate(i, ord, split)?;
+    let m = prep.fit(i, ord, &split.train)?;
+    let (e, l) = prep.residuals(&m, i, ord, &split.train)?;
+    Ok(Candidate { order: ord[i], validation, train: Profile::new(&e, &l), equation: m.equation(), n_terms: m.terms.len() })
+}
+
+/// Free-run simulation of a model on some runs, starting from the smoothed derivatives at the
+/// first sample; a diverging run is reported, not fatal.
+pub fn simulate_runs(model: &ModelFile, rs: &RecordSet, derivs: &[Vec<Derivatives>], outputs: &[usize], inputs: &[usize], runs: &[usize]) -> Result<Vec<RunSimulation>> {
+    let compiled = model.compile()?;
+    let mut out = Vec::new();
+    for &r in runs {
+        let run = &rs.runs[r];
+        let n = run.len();
+        let times: Vec<f64> = (0..n).map(|k| run.t0 + k as f64 * rs.tau).collect();
+        let mut x0 = Vec::new();
+        for (o, eq) in model.outputs.iter().enumerate() {
+            for k in 0..eq.order {
+                x0.push(derivs[o][r].values[k][0]);
+            }
+        }
+        let us: Vec<Vec<f64>> = inputs.iter().map(|&u| run.channels[u].clone()).collect();
+        let opts = SimOptions { run: run.id.clone(), rtol: 1e-6, atol: 1e-9, ..Default::default() };
+        match simulate_model(&compiled, &x0, &times, &us, &opts) {
+            Ok(traj) => {
+                let mut sim = RunSimulation { run: run.id.clone(), rms: Vec::new(), nrmse: Vec::new(), simulated: Vec::new(), error: None };
+                for (o, &c) in outputs.iter().enumerate() {
+                    let ys = traj.series(compiled.offset(o));
+                    let (rms, nrmse) = rms_nrmse(&ys, &run.channels[c]);
+                    sim.rms.push(rms);
+                    sim.nrmse.push(nrmse);
+                    sim.simulated.push(ys);
+                }
+                out.push(sim);
+            }
+            Err(e) => out.push(RunSimulation { run: run.id.clone(), rms: vec![f64::NAN; outputs.len()], nrmse: vec![f64::NAN; outputs.len()], simulated: Vec::new(), error: Some(e.to_string()) }),
+        }
+    }
+    Ok(out)
+}
