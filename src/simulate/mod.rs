@@ -265,12 +265,11 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         self.opts.atol + self.opts.rtol * x0[k].abs().max(x1[k].abs())
     }
 
-    /// One Radau IIA step from (t, x0) with step h and state Jacobian `jac`.
-    fn radau_step(&mut self, t: f64, x0: &[f64], h: f64, jac: &[f64]) -> StepOutcome {
+    /// LU factors of the simplified-Newton matrix `I - h (A x J)` for step `h`.
+    fn newton_matrix(&self, h: f64, jac: &[f64]) -> nalgebra::linalg::LU<f64, nalgebra::Dyn, nalgebra::Dyn> {
         let n = self.n;
         let m = 3 * n;
         let a = self.rk.a;
-        let c = self.rk.c;
         let mut mat = DMatrix::<f64>::identity(m, m);
         for i in 0..3 {
             for j in 0..3 {
@@ -282,19 +281,28 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 }
             }
         }
-        let lu = mat.lu();
+        mat.lu()
+    }
+
+    /// One Radau IIA step from (t, x0) with step h, given the factors of [`Self::newton_matrix`]
+    /// for that h (from a Jacobian at or near x0: simplified Newton tolerates a slightly old one).
+    fn radau_step(&mut self, t: f64, x0: &[f64], h: f64, lu: &nalgebra::linalg::LU<f64, nalgebra::Dyn, nalgebra::Dyn>) -> StepOutcome {
+        let n = self.n;
+        let m = 3 * n;
+        let a = self.rk.a;
+        let c = self.rk.c;
         // Stage increments Z_i, started at zero (a predictor from the previous step would save
         // iterations, but zero is robust after breakpoints).
         let mut z = vec![0.0; m];
         let mut fz = vec![0.0; m];
         let mut xs = vec![0.0; n];
+        let mut out = vec![0.0; n];
         let mut prev_norm = f64::INFINITY;
         for _iter in 0..12 {
             for i in 0..3 {
                 for k in 0..n {
                     xs[k] = x0[k] + z[i * n + k];
                 }
-                let mut out = vec![0.0; n];
                 self.f(t + c[i] * h, &xs, &mut out);
                 fz[i * n..(i + 1) * n].copy_from_slice(&out);
             }
@@ -380,18 +388,21 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
             }
             self.input.eval(t, &mut self.u);
             self.sys.jacobian(x, &self.u, &mut jac);
-            let full = self.radau_step(t, x, hh, &jac);
-            let half1 = match full {
-                StepOutcome::Ok(_) => self.radau_step(t, x, 0.5 * hh, &jac),
-                StepOutcome::NoConvergence => StepOutcome::NoConvergence,
+            let lu_full = self.newton_matrix(hh, &jac);
+            let full = self.radau_step(t, x, hh, &lu_full);
+            let lu_half = match full {
+                StepOutcome::Ok(_) => Some(self.newton_matrix(0.5 * hh, &jac)),
+                StepOutcome::NoConvergence => None,
+            };
+            let half1 = match &lu_half {
+                Some(lu) => self.radau_step(t, x, 0.5 * hh, lu),
+                None => StepOutcome::NoConvergence,
             };
             let result = match (full, half1) {
                 (StepOutcome::Ok(xf), StepOutcome::Ok(xm)) => {
-                    let tm = t + 0.5 * hh;
-                    self.input.eval(tm, &mut self.u);
-                    let mut jac2 = vec![0.0; n * n];
-                    self.sys.jacobian(&xm, &self.u, &mut jac2);
-                    match self.radau_step(tm, &xm, 0.5 * hh, &jac2) {
+                    // The second half step reuses the first one's Newton matrix.
+                    let lu = lu_half.as_ref().expect("factored above");
+                    match self.radau_step(t + 0.5 * hh, &xm, 0.5 * hh, lu) {
                         StepOutcome::Ok(xh) => Some((xf, xh)),
                         StepOutcome::NoConvergence => None,
                     }
