@@ -1,5 +1,7 @@
 //! Subcommand definitions and dispatch.
 
+mod simulate;
+
 use clap::{Parser, Subcommand};
 use ctsid::Result;
 
@@ -14,6 +16,8 @@ pub struct Cli {
 pub enum Command {
     /// Print the library version and the available engines.
     Info,
+    /// Simulate a model file on every run of a record and report RMS / NRMSE.
+    Simulate(simulate::SimulateArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -22,5 +26,6 @@ pub fn run(cli: Cli) -> Result<()> {
             println!("ctsid {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Simulate(args) => simulate::run(args),
     }
 }

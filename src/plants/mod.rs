@@ -19,6 +19,9 @@ pub mod noise;
 pub mod rng;
 pub mod throttle;
 
+/// Saturation level of the MIMO plant's default excitation.
+pub const MIMO_U_BAR: f64 = 5.0;
+
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
@@ -83,10 +86,10 @@ impl Plant {
         }
     }
 
-    /// The MIMO plant with its default excitation (the paper's family, u_bar = 2).
+    /// The MIMO plant with its default excitation (the paper's family, one draw per input).
     pub fn mimo() -> Plant {
         let mut ex = ExcitationConfig::paper();
-        ex.u_bar = 2.0;
+        ex.u_bar = MIMO_U_BAR;
         Plant { name: "mimo".into(), dynamics: Dynamics::Mimo(MimoPlant::new()), excitation: ex }
     }
 

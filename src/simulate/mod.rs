@@ -536,6 +536,165 @@ pub fn simulate_model(
     simulate(model, &input, x0, times, opts)
 }
 
+/// Samples used by [`estimate_initial_derivatives`] for an output of order `order`.
+pub fn initial_window(order: usize) -> usize {
+    (4 * (order + 2)).max(15)
+}
+
+/// Estimates `y, y', ..., y^(order-1)` at `t[0]` from the first samples of a run.
+///
+/// A polynomial of degree `order + 1` is fitted by least squares to the first
+/// [`initial_window`]`(order)` samples (time scaled to [0, 1] for conditioning) and differentiated
+/// at `t[0]`. This is a plain local fit, not the derivative smoother of the identification
+/// workflow: with noisy data the highest derivatives at the very start of a run are uncertain,
+/// and a stable model forgets that error at the rate of its slowest mode.
+pub fn estimate_initial_derivatives(t: &[f64], y: &[f64], order: usize, run: &str, what: &str) -> Result<Vec<f64>> {
+    let m = initial_window(order);
+    if t.len() < m || y.len() < m {
+        return Err(Error::RunTooShort { run: run.into(), len: t.len().min(y.len()), min: m, what: what.into() });
+    }
+    let deg = order + 1;
+    let span = t[m - 1] - t[0];
+    if !(span.is_finite() && span > 0.0) {
+        return Err(Error::InvalidData(format!("run '{run}': the first {m} sample times do not increase")));
+    }
+    let a = DMatrix::from_fn(m, deg + 1, |r, c| ((t[r] - t[0]) / span).powi(c as i32));
+    let b = DVector::from_fn(m, |r, _| y[r]);
+    let coef = a
+        .svd(true, true)
+        .solve(&b, 1e-12)
+        .map_err(|e| Error::Numerical(format!("run '{run}': initial-state fit failed: {e}")))?;
+    let mut fact = 1.0;
+    Ok((0..order)
+        .map(|k| {
+            if k > 0 {
+                fact *= k as f64;
+            }
+            coef[k] * fact / span.powi(k as i32)
+        })
+        .collect())
+}
+
+/// Refines an initial state of a model by Gauss-Newton on the simulated outputs over the first
+/// `window` samples of a run (the model's own dynamics fix the derivatives that a local fit
+/// estimates poorly: fast modes, noise).
+///
+/// `ys[i]` are the measured samples of output `i`, `us[c]` the inputs, `guess` a starting state
+/// (for example from [`estimate_initial_derivatives`]). Residuals of each output are scaled by
+/// that output's spread over the window. Returns the guess unchanged when no step improves it
+/// (for instance when the model diverges around it); linear models converge in one step.
+pub fn fit_initial_state(
+    model: &CompiledModel,
+    t: &[f64],
+    ys: &[Vec<f64>],
+    us: &[Vec<f64>],
+    guess: &[f64],
+    window: usize,
+    opts: &SimOptions,
+) -> Vec<f64> {
+    let w = window.min(t.len());
+    let n = model.n_state();
+    let n_out = model.n_outputs();
+    if w < 2 || guess.len() != n {
+        return guess.to_vec();
+    }
+    let tw = &t[..w];
+    let uw: Vec<Vec<f64>> = us.iter().map(|u| u[..w].to_vec()).collect();
+    let scale: Vec<f64> = (0..n_out)
+        .map(|i| {
+            let y = &ys[i][..w];
+            let mean = y.iter().sum::<f64>() / w as f64;
+            let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / w as f64).sqrt();
+            sd.max(1e-9 * mean.abs()).max(1e-300)
+        })
+        .collect();
+    let residuals = |x0: &[f64]| -> Option<Vec<f64>> {
+        let tr = simulate_model(model, x0, tw, &uw, opts).ok()?;
+        let mut r = Vec::with_capacity(w * n_out);
+        for i in 0..n_out {
+            let o = model.offset(i);
+            for k in 0..w {
+                r.push((tr.state(k)[o] - ys[i][k]) / scale[i]);
+            }
+        }
+        Some(r)
+    };
+    let cost = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
+    let mut x = guess.to_vec();
+    let mut r = match residuals(&x) {
+        Some(r) => r,
+        None => {
+            // Start from the measured values with zero derivatives instead.
+            let mut x2 = vec![0.0; n];
+            for i in 0..n_out {
+                x2[model.offset(i)] = ys[i][0];
+            }
+            match residuals(&x2) {
+                Some(r) => {
+                    x = x2;
+                    r
+                }
+                None => return guess.to_vec(),
+            }
+        }
+    };
+    let mut lambda = 1e-6;
+    for _ in 0..8 {
+        // Forward-difference sensitivities of the residuals to each initial state.
+        let mut jac = DMatrix::<f64>::zeros(r.len(), n);
+        for j in 0..n {
+            let dj = 1e-6 * x[j].abs().max(1e-3);
+            let mut xp = x.clone();
+            xp[j] += dj;
+            let Some(rp) = residuals(&xp) else { return x };
+            for k in 0..r.len() {
+                jac[(k, j)] = (rp[k] - r[k]) / dj;
+            }
+        }
+        let rv = DVector::from_column_slice(&r);
+        let jtj = jac.transpose() * &jac;
+        let jtr = jac.transpose() * rv;
+        let c0 = cost(&r);
+        let mut improved = false;
+        for _ in 0..6 {
+            let mut a = jtj.clone();
+            for j in 0..n {
+                a[(j, j)] += lambda * jtj[(j, j)].max(1e-300);
+            }
+            let Some(step) = a.lu().solve(&(-&jtr)) else { break };
+            let xn: Vec<f64> = x.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
+            if let Some(rn) = residuals(&xn) {
+                if cost(&rn) < c0 {
+                    x = xn;
+                    r = rn;
+                    lambda = (lambda * 0.1).max(1e-12);
+                    improved = true;
+                    break;
+                }
+            }
+            lambda *= 10.0;
+        }
+        if !improved || (c0 - cost(&r)) <= 1e-10 * c0 {
+            break;
+        }
+    }
+    x
+}
+
+/// RMS of `sim - meas` and NRMSE = RMS / standard deviation of `meas` (infinite when `meas`
+/// is constant and the error is not zero).
+pub fn rms_nrmse(sim: &[f64], meas: &[f64]) -> (f64, f64) {
+    let n = sim.len().min(meas.len());
+    if n == 0 {
+        return (0.0, 0.0);
+    }
+    let rms = (sim.iter().zip(meas).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / n as f64).sqrt();
+    let mean = meas[..n].iter().sum::<f64>() / n as f64;
+    let sd = (meas[..n].iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
+    let nrmse = if sd > 0.0 { rms / sd } else if rms == 0.0 { 0.0 } else { f64::INFINITY };
+    (rms, nrmse)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -551,6 +710,18 @@ mod tests {
         // Known closed form of a_33.
         assert!((r.a[2][2] - 1.0 / 9.0).abs() < 1e-14);
         assert!((r.a[0][0] - (88.0 - 7.0 * 6f64.sqrt()) / 360.0).abs() < 1e-14);
+    }
+
+    #[test]
+    fn initial_derivatives_of_a_polynomial_are_exact() {
+        let t: Vec<f64> = (0..30).map(|k| 1.0 + 0.01 * k as f64).collect();
+        // y = 2 + 3 (t-1) - 4 (t-1)^2 + 0.5 (t-1)^3 + (t-1)^4: degree order+1 = 4 for order 3
+        let y: Vec<f64> = t.iter().map(|&t| { let s = t - 1.0; 2.0 + 3.0 * s - 4.0 * s * s + 0.5 * s.powi(3) + s.powi(4) }).collect();
+        let d = estimate_initial_derivatives(&t, &y, 3, "r", "x").unwrap();
+        assert!((d[0] - 2.0).abs() < 1e-10 && (d[1] - 3.0).abs() < 1e-8 && (d[2] + 8.0).abs() < 1e-6, "{d:?}");
+        assert!(matches!(estimate_initial_derivatives(&t[..10], &y[..10], 3, "r", "x"), Err(Error::RunTooShort { .. })));
+        let (rms, nr) = rms_nrmse(&[1.0, 3.0], &[0.0, 2.0]);
+        assert_eq!((rms, nr), (1.0, 1.0));
     }
 
     #[test]
