@@ -94,7 +94,7 @@ fn interpolated_input_is_integrated_exactly_between_samples() {
     let m = siso(1, vec![Term::new(&[("u", 1)], 1.0)]);
     let t = grid(400, 0.003);
     let u: Vec<f64> = (0..400).map(|k| ((k * 7919) % 13) as f64 - 6.0).collect();
-    let tr = simulate_model(&m, &[0.0], &t, &[u.clone()], &SimOptions::default()).unwrap();
+    let tr = simulate_model(&m, &[0.0], &t, std::slice::from_ref(&u), &SimOptions::default()).unwrap();
     let mut acc = 0.0;
     for k in 1..400 {
         acc += 0.5 * 0.003 * (u[k - 1] + u[k]);
@@ -186,8 +186,8 @@ fn stiff_throttle_spectrum_matches_matrix_exponential() {
     let mut worst: f64 = 0.0;
     for j in 0..4 {
         let scale = exact.iter().map(|x| x[j].abs()).fold(0.0, f64::max);
-        for k in 0..t.len() {
-            worst = worst.max((tr.state(k)[j] - exact[k][j]).abs() / scale);
+        for (k, ex) in exact.iter().enumerate() {
+            worst = worst.max((tr.state(k)[j] - ex[j]).abs() / scale);
         }
     }
     assert!(worst < 1e-7, "worst relative error {worst:e}");
@@ -220,4 +220,26 @@ fn bad_arguments_are_errors() {
     assert!(simulate(&m, &ConstantInput(vec![0.0]), &[1.0], &[0.0, 1.0], &SimOptions::default()).is_err());
     assert!(simulate(&m, &ConstantInput(vec![0.0]), &[1.0, 0.0], &[0.0, 0.0], &SimOptions::default()).is_err());
     assert!(simulate(&m, &ConstantInput(vec![0.0, 1.0]), &[1.0, 0.0], &[0.0, 1.0], &SimOptions::default()).is_err());
+}
+
+#[test]
+fn initial_state_fit_recovers_the_state_from_noisy_samples() {
+    use ctsid::plants::rng::Rng;
+    use ctsid::simulate::{estimate_initial_derivatives, fit_initial_state};
+    // y''' = -6y - 11y' - 6y'' + 6u from x0 = (0.2, -1.0, 3.0), u = 1, with 1 % noise.
+    let m = siso(
+        3,
+        vec![Term::new(&[("y", 1)], -6.0), Term::new(&[("y_d1", 1)], -11.0), Term::new(&[("y_d2", 1)], -6.0), Term::new(&[("u", 1)], 6.0)],
+    );
+    let t = grid(400, 0.005);
+    let x_true = [0.2, -1.0, 3.0];
+    let tr = simulate(&m, &ConstantInput(vec![1.0]), &x_true, &t, &SimOptions::default()).unwrap();
+    let mut rng = Rng::new(5);
+    let y: Vec<f64> = tr.series(0).iter().map(|v| v + 0.01 * rng.normal()).collect();
+    let u = vec![vec![1.0; 400]];
+    let guess = estimate_initial_derivatives(&t, &y, 3, "r", "test").unwrap();
+    let fit = fit_initial_state(&m, &t, &[y.clone()], &u, &guess, 200, &SimOptions::default());
+    let err = |x: &[f64]| (0..3).map(|k| (x[k] - x_true[k]).abs() / [1.0, 5.0, 20.0][k]).fold(0.0, f64::max);
+    assert!(err(&fit) < 0.05, "fit {fit:?}");
+    assert!(err(&fit) < err(&guess), "fit {fit:?} not better than guess {guess:?}");
 }

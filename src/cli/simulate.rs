@@ -150,7 +150,7 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             Some(c) => {
                 let t = tab.numbers(c, rows)?;
                 for k in 1..t.len() {
-                    if !(t[k] > t[k - 1]) {
+                    if t[k].partial_cmp(&t[k - 1]) != Some(std::cmp::Ordering::Greater) {
                         return Err(Error::TimeNotIncreasing {
                             path: tab.path.clone(),
                             row: rows[k] + 2,

@@ -100,7 +100,7 @@ pub struct SampledInput {
 impl SampledInput {
     /// `t` strictly increasing; one vector of samples per channel, each as long as `t`.
     pub fn new(t: Vec<f64>, values: Vec<Vec<f64>>) -> Result<SampledInput> {
-        if t.windows(2).any(|w| !(w[1] > w[0])) {
+        if !t.windows(2).all(|w| w[1] > w[0]) {
             return Err(Error::InvalidData("input sample times must increase strictly".into()));
         }
         if values.iter().any(|v| v.len() != t.len()) {
@@ -488,7 +488,7 @@ pub fn simulate<S: System + ?Sized, I: Input + ?Sized>(
     if times.is_empty() {
         return Err(Error::param("times", "no output times"));
     }
-    if times.iter().any(|t| !t.is_finite()) || times.windows(2).any(|w| !(w[1] > w[0])) {
+    if times.iter().any(|t| !t.is_finite()) || !times.windows(2).all(|w| w[1] > w[0]) {
         return Err(Error::param("times", "output times must be finite and strictly increasing"));
     }
     if !(opts.rtol > 0.0 && opts.atol > 0.0) {
@@ -611,11 +611,9 @@ pub fn fit_initial_state(
     let residuals = |x0: &[f64]| -> Option<Vec<f64>> {
         let tr = simulate_model(model, x0, tw, &uw, opts).ok()?;
         let mut r = Vec::with_capacity(w * n_out);
-        for i in 0..n_out {
+        for (i, (y, s)) in ys.iter().zip(&scale).enumerate() {
             let o = model.offset(i);
-            for k in 0..w {
-                r.push((tr.state(k)[o] - ys[i][k]) / scale[i]);
-            }
+            r.extend(y[..w].iter().enumerate().map(|(k, v)| (tr.state(k)[o] - v) / s));
         }
         Some(r)
     };
