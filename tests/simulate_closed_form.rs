@@ -238,7 +238,7 @@ fn initial_state_fit_recovers_the_state_from_noisy_samples() {
     let y: Vec<f64> = tr.series(0).iter().map(|v| v + 0.01 * rng.normal()).collect();
     let u = vec![vec![1.0; 400]];
     let guess = estimate_initial_derivatives(&t, &y, 3, "r", "test").unwrap();
-    let fit = fit_initial_state(&m, &t, &[y.clone()], &u, &guess, 200, &SimOptions::default());
+    let fit = fit_initial_state(&m, &t, std::slice::from_ref(&y), &u, &guess, 200, &SimOptions::default());
     let err = |x: &[f64]| (0..3).map(|k| (x[k] - x_true[k]).abs() / [1.0, 5.0, 20.0][k]).fold(0.0, f64::max);
     assert!(err(&fit) < 0.05, "fit {fit:?}");
     assert!(err(&fit) < err(&guess), "fit {fit:?} not better than guess {guess:?}");
