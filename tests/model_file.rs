@@ -60,6 +60,12 @@ fn hand_written_minimal_file_is_valid_and_evaluates() {
     let mut dx = [0.0; 2];
     c.rhs(&[1.0, 2.0], &[4.0], &mut dx);
     assert_eq!(dx, [2.0, 22.5]);
+    // Coefficients can be swapped without recompiling.
+    let mut c = c;
+    assert_eq!(c.coefficients(), vec![-2.0, 3.0, 0.5]);
+    c.set_coefficients(&[1.0, 0.0, 0.0]).unwrap();
+    assert_eq!(c.eval_output(0, &[1.0, 2.0, 4.0]), 1.0);
+    assert!(c.set_coefficients(&[1.0]).is_err());
     // No tau, no degree: still valid, degree inferred.
     let m2 = Model::from_json_str(
         r#"{"format":"ctsid-model/1","inputs":[],"outputs":[{"name":"x","order":1,"terms":[{"exponents":{"x":2},"coefficient":-1}]}]}"#,

@@ -424,6 +424,24 @@ impl CompiledModel {
         &self.names
     }
 
+    /// All coefficients, output by output in term order (the order of the model file).
+    pub fn coefficients(&self) -> Vec<f64> {
+        self.terms.iter().flat_map(|ts| ts.iter().map(|t| t.coef)).collect()
+    }
+
+    /// Replaces the coefficients (same order as [`CompiledModel::coefficients`]) without
+    /// recompiling: for refinement loops that simulate many coefficient vectors.
+    pub fn set_coefficients(&mut self, c: &[f64]) -> Result<()> {
+        let n: usize = self.terms.iter().map(|ts| ts.len()).sum();
+        if c.len() != n {
+            return Err(Error::param("coefficients", format!("got {} values for {n} terms", c.len())));
+        }
+        for (t, &v) in self.terms.iter_mut().flat_map(|ts| ts.iter_mut()).zip(c) {
+            t.coef = v;
+        }
+        Ok(())
+    }
+
     /// `P_i(z)`: the highest derivative of output `i` at `z = [state, inputs]`.
     pub fn eval_output(&self, i: usize, z: &[f64]) -> f64 {
         self.terms[i].iter().map(|t| t.coef * t.factors.iter().fold(1.0, |a, &(v, e)| a * z[v].powi(e as i32))).sum()

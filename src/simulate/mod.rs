@@ -431,8 +431,9 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                         if let Some(e) = self.diverged(t, x) {
                             return Err(e);
                         }
-                        // A clipped last step says nothing about the next one: keep the old guess.
-                        if !last || fac < 1.0 {
+                        // A step clipped to land on b says little about the next one: keep the
+                        // old guess unless the step was nearly full length and asks for less.
+                        if !last || (fac < 1.0 && hh >= 0.5 * *h) {
                             *h = hh * fac;
                         }
                     } else {
