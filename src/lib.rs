@@ -11,6 +11,9 @@
 //! | candidate basis | [`basis`] | monomials of degree <= 12 in <= 32 variables |
 //! | sweep engines | [`engine`] | CPU (rayon) or GPU (wgpu compute shaders) |
 //! | sparse regression | [`regression`] | LARS / LassoLars written once against [`engine::SweepEngine`] |
+//! | model file | [`model`] | `ctsid-model/1` JSON, chains of integrators closed by polynomials |
+//! | simulation | [`simulate`] | Radau IIA with error control, inputs with known breakpoints |
+//! | built-in plants | [`plants`] | throttle and MIMO plants with known truth, seeded excitation and noise |
 //!
 //! Errors are typed ([`Error`]); nothing in the library panics on bad input.
 
@@ -18,7 +21,10 @@ pub mod basis;
 pub mod derivatives;
 pub mod engine;
 pub mod error;
+pub mod model;
+pub mod plants;
 pub mod records;
 pub mod regression;
+pub mod simulate;
 
 pub use error::{Error, Result};

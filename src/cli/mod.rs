@@ -2,6 +2,7 @@
 
 mod derive;
 mod score;
+mod simulate;
 
 use clap::{Parser, Subcommand};
 use ctsid::Result;
@@ -21,6 +22,8 @@ pub struct Cli {
 pub enum Command {
     /// Derivatives of one column (per run), with a per-sample standard deviation.
     Derive(derive::DeriveArgs),
+    /// Simulate a model file on every run of a record and report RMS / NRMSE.
+    Simulate(simulate::SimulateArgs),
     /// Score the derivative method on the shared test signals against the reference anchors.
     ScoreDerivatives(score::ScoreArgs),
 }
@@ -28,6 +31,7 @@ pub enum Command {
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Derive(a) => derive::run(a),
+        Command::Simulate(args) => simulate::run(args),
         Command::ScoreDerivatives(a) => score::run(a),
     }
 }

@@ -1,0 +1,178 @@
+//! The model file: round trip, hand-written files, and the one-line errors for bad files.
+
+use ctsid::model::{Model, OutputEquation, Term};
+use ctsid::Error;
+
+fn siso() -> Model {
+    Model::new(
+        &["u"],
+        vec![OutputEquation::new(
+            "y",
+            3,
+            vec![
+                Term::new(&[], 37664.0),
+                Term::new(&[("y", 1)], -23978.0),
+                Term::new(&[("y_d1", 2), ("u", 1)], 0.125),
+                Term::new(&[("y_d2", 1)], -675.7),
+            ],
+        )],
+        Some(0.003),
+    )
+}
+
+fn err_of(text: &str) -> String {
+    match Model::from_json_str(text, "m.json") {
+        Err(e @ Error::Model { .. }) => e.to_string(),
+        Err(e) => panic!("wrong error kind: {e}"),
+        Ok(_) => panic!("accepted a bad model: {text}"),
+    }
+}
+
+#[test]
+fn round_trip_is_exact_and_keeps_extra_fields() {
+    let mut m = siso();
+    m.extra.insert("training".into(), serde_json::json!({"p50": 0.01, "runs": [0, 1, 2]}));
+    m.outputs[0].extra.insert("selected_order".into(), serde_json::json!(3));
+    m.outputs[0].terms[1].extra.insert("stderr".into(), serde_json::json!(1.5));
+    let dir = std::env::temp_dir().join(format!("ctsid-model-rt-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("m.json");
+    m.write(path.to_str().unwrap()).unwrap();
+    let back = Model::read(path.to_str().unwrap()).unwrap();
+    assert_eq!(back, m);
+    // Coefficients survive bit for bit.
+    assert_eq!(back.outputs[0].terms[3].coefficient.to_bits(), (-675.7f64).to_bits());
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn hand_written_minimal_file_is_valid_and_evaluates() {
+    let text = r#"{"format": "ctsid-model/1", "tau": 0.01, "degree": 2, "inputs": ["u"],
+        "outputs": [{"name": "y", "order": 2, "terms": [
+            {"exponents": {"y_d0": 1}, "coefficient": -2.0},
+            {"exponents": {"y_d1": 1, "u": 1}, "coefficient": 3.0},
+            {"exponents": {}, "coefficient": 0.5}]}]}"#;
+    let m = Model::from_json_str(text, "hand.json").unwrap();
+    assert_eq!(m.variable_names(), ["y", "y_d1", "u"]);
+    let c = m.compile().unwrap();
+    // z = (y, y', u) = (1, 2, 4): -2 + 3*8 + 0.5
+    assert_eq!(c.eval_output(0, &[1.0, 2.0, 4.0]), 22.5);
+    let mut dx = [0.0; 2];
+    c.rhs(&[1.0, 2.0], &[4.0], &mut dx);
+    assert_eq!(dx, [2.0, 22.5]);
+    // Coefficients can be swapped without recompiling.
+    let mut c = c;
+    assert_eq!(c.coefficients(), vec![-2.0, 3.0, 0.5]);
+    c.set_coefficients(&[1.0, 0.0, 0.0]).unwrap();
+    assert_eq!(c.eval_output(0, &[1.0, 2.0, 4.0]), 1.0);
+    assert!(c.set_coefficients(&[1.0]).is_err());
+    // No tau, no degree: still valid, degree inferred.
+    let m2 = Model::from_json_str(
+        r#"{"format":"ctsid-model/1","inputs":[],"outputs":[{"name":"x","order":1,"terms":[{"exponents":{"x":2},"coefficient":-1}]}]}"#,
+        "m",
+    )
+    .unwrap();
+    assert_eq!(m2.degree, 2);
+    assert_eq!(m2.tau, None);
+}
+
+#[test]
+fn mimo_layout_and_cross_derivatives() {
+    let text = r#"{"format":"ctsid-model/1","tau":0.01,"degree":3,"inputs":["u1","u2"],
+      "outputs":[{"name":"a","order":2,"terms":[{"exponents":{"b_d2":1,"a":1},"coefficient":2}]},
+                 {"name":"b","order":3,"terms":[{"exponents":{"a_d1":1,"u2":2},"coefficient":-1}]}]}"#;
+    let m = Model::from_json_str(text, "m").unwrap();
+    assert_eq!(m.variable_names(), ["a", "a_d1", "b", "b_d1", "b_d2", "u1", "u2"]);
+    let c = m.compile().unwrap();
+    let x = [1.0, 2.0, 3.0, 4.0, 5.0];
+    let u = [7.0, 3.0];
+    let mut dx = [0.0; 5];
+    c.rhs(&x, &u, &mut dx);
+    assert_eq!(dx, [2.0, 2.0 * 5.0 * 1.0, 4.0, 5.0, -2.0 * 9.0]);
+    // Analytic Jacobian against central differences.
+    let mut jx = [0.0; 25];
+    let mut ju = [0.0; 10];
+    c.jacobians(&x, &u, &mut jx, &mut ju);
+    for k in 0..5 {
+        let mut xp = x;
+        let mut xm = x;
+        xp[k] += 1e-6;
+        xm[k] -= 1e-6;
+        let (mut fp, mut fm) = ([0.0; 5], [0.0; 5]);
+        c.rhs(&xp, &u, &mut fp);
+        c.rhs(&xm, &u, &mut fm);
+        for r in 0..5 {
+            assert!((jx[r * 5 + k] - (fp[r] - fm[r]) / 2e-6).abs() < 1e-6, "J[{r}][{k}]");
+        }
+    }
+    assert_eq!(ju[4 * 2 + 1], -2.0 * 2.0 * 3.0); // d(-a_d1*u2^2)/du2
+}
+
+#[test]
+fn unparsable_json_names_line_and_column() {
+    let e = err_of("{\"format\": \"ctsid-model/1\",\n \"inputs\": [u]}");
+    assert!(e.contains("m.json") && e.contains("line 2"), "{e}");
+    assert!(!e.contains('\n'));
+}
+
+#[test]
+fn unknown_format_is_refused() {
+    let e = err_of(r#"{"format":"ctsid-model/9","inputs":[],"outputs":[{"name":"y","order":1,"terms":[]}]}"#);
+    assert!(e.contains("unknown format") && e.contains("ctsid-model/9"), "{e}");
+    let e = err_of(r#"{"inputs":[],"outputs":[{"name":"y","order":1,"terms":[]}]}"#);
+    assert!(e.contains("format"), "{e}");
+}
+
+#[test]
+fn unknown_variable_names_the_term_and_name() {
+    let e = err_of(
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":2,"terms":[
+        {"exponents":{"y":1},"coefficient":1},{"exponents":{"v":1},"coefficient":1}]}]}"#,
+    );
+    assert!(e.contains("term 2") && e.contains("'v'") && e.contains("unknown variable"), "{e}");
+}
+
+#[test]
+fn derivative_at_or_above_the_order_is_refused() {
+    let e = err_of(
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":3,"terms":[
+        {"exponents":{"y_d3":1},"coefficient":1}]}]}"#,
+    );
+    assert!(e.contains("term 1") && e.contains("y_d3") && e.contains("order 3") && e.contains("y..y_d2"), "{e}");
+    // MIMO: b's derivatives only up to b's own order - 1, also in a's equation.
+    let e = err_of(
+        r#"{"format":"ctsid-model/1","inputs":[],"outputs":[{"name":"a","order":3,"terms":[
+        {"exponents":{"b_d2":1},"coefficient":1}]},{"name":"b","order":2,"terms":[]}]}"#,
+    );
+    assert!(e.contains("output 'a'") && e.contains("b_d2"), "{e}");
+}
+
+#[test]
+fn bad_exponents_and_coefficients_are_refused() {
+    for bad in ["-1", "1.5", "\"2\""] {
+        let e = err_of(&format!(
+            r#"{{"format":"ctsid-model/1","inputs":["u"],"outputs":[{{"name":"y","order":1,"terms":[
+            {{"exponents":{{"u":{bad}}},"coefficient":1}}]}}]}}"#
+        ));
+        assert!(e.contains("term 1") && e.contains("'u'") && e.contains("non-negative integers"), "{bad}: {e}");
+    }
+    // Non-finite coefficients cannot be written in JSON; they are refused when built in code.
+    let mut m = siso();
+    m.outputs[0].terms[0].coefficient = f64::NAN;
+    let e = m.to_json_string().unwrap_err().to_string();
+    assert!(e.contains("term 1") && e.contains("not finite"), "{e}");
+    let e = err_of(
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{},"coefficient":1e999}]}]}"#,
+    );
+    assert!(e.contains("m.json"), "{e}");
+}
+
+#[test]
+fn name_clashes_and_degree_are_checked() {
+    let e = err_of(r#"{"format":"ctsid-model/1","inputs":["y"],"outputs":[{"name":"y","order":1,"terms":[]}]}"#);
+    assert!(e.contains("'y'") && e.contains("twice"), "{e}");
+    let e = err_of(
+        r#"{"format":"ctsid-model/1","degree":1,"inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"u":2},"coefficient":1}]}]}"#,
+    );
+    assert!(e.contains("degree 2") && e.contains("degree 1"), "{e}");
+}

@@ -1,0 +1,169 @@
+//! `ctsid simulate`: true models reproduce generated data; errors are one line and non-zero.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+use ctsid::plants::{dataset, write_csv, Plant, ThrottlePreset};
+
+fn tmpdir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ctsid-simcli-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn ctsid(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_ctsid")).args(args).output().unwrap();
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+}
+
+/// NRMSE (%) on the `all` line for `output`.
+fn overall_nrmse(stdout: &str, output: &str) -> f64 {
+    let line = stdout.lines().find(|l| l.split_whitespace().take(2).eq(["all", output])).expect(stdout);
+    line.split_whitespace().last().unwrap().parse().unwrap()
+}
+
+fn fails_with(args: &[&str], needle: &str) {
+    let (code, _, err) = ctsid(args);
+    assert_ne!(code, 0, "{args:?} succeeded");
+    let lines: Vec<&str> = err.trim_end().lines().collect();
+    assert_eq!(lines.len(), 1, "not one line: {err}");
+    assert!(lines[0].starts_with("error: ") && lines[0].contains(needle), "{:?}: {}", args, lines[0]);
+}
+
+#[test]
+fn true_throttle_model_reproduces_its_data() {
+    let d = tmpdir("thr");
+    let plant = Plant::throttle(ThrottlePreset::Paper { patm: 0.0 });
+    let runs = dataset(&plant, 3, 400, 0.003, 0.0, 21).unwrap();
+    let data = d.join("data.csv");
+    write_csv(&plant, &runs, data.to_str().unwrap(), true).unwrap();
+    let model = d.join("model.json");
+    plant.true_model(Some(0.003)).unwrap().write(model.to_str().unwrap()).unwrap();
+    let sim = d.join("sim.csv");
+    let (code, out, err) = ctsid(&[
+        "simulate",
+        model.to_str().unwrap(),
+        data.to_str().unwrap(),
+        "--run-column",
+        "run",
+        "--time-column",
+        "t",
+        "-o",
+        sim.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(overall_nrmse(&out, "y") < 0.1, "{out}");
+    // y_sim beside the data, close to the truth on every row.
+    let mut rdr = csv::Reader::from_path(&sim).unwrap();
+    let h = rdr.headers().unwrap().clone();
+    let iy = h.iter().position(|c| c == "y_true").unwrap();
+    let is = h.iter().position(|c| c == "y_sim").unwrap();
+    let mut n = 0;
+    for r in rdr.records() {
+        let r = r.unwrap();
+        let (a, b): (f64, f64) = (r[iy].parse().unwrap(), r[is].parse().unwrap());
+        assert!((a - b).abs() < 1e-2 * (1.0 + a.abs()), "{a} vs {b}");
+        n += 1;
+    }
+    assert_eq!(n, 1200);
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn true_mimo_model_reproduces_noisy_data() {
+    let d = tmpdir("mimo");
+    let plant = Plant::mimo();
+    let runs = dataset(&plant, 3, 1000, 0.003, 0.03, 3).unwrap();
+    let data = d.join("data.csv");
+    write_csv(&plant, &runs, data.to_str().unwrap(), true).unwrap();
+    let model = d.join("model.json");
+    plant.true_model(Some(0.003)).unwrap().write(model.to_str().unwrap()).unwrap();
+    let sim = d.join("sim.csv");
+    // tau from the model file, no time column.
+    let (code, out, err) =
+        ctsid(&["simulate", model.to_str().unwrap(), data.to_str().unwrap(), "--run-column", "run", "-o", sim.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    // Against the truth (the measured output carries 3 % noise): NRMSE of y_sim vs y_true.
+    let mut rdr = csv::Reader::from_path(&sim).unwrap();
+    let h = rdr.headers().unwrap().clone();
+    let rows: Vec<csv::StringRecord> = rdr.records().map(|r| r.unwrap()).collect();
+    let col = |name: &str| -> Vec<f64> {
+        let c = h.iter().position(|x| x == name).unwrap();
+        rows.iter().map(|r| r[c].parse().unwrap()).collect()
+    };
+    for y in ["y1", "y2", "y3"] {
+        let (rms, nrmse) = ctsid::simulate::rms_nrmse(&col(&format!("{y}_sim")), &col(&format!("{y}_true")));
+        eprintln!("{y}: rms {rms:e} nrmse vs truth {:.3} %", 100.0 * nrmse);
+        assert!(nrmse < 0.03, "{y}: NRMSE against the truth {nrmse}\n{out}");
+        // The printed NRMSE is against the noisy measurement: near the noise's own share.
+        assert!(overall_nrmse(&out, y) < 20.0, "{out}");
+    }
+    // A wrong model (inputs' signs flipped) is clearly worse: the metric can fail.
+    let mut wrong = plant.true_model(Some(0.003)).unwrap();
+    for o in &mut wrong.outputs {
+        for t in &mut o.terms {
+            if t.exponents.keys().any(|k| k.starts_with('u')) {
+                t.coefficient = -t.coefficient;
+            }
+        }
+    }
+    let wm = d.join("wrong.json");
+    wrong.write(wm.to_str().unwrap()).unwrap();
+    let (_, out2, _) = ctsid(&["simulate", wm.to_str().unwrap(), data.to_str().unwrap(), "--run-column", "run"]);
+    assert!(overall_nrmse(&out2, "y1") > 50.0, "{out2}");
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn errors_are_one_line() {
+    let d = tmpdir("err");
+    let model = d.join("m.json");
+    std::fs::write(
+        &model,
+        r#"{"format":"ctsid-model/1","tau":0.01,"inputs":["u"],"outputs":[{"name":"y","order":2,
+        "terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":1}]}]}"#,
+    )
+    .unwrap();
+    let data = d.join("d.csv");
+    let mut s = String::from("run,t,u,y\n");
+    for r in 0..2 {
+        for k in 0..40 {
+            s += &format!("{r},{},{},{}\n", k as f64 * 0.01, 1.0, 0.0);
+        }
+    }
+    std::fs::write(&data, &s).unwrap();
+    let (m, dp) = (model.to_str().unwrap(), data.to_str().unwrap());
+    // Works as a baseline.
+    let (code, _, err) = ctsid(&["simulate", m, dp, "--run-column", "run"]);
+    assert_eq!(code, 0, "{err}");
+    fails_with(&["simulate", m, dp, "--run-column", "batch"], "no column named 'batch'");
+    fails_with(&["simulate", m, dp, "--run-column", "run", "--time-column", "time"], "no column named 'time'");
+    // Missing output / input columns.
+    let nod = d.join("noy.csv");
+    std::fs::write(&nod, "run,u\n0,1\n").unwrap();
+    fails_with(&["simulate", m, nod.to_str().unwrap(), "--run-column", "run"], "no column named 'y'");
+    // Model file that does not parse, or names unknown variables.
+    let bad = d.join("bad.json");
+    std::fs::write(&bad, "{\"format\": \"ctsid-model/1\", \"inputs\": [").unwrap();
+    fails_with(&["simulate", bad.to_str().unwrap(), dp, "--run-column", "run"], "model file");
+    std::fs::write(
+        &bad,
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"w":1},"coefficient":1}]}]}"#,
+    )
+    .unwrap();
+    fails_with(&["simulate", bad.to_str().unwrap(), dp, "--run-column", "run"], "unknown variable 'w'");
+    // Too-short run.
+    let short = d.join("short.csv");
+    std::fs::write(&short, "run,u,y\n0,1,0\n0,1,0\n0,1,0\n").unwrap();
+    fails_with(&["simulate", m, short.to_str().unwrap(), "--run-column", "run"], "needs at least");
+    // Non-numeric value, named by row and column.
+    let nan = d.join("nan.csv");
+    std::fs::write(&nan, s.replacen("0,0,1,0\n", "0,0,1,abc\n", 1)).unwrap();
+    fails_with(&["simulate", m, nan.to_str().unwrap(), "--run-column", "run"], "row 2, column 'y'");
+    // No tau anywhere.
+    let notau = d.join("notau.json");
+    std::fs::write(&notau, std::fs::read_to_string(&model).unwrap().replace("\"tau\":0.01,", "")).unwrap();
+    fails_with(&["simulate", notau.to_str().unwrap(), dp, "--run-column", "run"], "--tau");
+    fails_with(&["simulate", m, dp, "--run-column", "run", "--tau=-1"], "tau");
+    std::fs::remove_dir_all(&d).ok();
+}
