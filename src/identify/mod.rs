@@ -30,7 +30,10 @@ use crate::error::{Error, Result};
 use crate::model::{derivative_name, Model as ModelFile, OutputEquation, Term as ModelTerm};
 use crate::records::RecordSet;
 use crate::regression::{EngineChoice, Method, Regression};
-use crate::simulate::{rms_nrmse, simulate_model, SimOptions};
+use crate::simulate::{fit_initial_state, rms_nrmse, simulate_model, SimOptions};
+
+/// Samples used to refine each simulated run's initial state.
+pub const INIT_WINDOW: usize = 200;
 use profile::{eta_rule, Profile};
 use serde::Serialize;
 pub use split::Split;
@@ -414,6 +417,10 @@ pub fn simulate_runs(model: &ModelFile, rs: &RecordSet, derivs: &[Vec<Derivative
         }
         let us: Vec<Vec<f64>> = inputs.iter().map(|&u| run.channels[u].clone()).collect();
         let opts = SimOptions { run: run.id.clone(), rtol: 1e-6, atol: 1e-9, ..Default::default() };
+        // The smoothed derivatives at the first sample are the least certain of the run; let the
+        // model's own dynamics refine them on the first samples (Gauss-Newton on the outputs).
+        let ys: Vec<Vec<f64>> = outputs.iter().map(|&c| run.channels[c].clone()).collect();
+        let x0 = fit_initial_state(&compiled, &times, &ys, &us, &x0, INIT_WINDOW, &opts);
         match simulate_model(&compiled, &x0, &times, &us, &opts) {
             Ok(traj) => {
                 let mut sim = RunSimulation { run: run.id.clone(), rms: Vec::new(), nrmse: Vec::new(), simulated: Vec::new(), error: None };
