@@ -16,6 +16,10 @@
 
 use crate::error::Result;
 
+pub mod cpu;
+
+pub use cpu::{CpuEngine, CpuOptions, DenseEngine};
+
 /// Feature rows Z, stored column-major (variable k is `data[k*n_samples..(k+1)*n_samples]`).
 #[derive(Debug, Clone)]
 pub struct Features {
