@@ -1,6 +1,8 @@
 //! Subcommand definitions and dispatch.
 
 use clap::{Parser, Subcommand};
+
+mod regress;
 use ctsid::Result;
 
 #[derive(Parser, Debug)]
@@ -14,6 +16,8 @@ pub struct Cli {
 pub enum Command {
     /// Print the library version and the available engines.
     Info,
+    /// Sparse polynomial regression of a label column on feature columns (LARS / LassoLars + eBIC).
+    Regress(regress::RegressArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -22,5 +26,6 @@ pub fn run(cli: Cli) -> Result<()> {
             println!("ctsid {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Regress(a) => regress::run(a),
     }
 }
