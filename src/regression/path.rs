@@ -24,6 +24,7 @@
 use super::cholesky::Cholesky;
 use crate::engine::SweepEngine;
 use crate::error::{Error, Result};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 /// Plain LARS or the lasso modification.
@@ -347,7 +348,7 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
                 refreshed_this_iter = true;
                 continue;
             }
-            let g: Vec<f64> = xa.iter().map(|x| dot(x, &xt)).collect();
+            let g: Vec<f64> = xa.par_iter().map(|x| dot(x, &xt)).collect();
             let (wv, pivot) = chol.pivot(&g, dot(&xt, &xt));
             let pivot = pivot.max(f64::EPSILON);
             if pivot < opts.collinearity_tol {
@@ -392,10 +393,15 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
             return Err(Error::Numerical(format!("the active system became singular at step {n_iter} with {k} terms; raise the collinearity tolerance")));
         }
         ls.iter_mut().for_each(|x| *x *= aa);
-        u.iter_mut().for_each(|x| *x = 0.0);
-        for (col, l) in xa.iter().zip(&ls) {
-            u.iter_mut().zip(col).for_each(|(ui, xi)| *ui += l * xi);
-        }
+        // u = X~_A ls, parallel over sample chunks (O(n k) per step).
+        u.par_chunks_mut(4096).enumerate().for_each(|(c, uc)| {
+            uc.iter_mut().for_each(|x| *x = 0.0);
+            let off = c * 4096;
+            for (col, l) in xa.iter().zip(&ls) {
+                let len = uc.len();
+                uc.iter_mut().zip(&col[off..off + len]).for_each(|(ui, xi)| *ui += l * xi);
+            }
+        });
         sd.corr(&u, &mut a)?;
 
         let inactive = |j: usize| sd.usable[j] && !in_active[j] && !skipped[j];
