@@ -33,6 +33,7 @@ use super::{ColumnStats, Features, Precision, SweepEngine};
 use crate::basis::Basis;
 use crate::error::{Error, Result};
 use kernel::{Elem, Plan};
+pub use kernel::simd_level;
 use rayon::prelude::*;
 
 /// Settings of the CPU engine.
@@ -63,8 +64,8 @@ pub struct CpuEngine {
     dense: Option<DenseEngine>,
 }
 
-const B32: usize = 128;
-const B64: usize = 128;
+const B32: usize = kernel::SIMD_B;
+const B64: usize = kernel::SIMD_B;
 
 impl CpuEngine {
     /// Builds the engine for `basis` over the feature rows `features` (names must match).
@@ -150,7 +151,9 @@ impl CpuEngine {
                 a
             })
             .unwrap_or_else(|| vec![0.0; nc]);
-        out.copy_from_slice(&total);
+        for (o, t) in self.plan.order().iter().zip(&total) {
+            out[*o as usize] = *t;
+        }
     }
 
     fn centred_squares(&self, w: Option<&[f64]>, mean: &[f64]) -> Vec<f64> {
@@ -215,7 +218,7 @@ pub(crate) fn check_weights(weights: Option<&[f64]>, n: usize) -> Result<()> {
 
 impl SweepEngine for CpuEngine {
     fn describe(&self) -> String {
-        let mode = if self.dense.is_some() { "materialised f64".to_string() } else { format!("on-the-fly {:?}", self.precision).to_lowercase() };
+        let mode = if self.dense.is_some() { "materialised f64".to_string() } else { format!("on-the-fly {:?}, {}", self.precision, kernel::simd_level()).to_lowercase() };
         format!("cpu ({mode}, {} threads, {} x {})", rayon::current_num_threads(), self.n_samples, self.basis.len())
     }
 
