@@ -24,6 +24,8 @@
 //! Column statistics are always computed in f64 with two passes (mean, then centred squares),
 //! so nearly constant monomials get an accurate norm; `columns` evaluates exact f64 values.
 
+#![allow(clippy::needless_range_loop)]
+
 mod dense;
 mod kernel;
 

@@ -2,6 +2,9 @@
 //! enters) and deletions (a lasso drop), in f64. Hand-written because the active set changes
 //! one column at a time: each change costs O(k^2) instead of a fresh O(k^3) factorisation.
 
+// `!(x > t)` is deliberate throughout: NaN must fail these checks.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 #[derive(Debug, Clone, Default)]
 pub struct Cholesky {
     /// Row i holds L[i][0..=i].

@@ -22,6 +22,9 @@
 //!
 //! Settings are validated by [`RegressionBuilder::build`] before any data is touched.
 
+// `!(x > t)` is deliberate throughout: NaN must fail these checks.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 pub mod cholesky;
 pub mod path;
 pub mod select;

@@ -21,6 +21,9 @@
 //!   `collinearity_tol`, i.e. its distance to the span of the active columns, in unit norm) is
 //!   skipped for the rest of the path and reported; nothing becomes NaN.
 
+// `!(x > t)` is deliberate throughout: NaN must fail these checks.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 use super::cholesky::Cholesky;
 use crate::engine::SweepEngine;
 use crate::error::{Error, Result};

@@ -19,6 +19,9 @@
 //!    lowers it. The increase of RSS when term t leaves is `b_t^2 / ||row t of R^{-1}||^2`, so each
 //!    round costs one QR. The constant may be pruned too (then the model goes through the origin).
 
+// `!(x > t)` is deliberate throughout: NaN must fail these checks.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
 use super::cholesky::Cholesky;
 use super::path::Path;
 use crate::error::{Error, Result};
@@ -54,7 +57,8 @@ pub fn path_ebic(path: &Path, p: usize, gamma: f64, rss_floor: f64) -> Vec<Optio
         }
     }
     let yy: f64 = path.y_tilde.iter().map(|v| v * v).sum();
-    let mut seen: Vec<(Vec<usize>, Option<(f64, f64)>)> = Vec::new();
+    type Scored = (Vec<usize>, Option<(f64, f64)>);
+    let mut seen: Vec<Scored> = Vec::new();
     let mut out = Vec::with_capacity(path.breakpoints.len());
     let mut resid = vec![0.0; n];
     for bp in &path.breakpoints {
