@@ -95,6 +95,22 @@ fn plain_lars_recovers_a_small_problem_too() {
 }
 
 #[test]
+fn relevance_threshold_stops_the_path() {
+    // Noise keeps the path going after the true terms, with small gains per step.
+    let p = problem(3, 4, 3, 2000, 4, 0.05);
+    let reg = |eps: f64| Regression::builder().degree(3).method(Method::Lars).epsilon(eps).build().unwrap();
+    let full = reg(0.0).fit(&p.features, &p.label, "y", None).unwrap();
+    let short = reg(0.05).fit(&p.features, &p.label, "y", None).unwrap();
+    assert_eq!(short.diagnostics.stop, ctsid::regression::StopReason::Relevance);
+    assert!(short.diagnostics.path_steps < full.diagnostics.path_steps, "{} vs {}", short.diagnostics.path_steps, full.diagnostics.path_steps);
+    // Each step kept before the stop lowered the relative residual by at least epsilon.
+    let steps = &short.path;
+    for k in 1..steps.len() - 1 {
+        assert!(steps[k - 1].rel_residual - steps[k].rel_residual >= 0.05, "step {k}");
+    }
+}
+
+#[test]
 fn duplicated_feature_is_skipped_without_nan() {
     // z1 is a copy of z0 (exactly, or up to 1e-10): every monomial in z1 duplicates one in z0.
     for offset in [0.0, 1e-10] {

@@ -99,3 +99,69 @@ fn sklearn_paths_from_z_through_the_basis_and_cpu_engine() {
         }
     }
 }
+
+#[test]
+fn exact_refreshes_do_not_change_the_path() {
+    // refresh_tol = 0 recomputes every correlation by an exact sweep whenever a candidate enters.
+    for f in load() {
+        let mut e = DenseEngine::from_columns(&f.x_cols).unwrap();
+        let steps = f.alphas.len() - 1;
+        let opts = PathOptions { method: f.method, max_terms: 10_000, max_steps: steps, refresh_tol: 0.0, ..PathOptions::default() };
+        let path = lars_path(&mut e, &f.y, None, &opts).unwrap();
+        assert!(path.refreshes > 0, "{}", f.name);
+        let scale = f.coefs.last().unwrap().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let last = path.breakpoints.last().unwrap();
+        assert_eq!(path.breakpoints.len(), f.alphas.len(), "{}", f.name);
+        for (id, c) in last.active.iter().zip(&last.coefs) {
+            assert!((c - f.coefs.last().unwrap()[*id]).abs() <= 1e-8 * scale, "{}", f.name);
+        }
+    }
+}
+
+#[test]
+fn alpha_min_interpolates_like_scikit_learn() {
+    for f in load() {
+        let k = 4;
+        let alpha_min = 0.5 * (f.alphas[k - 1] + f.alphas[k]);
+        let mut e = DenseEngine::from_columns(&f.x_cols).unwrap();
+        let opts = PathOptions { method: f.method, max_terms: 10_000, max_steps: 10_000, alpha_min, ..PathOptions::default() };
+        let path = lars_path(&mut e, &f.y, None, &opts).unwrap();
+        assert_eq!(path.stop, ctsid::regression::StopReason::AlphaMin);
+        assert_eq!(path.breakpoints.len(), k + 1, "{}", f.name);
+        let last = path.breakpoints.last().unwrap();
+        assert_eq!(last.alpha, alpha_min);
+        let ss = (f.alphas[k - 1] - alpha_min) / (f.alphas[k - 1] - f.alphas[k]);
+        let scale = f.coefs[k].iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let mut dense = vec![0.0; f.coefs[k].len()];
+        for (id, c) in last.active.iter().zip(&last.coefs) {
+            dense[*id] = *c;
+        }
+        for j in 0..dense.len() {
+            let want = f.coefs[k - 1][j] + ss * (f.coefs[k][j] - f.coefs[k - 1][j]);
+            assert!((dense[j] - want).abs() <= 1e-8 * scale, "{}: coef {j}", f.name);
+        }
+    }
+}
+
+#[test]
+fn f32_sweeps_keep_the_entering_order_of_well_separated_paths() {
+    // The f32 engine only steers the path; on these small problems it must pick the same terms.
+    for f in load().iter().filter(|f| f.name.contains("small")) {
+        let nz = f.z[0].len();
+        let degree = f.exponents.iter().map(|e| e.iter().sum::<u32>()).max().unwrap() as usize;
+        let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
+        let basis = Basis::new(&names, degree, BasisLimits::default()).unwrap();
+        let feats = Features::new(names.clone(), (0..nz).map(|k| f.z.iter().map(|r| r[k]).collect()).collect());
+        let mut e = CpuEngine::new(&basis, &feats, CpuOptions { precision: Precision::F32, materialize_limit_bytes: 0 }).unwrap();
+        let opts = PathOptions { method: f.method, max_terms: 10_000, max_steps: 8, ..PathOptions::default() };
+        let path = lars_path(&mut e, &f.y, None, &opts).unwrap();
+        let got: Vec<usize> = path.breakpoints.last().unwrap().active.iter().map(|j| j - 1).collect();
+        let want: Vec<usize> = f.coefs[8].iter().enumerate().filter(|(_, c)| **c != 0.0).map(|(j, _)| j).collect();
+        let mut g = got.clone();
+        g.sort_unstable();
+        assert_eq!(g, want, "{}", f.name);
+        for (k, bp) in path.breakpoints.iter().enumerate() {
+            assert!((bp.alpha - f.alphas[k]).abs() <= 1e-4 * f.alphas[k], "{}: alpha {k}", f.name);
+        }
+    }
+}
