@@ -136,9 +136,9 @@ fn alpha_min_interpolates_like_scikit_learn() {
         for (id, c) in last.active.iter().zip(&last.coefs) {
             dense[*id] = *c;
         }
-        for j in 0..dense.len() {
+        for (j, got) in dense.iter().enumerate() {
             let want = f.coefs[k - 1][j] + ss * (f.coefs[k][j] - f.coefs[k - 1][j]);
-            assert!((dense[j] - want).abs() <= 1e-8 * scale, "{}: coef {j}", f.name);
+            assert!((got - want).abs() <= 1e-8 * scale, "{}: coef {j}", f.name);
         }
     }
 }
