@@ -5,6 +5,8 @@ mod score;
 mod simulate;
 
 use clap::{Parser, Subcommand};
+
+mod regress;
 use ctsid::Result;
 
 #[derive(Parser, Debug)]
@@ -26,6 +28,8 @@ pub enum Command {
     Simulate(simulate::SimulateArgs),
     /// Score the derivative method on the shared test signals against the reference anchors.
     ScoreDerivatives(score::ScoreArgs),
+    /// Sparse polynomial regression of a label column on feature columns (LARS / LassoLars + eBIC).
+    Regress(regress::RegressArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -33,5 +37,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Derive(a) => derive::run(a),
         Command::Simulate(args) => simulate::run(args),
         Command::ScoreDerivatives(a) => score::run(a),
+        Command::Regress(a) => regress::run(a),
     }
 }

@@ -16,8 +16,11 @@
 
 use crate::error::Result;
 
+pub mod cpu;
 pub mod gpu;
 pub mod select;
+
+pub use cpu::{CpuEngine, CpuOptions, DenseEngine};
 
 /// Feature rows Z, stored column-major (variable k is `data[k*n_samples..(k+1)*n_samples]`).
 #[derive(Debug, Clone)]

@@ -1,1 +1,481 @@
-//! Sparse regression (work in progress).
+//! Sparse polynomial regression: find the few monomials of degree <= d that explain a label.
+//!
+//! ```no_run
+//! use ctsid::regression::{Regression, Method};
+//! # fn main() -> ctsid::Result<()> {
+//! # let features = ctsid::engine::Features::new(vec!["u".into(), "y".into()], vec![vec![0.0; 10], vec![1.0; 10]]);
+//! # let label = vec![0.0; 10];
+//! let model = Regression::builder().degree(3).method(Method::LassoLars).max_terms(20).build()?
+//!     .fit(&features, &label, "y_d1", None)?;
+//! println!("{}", model.equation());
+//! # Ok(()) }
+//! ```
+//!
+//! What happens in a fit:
+//! 1. [`path::lars_path`] runs LARS or LassoLars over all candidates through a
+//!    [`SweepEngine`] (standardised candidates, intercept by centring; see that module).
+//! 2. [`select`] picks the path support with the lowest extended BIC on an OLS refit, refits it
+//!    by least squares in original units and prunes terms backwards while eBIC improves.
+//! 3. The [`Model`] holds the chosen terms with coefficients in original units (the constant
+//!    monomial, when kept, is the intercept: a term with empty exponents), the path with
+//!    coefficients in original units at every breakpoint, and the selection diagnostics.
+//!
+//! Settings are validated by [`RegressionBuilder::build`] before any data is touched.
+
+// `!(x > t)` is deliberate throughout: NaN must fail these checks.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
+pub mod cholesky;
+pub mod path;
+pub mod select;
+
+pub use path::{lars_path, Breakpoint, Event, Method, Path, PathOptions, StopReason};
+
+use crate::basis::{Basis, BasisLimits};
+use crate::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Which engine runs the sweeps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EngineChoice {
+    Cpu,
+    Gpu,
+    #[default]
+    Auto,
+}
+
+/// Unchecked settings; [`RegressionBuilder::build`] validates them into a [`Regression`].
+#[derive(Debug, Clone)]
+pub struct RegressionBuilder {
+    degree: usize,
+    method: Method,
+    max_terms: usize,
+    max_steps: Option<usize>,
+    alpha_min: f64,
+    epsilon: f64,
+    ebic_gamma: f64,
+    prune: bool,
+    fit_intercept: bool,
+    collinearity_tol: f64,
+    refresh_tol: f64,
+    rss_floor: f64,
+    engine: EngineChoice,
+    precision: Option<Precision>,
+    max_candidates: u64,
+}
+
+impl Default for RegressionBuilder {
+    fn default() -> Self {
+        let p = PathOptions::default();
+        RegressionBuilder {
+            degree: 2,
+            method: p.method,
+            max_terms: p.max_terms,
+            max_steps: None,
+            alpha_min: p.alpha_min,
+            epsilon: p.epsilon,
+            ebic_gamma: 1.0,
+            prune: true,
+            fit_intercept: true,
+            collinearity_tol: p.collinearity_tol,
+            refresh_tol: p.refresh_tol,
+            rss_floor: 1e-10,
+            engine: EngineChoice::Auto,
+            precision: None,
+            max_candidates: BasisLimits::default().max_candidates,
+        }
+    }
+}
+
+macro_rules! setter {
+    ($(#[$m:meta])* $name:ident: $t:ty) => {
+        $(#[$m])*
+        pub fn $name(mut self, v: $t) -> Self {
+            self.$name = v;
+            self
+        }
+    };
+}
+
+impl RegressionBuilder {
+    setter!(/// Largest monomial degree d (0..=12).
+        degree: usize);
+    setter!(/// LARS or LassoLars (default).
+        method: Method);
+    setter!(/// Most active terms along the path (default 40).
+        max_terms: usize);
+    setter!(/// Smallest alpha (scikit-learn's convention) the path goes down to (default 0).
+        alpha_min: f64);
+    setter!(/// Relevance threshold: the path stops when a new monomial lowers ||r|| / ||y~|| by less (default 0: off).
+        epsilon: f64);
+    setter!(/// eBIC's gamma in [0, 1] (default 1).
+        ebic_gamma: f64);
+    setter!(/// Backward pruning after the eBIC choice (default on).
+        prune: bool);
+    setter!(/// Fit an intercept (the constant monomial, reported as a term; default on).
+        fit_intercept: bool);
+    setter!(/// Smallest Cholesky pivot (unit columns) a candidate needs to enter (default 1e-7).
+        collinearity_tol: f64);
+    setter!(/// Relative drift of incremental correlations that triggers an exact sweep (default 1e-4).
+        refresh_tol: f64);
+    setter!(/// Relative residual below which fits count as exact in eBIC (default 1e-10).
+        rss_floor: f64);
+    setter!(/// Engine: cpu, gpu or auto (default).
+        engine: EngineChoice);
+    setter!(/// Largest basis accepted (default from [`BasisLimits`]).
+        max_candidates: u64);
+
+    /// Most path iterations (default 8 x max_terms + 20).
+    pub fn max_steps(mut self, v: usize) -> Self {
+        self.max_steps = Some(v);
+        self
+    }
+
+    /// Arithmetic of the CPU engine's sweeps (default: f32 on the matrix-free engine; the
+    /// selection's refits are always exact f64).
+    pub fn precision(mut self, p: Precision) -> Self {
+        self.precision = Some(p);
+        self
+    }
+
+    /// Checks every setting; the error names the first bad one.
+    pub fn build(self) -> Result<Regression> {
+        if self.degree > crate::basis::MAX_DEGREE {
+            return Err(Error::param("degree", format!("{} is above the maximum {}", self.degree, crate::basis::MAX_DEGREE)));
+        }
+        if self.max_terms == 0 {
+            return Err(Error::param("max_terms", "must be at least 1"));
+        }
+        if self.max_steps == Some(0) {
+            return Err(Error::param("max_steps", "must be at least 1"));
+        }
+        let finite_nonneg = |name: &str, v: f64| {
+            if v.is_finite() && v >= 0.0 {
+                Ok(())
+            } else {
+                Err(Error::param(name, format!("{v} must be a finite number >= 0")))
+            }
+        };
+        finite_nonneg("alpha_min", self.alpha_min)?;
+        finite_nonneg("epsilon", self.epsilon)?;
+        finite_nonneg("rss_floor", self.rss_floor)?;
+        if !(0.0..=1.0).contains(&self.ebic_gamma) {
+            return Err(Error::param("ebic_gamma", format!("{} is outside [0, 1]", self.ebic_gamma)));
+        }
+        if !(self.epsilon < 1.0) {
+            return Err(Error::param("epsilon", format!("{} would stop before the first term (use a value below 1)", self.epsilon)));
+        }
+        if !(self.collinearity_tol > 0.0 && self.collinearity_tol < 1.0) {
+            return Err(Error::param("collinearity_tol", format!("{} is outside (0, 1)", self.collinearity_tol)));
+        }
+        if !(self.refresh_tol > 0.0 && self.refresh_tol.is_finite()) {
+            return Err(Error::param("refresh_tol", format!("{} must be positive", self.refresh_tol)));
+        }
+        if self.max_candidates == 0 {
+            return Err(Error::param("max_candidates", "must be at least 1"));
+        }
+        let path = PathOptions {
+            method: self.method,
+            max_terms: self.max_terms,
+            max_steps: self.max_steps.unwrap_or(8 * self.max_terms + 20),
+            alpha_min: self.alpha_min,
+            epsilon: self.epsilon,
+            collinearity_tol: self.collinearity_tol,
+            refresh_tol: self.refresh_tol,
+        };
+        Ok(Regression {
+            degree: self.degree,
+            path,
+            ebic_gamma: self.ebic_gamma,
+            prune: self.prune,
+            fit_intercept: self.fit_intercept,
+            rss_floor: self.rss_floor,
+            engine: self.engine,
+            precision: self.precision,
+            max_candidates: self.max_candidates,
+        })
+    }
+}
+
+/// Checked regression settings; [`Regression::fit`] runs them on data.
+#[derive(Debug, Clone)]
+pub struct Regression {
+    degree: usize,
+    path: PathOptions,
+    ebic_gamma: f64,
+    prune: bool,
+    fit_intercept: bool,
+    rss_floor: f64,
+    engine: EngineChoice,
+    precision: Option<Precision>,
+    max_candidates: u64,
+}
+
+/// One term of a model.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct Term {
+    /// Variable name -> exponent (empty for the constant).
+    pub exponents: BTreeMap<String, u32>,
+    pub coefficient: f64,
+    /// Position in the candidate basis (graded-lex order; 0 is the constant).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub index: Option<usize>,
+    /// The monomial as written, e.g. `y_d1^2*u`.
+    #[serde(default)]
+    pub name: String,
+}
+
+/// One breakpoint of the path, in original units.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct PathPoint {
+    pub alpha: f64,
+    /// Active monomials (names) in entering order.
+    pub active: Vec<String>,
+    pub active_index: Vec<usize>,
+    /// Coefficients in original units, aligned with `active`.
+    pub coefficients: Vec<f64>,
+    pub intercept: f64,
+    pub rel_residual: f64,
+    /// eBIC of an OLS refit on this support (None: singular refit).
+    pub ebic: Option<f64>,
+}
+
+/// How the model was chosen.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Diagnostics {
+    pub engine: String,
+    pub method: Method,
+    pub n_samples: usize,
+    pub n_candidates: usize,
+    pub path_steps: usize,
+    pub stop: StopReason,
+    pub sweeps: usize,
+    pub refreshes: usize,
+    /// Candidates with no variation on the data (the constant monomial among them).
+    pub constant_candidates: usize,
+    /// Candidates refused because they were collinear with the active set.
+    pub skipped_collinear: Vec<String>,
+    /// Breakpoint whose support had the lowest eBIC.
+    pub chosen_breakpoint: usize,
+    pub ebic_path_choice: f64,
+    /// Terms removed by backward pruning, in order, and the final eBIC.
+    pub pruned: Vec<String>,
+    pub ebic_final: f64,
+    /// Weighted residual sum of squares of the final model and R^2.
+    pub rss: f64,
+    pub r2: f64,
+    pub notes: Vec<String>,
+}
+
+/// A fitted sparse polynomial.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Model {
+    pub label: String,
+    pub features: Vec<String>,
+    pub degree: usize,
+    pub terms: Vec<Term>,
+    pub diagnostics: Diagnostics,
+    pub path: Vec<PathPoint>,
+}
+
+/// Formats a number with about 6 significant digits, as people write it.
+pub fn format_coefficient(x: f64) -> String {
+    let a = x.abs();
+    if a == 0.0 {
+        return "0".into();
+    }
+    if !(1e-4..1e6).contains(&a) {
+        return format!("{x:.5e}");
+    }
+    let digits = (5 - a.log10().floor() as i32).clamp(0, 10) as usize;
+    let s = format!("{x:.digits$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+impl Model {
+    /// `label = c1*m1 + c2*m2 - ...`, the constant last.
+    pub fn equation(&self) -> String {
+        let mut parts: Vec<(String, f64)> = self.terms.iter().filter(|t| !t.exponents.is_empty()).map(|t| (t.name.clone(), t.coefficient)).collect();
+        if let Some(c) = self.terms.iter().find(|t| t.exponents.is_empty()) {
+            parts.push((String::new(), c.coefficient));
+        }
+        if parts.is_empty() {
+            return format!("{} = 0", self.label);
+        }
+        let mut s = format!("{} =", self.label);
+        for (i, (name, c)) in parts.iter().enumerate() {
+            let mag = format_coefficient(c.abs());
+            let sign = if *c < 0.0 { "-" } else if i == 0 { "" } else { "+" };
+            let body = if name.is_empty() { mag } else { format!("{mag}*{name}") };
+            if i == 0 {
+                s.push_str(&format!(" {sign}{body}"));
+            } else {
+                s.push_str(&format!(" {sign} {body}"));
+            }
+        }
+        s
+    }
+
+    /// Evaluates the model on feature rows (by the model's feature names).
+    pub fn predict(&self, features: &Features) -> Result<Vec<f64>> {
+        let mut out = vec![0.0; features.n_samples];
+        for t in &self.terms {
+            let mut col = vec![t.coefficient; features.n_samples];
+            for (name, e) in &t.exponents {
+                let k = features.names.iter().position(|n| n == name).ok_or_else(|| Error::InvalidData(format!("the model uses '{name}', which the data does not have")))?;
+                col.iter_mut().zip(features.column(k)).for_each(|(c, z)| *c *= z.powi(*e as i32));
+            }
+            out.iter_mut().zip(&col).for_each(|(o, c)| *o += c);
+        }
+        Ok(out)
+    }
+}
+
+impl Regression {
+    pub fn builder() -> RegressionBuilder {
+        RegressionBuilder::default()
+    }
+
+    pub fn degree(&self) -> usize {
+        self.degree
+    }
+
+    pub fn path_options(&self) -> &PathOptions {
+        &self.path
+    }
+
+    /// Builds the basis and the engine chosen by the settings, then fits.
+    pub fn fit(&self, features: &Features, label: &[f64], label_name: &str, weights: Option<&[f64]>) -> Result<Model> {
+        let basis = Basis::new(&features.names, self.degree, BasisLimits { max_candidates: self.max_candidates })?;
+        let mut notes = Vec::new();
+        match self.engine {
+            EngineChoice::Gpu => return Err(Error::Gpu("GPU engine not available in this build".into())),
+            EngineChoice::Auto => notes.push("engine auto: chose the CPU engine (no GPU engine in this build)".to_string()),
+            EngineChoice::Cpu => {}
+        }
+        let precision = self.precision.unwrap_or(Precision::F32);
+        let mut engine = CpuEngine::new(&basis, features, CpuOptions { precision, ..CpuOptions::default() })?;
+        let mut model = self.fit_with_engine(&basis, &mut engine, label, label_name, weights)?;
+        model.diagnostics.notes.splice(0..0, notes);
+        Ok(model)
+    }
+
+    /// Fits with a given engine over `basis` (the engine's candidates must be that basis, in order).
+    pub fn fit_with_engine(&self, basis: &Basis, engine: &mut dyn SweepEngine, label: &[f64], label_name: &str, weights: Option<&[f64]>) -> Result<Model> {
+        if engine.n_candidates() != basis.len() {
+            return Err(Error::param("engine", format!("the engine has {} candidates but the basis {}", engine.n_candidates(), basis.len())));
+        }
+        let path = lars_path(engine, label, weights, &self.path)?;
+        let n = engine.n_samples();
+        let p = basis.len();
+        let ebics = select::path_ebic(&path, p, self.ebic_gamma, self.rss_floor);
+        let (chosen, ebic_choice) = ebics
+            .iter()
+            .enumerate()
+            .filter_map(|(i, e)| e.map(|(v, _)| (i, v)))
+            .fold((0, f64::INFINITY), |best, cur| if cur.1 < best.1 { cur } else { best });
+
+        // Final refit in original units on the chosen support (+ the constant).
+        let mut support: Vec<usize> = path.breakpoints[chosen].active.clone();
+        if self.fit_intercept {
+            support.insert(0, 0);
+        }
+        let sw = &path.sqrt_w;
+        let y_w: Vec<f64> = label.iter().zip(sw).map(|(y, s)| y * s).collect();
+        let floor = (self.rss_floor * path.y_norm).powi(2);
+        let mut pruned = Vec::new();
+        let mut cols: Vec<Vec<f64>> = engine.columns(&support)?.into_iter().map(|c| c.iter().zip(sw).map(|(x, s)| x * s).collect()).collect();
+        let mut ls = select::least_squares(&cols, &y_w)?;
+        let mut score = select::ebic(n, ls.rss, support.len(), p, self.ebic_gamma, floor);
+        while self.prune && !support.is_empty() {
+            let k = support.len();
+            let best = (0..k)
+                .map(|t| (t, select::ebic(n, ls.rss + ls.removal_cost[t], k - 1, p, self.ebic_gamma, floor)))
+                .fold((usize::MAX, f64::INFINITY), |b, c| if c.1 < b.1 { c } else { b });
+            if best.0 == usize::MAX || best.1 >= score {
+                break;
+            }
+            let id = support.remove(best.0);
+            cols.remove(best.0);
+            pruned.push(basis.name(id));
+            ls = select::least_squares(&cols, &y_w)?;
+            score = select::ebic(n, ls.rss, support.len(), p, self.ebic_gamma, floor);
+        }
+
+        let names = basis.names();
+        let term = |id: usize, c: f64| {
+            let e = basis.code(id).exponents(names.len());
+            Term {
+                exponents: e.iter().enumerate().filter(|(_, k)| **k > 0).map(|(v, k)| (names[v].clone(), *k)).collect(),
+                coefficient: c,
+                index: Some(id),
+                name: basis.name(id),
+            }
+        };
+        let mut terms: Vec<Term> = support.iter().zip(&ls.coef).map(|(&id, &c)| term(id, c)).collect();
+        terms.sort_by_key(|t| t.index);
+
+        let st = &path.store;
+        let path_points = path
+            .breakpoints
+            .iter()
+            .zip(&ebics)
+            .map(|(bp, e)| {
+                let mut intercept = path.y_mean;
+                let coefficients: Vec<f64> = bp
+                    .active
+                    .iter()
+                    .zip(&bp.coefs)
+                    .map(|(id, c)| {
+                        let q = st.position(*id).expect("stored");
+                        let b = c / st.norm[q];
+                        intercept -= b * st.mean[q];
+                        b
+                    })
+                    .collect();
+                PathPoint {
+                    alpha: bp.alpha,
+                    active: bp.active.iter().map(|j| basis.name(*j)).collect(),
+                    active_index: bp.active.clone(),
+                    coefficients,
+                    intercept,
+                    rel_residual: bp.rel_residual,
+                    ebic: e.map(|v| v.0),
+                }
+            })
+            .collect();
+
+        let yy: f64 = path.y_norm * path.y_norm;
+        let diagnostics = Diagnostics {
+            engine: engine.describe(),
+            method: self.path.method,
+            n_samples: n,
+            n_candidates: p,
+            path_steps: path.breakpoints.len().saturating_sub(1),
+            stop: path.stop,
+            sweeps: path.sweeps,
+            refreshes: path.refreshes,
+            constant_candidates: path.constant_candidates.len(),
+            skipped_collinear: path
+                .events
+                .iter()
+                .filter_map(|e| if let Event::SkippedCollinear { candidate, .. } = e { Some(basis.name(*candidate)) } else { None })
+                .collect(),
+            chosen_breakpoint: chosen,
+            ebic_path_choice: ebic_choice,
+            pruned,
+            ebic_final: score,
+            rss: ls.rss,
+            r2: if yy > 0.0 { 1.0 - ls.rss / yy } else { 1.0 },
+            notes: Vec::new(),
+        };
+        Ok(Model { label: label_name.to_string(), features: names.to_vec(), degree: basis.degree(), terms, diagnostics, path: path_points })
+    }
+}

@@ -1,0 +1,346 @@
+//! The CPU sweep engine: monomial values generated on the fly, never materialised (except, by
+//! choice, for tiny problems), rayon-parallel over sample blocks.
+//!
+//! # How a sweep runs
+//! The candidates form a tree: every monomial of degree k >= 1 is its parent (degree k - 1) times
+//! one variable, and the children of one parent are consecutive in the basis order (see
+//! [`crate::basis`]). The engine walks the *internal* nodes (degree < d) depth first, one block of
+//! `B` samples at a time (B = 128, measured best on this machine: 64 and 256 are slower, so that the block of Z, the stack of parent
+//! values and the scratch vectors stay in L1). For every internal node p with values `x_p` it
+//! forms `x_p * v` once, and the correlation of each child `c = p * z_k` is then
+//! `sum_i (x_p v)_i z_ik`: one multiply-add per sample-candidate pair, computed for up to eight
+//! children at a time with register accumulators ([`kernel`]). Only internal nodes are ever
+//! written (one multiply per sample each). Partial sums over one block are kept in the working
+//! precision and added to f64 totals, so the accumulation across the whole sweep is f64.
+//!
+//! Memory: Z twice (f64 and f32 copies, O(n_s x n_z)), one f64 accumulator of length n_candidates
+//! per worker thread, and a few KiB of scratch per block.
+//!
+//! # Materialised mode
+//! When `n_samples x n_candidates x 8 bytes` is at most [`CpuOptions::materialize_limit_bytes`]
+//! (default 8 MiB), the engine builds the f64 design once and sweeps it as a dense matrix
+//! ([`DenseEngine`]); that avoids the tree walk overhead on tiny problems and is exact f64.
+//!
+//! Column statistics are always computed in f64 with two passes (mean, then centred squares),
+//! so nearly constant monomials get an accurate norm; `columns` evaluates exact f64 values.
+
+#![allow(clippy::needless_range_loop)]
+
+mod dense;
+mod kernel;
+
+pub use dense::DenseEngine;
+
+use super::{ColumnStats, Features, Precision, SweepEngine};
+use crate::basis::Basis;
+use crate::error::{Error, Result};
+use kernel::{Elem, Plan};
+pub use kernel::simd_level;
+use rayon::prelude::*;
+
+/// Settings of the CPU engine.
+#[derive(Debug, Clone, Copy)]
+pub struct CpuOptions {
+    /// Arithmetic of the monomial products in sweeps (accumulation is f64 either way).
+    pub precision: Precision,
+    /// Materialise the design when it needs at most this many bytes (0 disables).
+    pub materialize_limit_bytes: usize,
+}
+
+impl Default for CpuOptions {
+    fn default() -> Self {
+        CpuOptions { precision: Precision::F64, materialize_limit_bytes: 8 << 20 }
+    }
+}
+
+/// Matrix-free engine over a monomial basis (see the module docs).
+pub struct CpuEngine {
+    basis: Basis,
+    n_samples: usize,
+    precision: Precision,
+    plan: Plan,
+    /// Z in f64, column-major (exact values for `columns` and the statistics).
+    z64: Vec<f64>,
+    z_blocks64: Vec<f64>,
+    z_blocks32: Vec<f32>,
+    dense: Option<DenseEngine>,
+}
+
+const B32: usize = kernel::SIMD_B;
+const B64: usize = kernel::SIMD_B;
+
+impl CpuEngine {
+    /// Builds the engine for `basis` over the feature rows `features` (names must match).
+    pub fn new(basis: &Basis, features: &Features, options: CpuOptions) -> Result<CpuEngine> {
+        if features.n_vars() != basis.n_vars() {
+            return Err(Error::param(
+                "features",
+                format!("the basis has {} variables but the data has {}", basis.n_vars(), features.n_vars()),
+            ));
+        }
+        if features.n_samples == 0 {
+            return Err(Error::InvalidData("no samples to regress on".into()));
+        }
+        if let Some(k) = features.data.iter().position(|x| !x.is_finite()) {
+            let (var, row) = (k / features.n_samples, k % features.n_samples);
+            return Err(Error::InvalidData(format!(
+                "feature '{}' is not finite at sample {row}",
+                features.names.get(var).map(String::as_str).unwrap_or("?")
+            )));
+        }
+        let n = features.n_samples;
+        let nc = basis.len();
+        let dense_bytes = (n as u128) * (nc as u128) * 8;
+        let dense = if dense_bytes <= options.materialize_limit_bytes as u128 {
+            let mut data = vec![0.0; n * nc];
+            data.par_chunks_mut(n).enumerate().for_each(|(j, col)| eval_column(basis, features, j, col));
+            Some(DenseEngine::from_column_major(n, nc, data))
+        } else {
+            None
+        };
+        let plan = Plan::new(basis);
+        let z_blocks64 = kernel::block_layout::<f64>(features, B64);
+        let z_blocks32 = if options.precision == Precision::F32 && dense.is_none() {
+            kernel::block_layout::<f32>(features, B32)
+        } else {
+            Vec::new()
+        };
+        Ok(CpuEngine {
+            basis: basis.clone(),
+            n_samples: n,
+            precision: options.precision,
+            plan,
+            z64: features.data.clone(),
+            z_blocks64,
+            z_blocks32,
+            dense,
+        })
+    }
+
+    pub fn basis(&self) -> &Basis {
+        &self.basis
+    }
+
+    /// Whether this engine materialised its design (tiny problems only).
+    pub fn is_materialized(&self) -> bool {
+        self.dense.is_some()
+    }
+
+    fn raw_sweep<T: Elem>(&self, blocks: &[T], bsz: usize, v: &[f64], out: &mut [f64]) {
+        let n = self.n_samples;
+        let nz = self.basis.n_vars();
+        let nc = self.basis.len();
+        let n_blocks = n.div_ceil(bsz);
+        // Enough chunks for load balance across threads, few enough that per-chunk accumulators stay cheap.
+        let threads = rayon::current_num_threads().max(1);
+        let per_task = n_blocks.div_ceil(threads * 2).max(1);
+        let total = (0..n_blocks.div_ceil(per_task))
+            .into_par_iter()
+            .map(|t| {
+                let mut acc = vec![0.0f64; nc];
+                let mut scratch = kernel::Scratch::<T>::new(self.plan.degree(), nz, bsz);
+                for b in t * per_task..((t + 1) * per_task).min(n_blocks) {
+                    let zb = &blocks[b * nz * bsz..(b + 1) * nz * bsz];
+                    let s0 = b * bsz;
+                    let len = bsz.min(n - s0);
+                    scratch.load_v(&v[s0..s0 + len]);
+                    kernel::sweep_block(&self.plan, zb, bsz, &mut scratch, &mut acc);
+                }
+                acc
+            })
+            .reduce_with(|mut a, b| {
+                a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
+                a
+            })
+            .unwrap_or_else(|| vec![0.0; nc]);
+        for (o, t) in self.plan.order().iter().zip(&total) {
+            out[*o as usize] = *t;
+        }
+    }
+
+    fn centred_squares(&self, w: Option<&[f64]>, mean: &[f64]) -> Vec<f64> {
+        let n = self.n_samples;
+        let nz = self.basis.n_vars();
+        let nc = self.basis.len();
+        let bsz = B64;
+        let n_blocks = n.div_ceil(bsz);
+        let ones;
+        let w = match w {
+            Some(w) => w,
+            None => {
+                ones = vec![1.0; n];
+                &ones
+            }
+        };
+        (0..n_blocks)
+            .into_par_iter()
+            .fold(
+                || (vec![0.0f64; nc], kernel::Scratch::<f64>::new(self.plan.degree(), nz, bsz)),
+                |(mut acc, mut scratch), b| {
+                    let zb = &self.z_blocks64[b * nz * bsz..(b + 1) * nz * bsz];
+                    let s0 = b * bsz;
+                    let len = bsz.min(n - s0);
+                    scratch.load_v(&w[s0..s0 + len]);
+                    kernel::centred_block(&self.plan, zb, bsz, &mut scratch, mean, &mut acc);
+                    (acc, scratch)
+                },
+            )
+            .map(|(acc, _)| acc)
+            .reduce_with(|mut a, b| {
+                a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
+                a
+            })
+            .unwrap_or_else(|| vec![0.0; nc])
+    }
+}
+
+/// Exact f64 values of monomial j on every sample.
+fn eval_column(basis: &Basis, features: &Features, j: usize, out: &mut [f64]) {
+    out.fill(1.0);
+    for v in basis.code(j).vars() {
+        let z = features.column(v);
+        out.iter_mut().zip(z).for_each(|(o, zi)| *o *= zi);
+    }
+}
+
+pub(crate) fn check_weights(weights: Option<&[f64]>, n: usize) -> Result<()> {
+    if let Some(w) = weights {
+        if w.len() != n {
+            return Err(Error::param("weights", format!("{} weights for {n} samples", w.len())));
+        }
+        if let Some(i) = w.iter().position(|x| !x.is_finite() || *x < 0.0) {
+            return Err(Error::param("weights", format!("weight {} at sample {i} is negative or not finite", w[i])));
+        }
+        if !w.iter().any(|x| *x > 0.0) {
+            return Err(Error::param("weights", "all weights are zero"));
+        }
+    }
+    Ok(())
+}
+
+impl SweepEngine for CpuEngine {
+    fn describe(&self) -> String {
+        let mode = if self.dense.is_some() { "materialised f64".to_string() } else { format!("on-the-fly {:?}, {}", self.precision, kernel::simd_level()).to_lowercase() };
+        format!("cpu ({mode}, {} threads, {} x {})", rayon::current_num_threads(), self.n_samples, self.basis.len())
+    }
+
+    fn n_samples(&self) -> usize {
+        self.n_samples
+    }
+
+    fn n_candidates(&self) -> usize {
+        self.basis.len()
+    }
+
+    fn column_stats(&mut self, weights: Option<&[f64]>) -> Result<ColumnStats> {
+        check_weights(weights, self.n_samples)?;
+        if let Some(d) = self.dense.as_mut() {
+            return d.column_stats(weights);
+        }
+        let n = self.n_samples;
+        let w: Vec<f64> = weights.map(<[f64]>::to_vec).unwrap_or_else(|| vec![1.0; n]);
+        let sw: f64 = w.iter().sum();
+        let mut sums = vec![0.0; self.basis.len()];
+        self.raw_sweep::<f64>(&self.z_blocks64, B64, &w, &mut sums);
+        let mean: Vec<f64> = sums.iter().map(|s| s / sw).collect();
+        let sq = self.centred_squares(weights, &mean);
+        let norm = sq.iter().map(|s| s.max(0.0).sqrt()).collect();
+        Ok(ColumnStats { mean, norm })
+    }
+
+    fn sweep(&mut self, v: &[f64], out: &mut [f64]) -> Result<()> {
+        if v.len() != self.n_samples || out.len() != self.basis.len() {
+            return Err(Error::param("sweep", format!("vector lengths {} / {} do not match {} samples / {} candidates", v.len(), out.len(), self.n_samples, self.basis.len())));
+        }
+        if let Some(d) = self.dense.as_mut() {
+            return d.sweep(v, out);
+        }
+        match self.precision {
+            Precision::F32 => self.raw_sweep::<f32>(&self.z_blocks32, B32, v, out),
+            Precision::F64 => self.raw_sweep::<f64>(&self.z_blocks64, B64, v, out),
+        }
+        Ok(())
+    }
+
+    fn columns(&mut self, idx: &[usize]) -> Result<Vec<Vec<f64>>> {
+        let n = self.n_samples;
+        let feats = Features { n_samples: n, names: self.basis.names().to_vec(), data: std::mem::take(&mut self.z64) };
+        let mut res = Vec::with_capacity(idx.len());
+        for &j in idx {
+            if j >= self.basis.len() {
+                self.z64 = feats.data;
+                return Err(Error::param("columns", format!("candidate {j} is out of range ({} candidates)", self.basis.len())));
+            }
+            let mut col = vec![0.0; n];
+            eval_column(&self.basis, &feats, j, &mut col);
+            res.push(col);
+        }
+        self.z64 = feats.data;
+        Ok(res)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::basis::BasisLimits;
+
+    fn lcg(seed: &mut u64) -> f64 {
+        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((*seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+
+    fn problem(nz: usize, d: usize, n: usize) -> (Basis, Features) {
+        let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
+        let mut s = 7u64;
+        let cols = (0..nz).map(|_| (0..n).map(|_| lcg(&mut s)).collect()).collect();
+        (Basis::new(&names, d, BasisLimits::default()).unwrap(), Features::new(names, cols))
+    }
+
+    #[test]
+    fn on_the_fly_sweeps_and_stats_match_materialised() {
+        for (nz, d, n) in [(3, 4, 300), (5, 3, 1000), (2, 0, 50), (4, 1, 129)] {
+            let (b, f) = problem(nz, d, n);
+            let mut dense = CpuEngine::new(&b, &f, CpuOptions { materialize_limit_bytes: usize::MAX, ..Default::default() }).unwrap();
+            assert!(dense.is_materialized());
+            let mut s = 3u64;
+            let v: Vec<f64> = (0..n).map(|_| lcg(&mut s)).collect();
+            let w: Vec<f64> = (0..n).map(|_| lcg(&mut s).abs()).collect();
+            let mut reference = vec![0.0; b.len()];
+            dense.sweep(&v, &mut reference).unwrap();
+            let rs = dense.column_stats(Some(&w)).unwrap();
+            for precision in [Precision::F64, Precision::F32] {
+                let mut e = CpuEngine::new(&b, &f, CpuOptions { precision, materialize_limit_bytes: 0 }).unwrap();
+                assert!(!e.is_materialized());
+                let mut out = vec![f64::NAN; b.len()];
+                e.sweep(&v, &mut out).unwrap();
+                let cols = e.columns(&(0..b.len()).collect::<Vec<_>>()).unwrap();
+                let tol = if precision == Precision::F64 { 1e-13 } else { 1e-5 };
+                for j in 0..b.len() {
+                    let scale: f64 = cols[j].iter().zip(&v).map(|(x, y)| (x * y).abs()).sum();
+                    assert!((out[j] - reference[j]).abs() <= tol * scale, "{precision:?} candidate {j}: {} vs {}", out[j], reference[j]);
+                }
+                let st = e.column_stats(Some(&w)).unwrap();
+                for j in 0..b.len() {
+                    assert!((st.mean[j] - rs.mean[j]).abs() <= 1e-12 * (1.0 + rs.mean[j].abs()));
+                    assert!((st.norm[j] - rs.norm[j]).abs() <= 1e-10 * (1.0 + rs.norm[j]), "norm {j}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn columns_are_exact_monomials() {
+        let (b, f) = problem(3, 3, 20);
+        let mut e = CpuEngine::new(&b, &f, CpuOptions { materialize_limit_bytes: 0, ..Default::default() }).unwrap();
+        let cols = e.columns(&[0, 5, b.len() - 1]).unwrap();
+        for (c, j) in cols.iter().zip([0, 5, b.len() - 1]) {
+            for i in 0..20 {
+                let z: Vec<f64> = (0..3).map(|k| f.column(k)[i]).collect();
+                assert_eq!(c[i], b.code(j).eval(&z));
+            }
+        }
+        assert!(e.columns(&[b.len()]).is_err());
+        assert!(e.column_stats(Some(&[1.0; 3])).is_err());
+    }
+}

@@ -1,0 +1,445 @@
+//! The inner loops of the CPU engine: one block of samples against every candidate.
+//!
+//! The family loop has explicit SIMD versions (AVX2 + FMA, f32 and f64, chosen at run time from
+//! the CPU's features, see [`simd_level`]); other CPUs use the portable loops.
+
+use crate::basis::Basis;
+use crate::engine::Features;
+use std::ops::{Add, Mul, Sub};
+
+/// The working precision of monomial products (f32 or f64).
+pub trait Elem: Copy + Send + Sync + Default + Add<Output = Self> + Mul<Output = Self> + Sub<Output = Self> + 'static {
+    const ZERO: Self;
+    const ONE: Self;
+    fn from_f64(x: f64) -> Self;
+    fn to_f64(self) -> f64;
+}
+
+impl Elem for f32 {
+    const ZERO: f32 = 0.0;
+    const ONE: f32 = 1.0;
+    fn from_f64(x: f64) -> f32 {
+        x as f32
+    }
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+}
+
+impl Elem for f64 {
+    const ZERO: f64 = 0.0;
+    const ONE: f64 = 1.0;
+    fn from_f64(x: f64) -> f64 {
+        x
+    }
+    fn to_f64(self) -> f64 {
+        self
+    }
+}
+
+/// One internal node of the monomial tree (degree < d) and its children.
+#[derive(Debug, Clone, Copy)]
+struct Family {
+    /// Degree of the node: its values live in stack slot `level`.
+    level: u8,
+    /// Variable that multiplies the parent (slot level-1) to give this node (unused at level 0).
+    var: u8,
+    /// Children are `node * z_k` for k in `first_var..n_vars`, basis indices from `child_start`.
+    first_var: u8,
+    child_start: u32,
+    /// Where the children's sums go in the sweep accumulator, which is in *plan order*: the
+    /// children of each family are contiguous and families follow the depth-first walk, so a
+    /// sweep writes its accumulator sequentially (basis order would scatter the writes over the
+    /// whole array, one cache miss per family and block).
+    out_start: u32,
+}
+
+/// Depth-first list of the internal nodes of a basis (see the module docs of `cpu`).
+#[derive(Debug, Clone)]
+pub struct Plan {
+    families: Vec<Family>,
+    /// Basis index of each accumulator position.
+    order: Vec<u32>,
+    degree: usize,
+    n_vars: usize,
+}
+
+impl Plan {
+    pub fn new(basis: &Basis) -> Plan {
+        let nc = basis.len();
+        let mut first_child = vec![u32::MAX; nc];
+        for j in 1..nc {
+            let p = basis.parent(j).expect("non-constant monomials have parents");
+            if first_child[p] == u32::MAX {
+                first_child[p] = j as u32;
+            }
+        }
+        let degree = basis.degree();
+        let n_vars = basis.n_vars();
+        let mut families = Vec::new();
+        let mut order = vec![0u32];
+        if degree > 0 {
+            // Explicit stack: (node index); children pushed in reverse to visit in basis order.
+            let mut stack = vec![0usize];
+            while let Some(j) = stack.pop() {
+                let code = basis.code(j);
+                let first_var = basis.last_var(j).unwrap_or(0);
+                families.push(Family {
+                    level: code.degree() as u8,
+                    var: first_var as u8,
+                    first_var: first_var as u8,
+                    child_start: first_child[j],
+                    out_start: order.len() as u32,
+                });
+                order.extend(first_child[j]..first_child[j] + (n_vars - first_var) as u32);
+                if code.degree() + 1 < degree {
+                    let start = first_child[j] as usize;
+                    for c in (start..start + (n_vars - first_var)).rev() {
+                        stack.push(c);
+                    }
+                }
+            }
+        }
+        debug_assert_eq!(order.len(), nc);
+        Plan { families, order, degree, n_vars }
+    }
+
+    pub fn degree(&self) -> usize {
+        self.degree
+    }
+
+    /// Basis index of every accumulator position of [`sweep_block`].
+    pub fn order(&self) -> &[u32] {
+        &self.order
+    }
+}
+
+/// Z rearranged block by block: block b, variable k, sample i at `(b * n_vars + k) * bsz + i`,
+/// zero-padded past the last sample.
+pub fn block_layout<T: Elem>(features: &Features, bsz: usize) -> Vec<T> {
+    let n = features.n_samples;
+    let nz = features.n_vars();
+    let nb = n.div_ceil(bsz);
+    let mut out = vec![T::ZERO; nb * nz * bsz];
+    for b in 0..nb {
+        for k in 0..nz {
+            let col = features.column(k);
+            let dst = &mut out[(b * nz + k) * bsz..(b * nz + k + 1) * bsz];
+            for (i, d) in dst.iter_mut().enumerate() {
+                let s = b * bsz + i;
+                if s < n {
+                    *d = T::from_f64(col[s]);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Per-task scratch: the stack of node values (one slot per level), the block of v, and x_p * v.
+pub struct Scratch<T> {
+    vals: Vec<T>,
+    vb: Vec<T>,
+    /// v times each variable, for the current block.
+    vz: Vec<T>,
+}
+
+impl<T: Elem> Scratch<T> {
+    pub fn new(degree: usize, n_vars: usize, bsz: usize) -> Self {
+        let mut vals = vec![T::ZERO; degree.max(1) * bsz];
+        vals[..bsz].fill(T::ONE);
+        Scratch { vals, vb: vec![T::ZERO; bsz], vz: vec![T::ZERO; n_vars * bsz] }
+    }
+
+    /// Loads one block of v (shorter than the block at the end: the rest is zero).
+    pub fn load_v(&mut self, v: &[f64]) {
+        for (d, s) in self.vb.iter_mut().zip(v) {
+            *d = T::from_f64(*s);
+        }
+        self.vb[v.len()..].fill(T::ZERO);
+    }
+}
+
+/// Adds one block's contribution `sum_i x_ij v_i` to the accumulator of every candidate, in
+/// plan order (`acc[p]` belongs to basis index `plan.order()[p]`).
+///
+/// Per block, `vz_k = v * z_k` is formed once for every variable; the correlation of child
+/// `p * z_k` is then `sum_i x_p,i vz_k,i`, one multiply-add per pair, with the parent values
+/// `x_p` (themselves `x_parent(p) * z_var`) computed in the same pass.
+pub fn sweep_block<T: Elem>(plan: &Plan, zb: &[T], bsz: usize, s: &mut Scratch<T>, acc: &mut [f64]) {
+    let nv = plan.n_vars;
+    // vz_k and the constant / degree-1 candidates.
+    acc[0] += s.vb.iter().map(|x| x.to_f64()).sum::<f64>();
+    for k in 0..nv {
+        let zk = &zb[k * bsz..(k + 1) * bsz];
+        let dst = &mut s.vz[k * bsz..(k + 1) * bsz];
+        let mut sum = 0.0f64;
+        for i in 0..bsz {
+            dst[i] = s.vb[i] * zk[i];
+            sum += dst[i].to_f64();
+        }
+        if plan.degree >= 1 {
+            acc[1 + k] += sum;
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::any::TypeId;
+        let level = simd_level();
+        if bsz == SIMD_B && level != "none" {
+            // SAFETY: the slices are reinterpreted only as their own element type (checked by
+            // TypeId), and each path runs only when the CPU has its instruction set.
+            unsafe {
+                macro_rules! run {
+                    ($e:ty, $m:ident) => {{
+                        let zb = std::slice::from_raw_parts(zb.as_ptr() as *const $e, zb.len());
+                        let vz = std::slice::from_raw_parts(s.vz.as_ptr() as *const $e, s.vz.len());
+                        let vals = std::slice::from_raw_parts_mut(s.vals.as_mut_ptr() as *mut $e, s.vals.len());
+                        simd::$m::families(plan, zb, vz, vals, acc);
+                        return;
+                    }};
+                }
+                let is32 = TypeId::of::<T>() == TypeId::of::<f32>();
+                let is64 = TypeId::of::<T>() == TypeId::of::<f64>();
+                match (level, is32, is64) {
+                    ("avx2", true, _) => run!(f32, avx2_f32),
+                    ("avx2", _, true) => run!(f64, avx2_f64),
+                    _ => {}
+                }
+            }
+        }
+    }
+    families_generic(plan, zb, bsz, s, acc);
+}
+
+fn families_generic<T: Elem>(plan: &Plan, zb: &[T], bsz: usize, s: &mut Scratch<T>, acc: &mut [f64]) {
+    let nv = plan.n_vars;
+    for f in plan.families.iter().skip(1) {
+        let lvl = f.level as usize;
+        let (lo, hi) = s.vals.split_at_mut(lvl * bsz);
+        let parent = &lo[(lvl - 1) * bsz..];
+        let me = &mut hi[..bsz];
+        let zk = &zb[f.var as usize * bsz..(f.var as usize + 1) * bsz];
+        for i in 0..bsz {
+            me[i] = parent[i] * zk[i];
+        }
+        for (t, k) in (f.first_var as usize..nv).enumerate() {
+            let vz = &s.vz[k * bsz..(k + 1) * bsz];
+            let mut part = [T::ZERO; 8];
+            for c in (0..bsz).step_by(8) {
+                for l in 0..8 {
+                    part[l] = me[c + l] * vz[c + l] + part[l];
+                }
+            }
+            acc[f.out_start as usize + t] += part.iter().map(|x| x.to_f64()).sum::<f64>();
+        }
+    }
+}
+
+/// Block size of the SIMD paths (f32 or f64 elements).
+pub const SIMD_B: usize = 128;
+
+/// Generates one SIMD implementation of the family loop (see [`sweep_block`]) for an element
+/// type and an instruction set; `$hsum` reduces one accumulator vector to f64.
+#[cfg(target_arch = "x86_64")]
+macro_rules! simd_families {
+    ($name:ident, $feat:literal, $t:ty, $v:ty, $lanes:literal, $load:ident, $store:ident, $mul:ident, $add:ident, $fma:ident, $zero:ident, $reduce:item) => {
+        pub mod $name {
+            use super::super::Plan;
+            use std::arch::x86_64::*;
+
+            const B: usize = super::super::SIMD_B;
+            const L: usize = $lanes;
+
+            $reduce
+
+            /// All families but the constant one (handled by the caller).
+            #[target_feature(enable = $feat)]
+            pub unsafe fn families(plan: &Plan, zb: &[$t], vz: &[$t], vals: &mut [$t], acc: &mut [f64]) {
+                let nv = plan.n_vars;
+                let deg = plan.degree;
+                assert!(zb.len() >= nv * B && vz.len() >= nv * B && vals.len() >= deg * B);
+                let zp = zb.as_ptr();
+                let vzp = vz.as_ptr();
+                let vp = vals.as_mut_ptr();
+                for f in plan.families.iter().skip(1) {
+                    let lvl = f.level as usize;
+                    let parent = vp.add((lvl - 1) * B) as *const $t;
+                    let me = vp.add(lvl * B);
+                    let zvar = zp.add(f.var as usize * B);
+                    // Leaves' parents (level d-1) never need their values again.
+                    let store = lvl + 1 < deg;
+                    let mut k = f.first_var as usize;
+                    let mut out = f.out_start as usize;
+                    let mut first = true;
+                    while k < nv {
+                        let m = (nv - k).min(8);
+                        let o = &mut acc[out..out + m];
+                        let z = vzp.add(k * B);
+                        // K accumulators per child break the FMA latency chain when a
+                        // family has few children (most have 1 to 3).
+                        macro_rules! go {
+                            ($nt:literal, $k:literal) => {
+                                if first && store {
+                                    tile::<$nt, $k, true, true>(parent, zvar, me, z, o)
+                                } else if first {
+                                    tile::<$nt, $k, true, false>(parent, zvar, me, z, o)
+                                } else {
+                                    tile::<$nt, $k, false, false>(parent, zvar, me, z, o)
+                                }
+                            };
+                        }
+                        match m {
+                            8 => go!(8, 1),
+                            7 => go!(7, 1),
+                            6 => go!(6, 1),
+                            5 => go!(5, 1),
+                            4 => go!(4, 2),
+                            3 => go!(3, 2),
+                            2 => go!(2, 4),
+                            _ => go!(1, 4),
+                        }
+                        // Later tiles of the same family re-read the stored values.
+                        if first && !store && k + m < nv {
+                            let mut c = 0;
+                            while c < B {
+                                $store(me.add(c), $mul($load(parent.add(c)), $load(zvar.add(c))));
+                                c += L;
+                            }
+                        }
+                        first = false;
+                        k += m;
+                        out += m;
+                    }
+                }
+            }
+
+            /// `out[t] += sum_i x_i vz_{t,i}` for NT children, x = parent * z_var computed on the fly
+            /// (COMPUTE) and stored for the subtree (STORE), or read back.
+            #[inline]
+            #[target_feature(enable = $feat)]
+            unsafe fn tile<const NT: usize, const K: usize, const COMPUTE: bool, const STORE: bool>(parent: *const $t, zvar: *const $t, me: *mut $t, vz: *const $t, out: &mut [f64]) {
+                let mut a = [[$zero(); NT]; K];
+                let mut c = 0;
+                while c < B {
+                    for k in 0..K {
+                        let cc = c + k * L;
+                        let x = if COMPUTE {
+                            let x = $mul($load(parent.add(cc)), $load(zvar.add(cc)));
+                            if STORE {
+                                $store(me.add(cc), x);
+                            }
+                            x
+                        } else {
+                            $load(me.add(cc))
+                        };
+                        for t in 0..NT {
+                            a[k][t] = $fma(x, $load(vz.add(t * B + cc)), a[k][t]);
+                        }
+                    }
+                    c += K * L;
+                }
+                for k in 1..K {
+                    for t in 0..NT {
+                        a[0][t] = $add(a[0][t], a[k][t]);
+                    }
+                }
+                reduce::<NT>(&a[0], out);
+            }
+        }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    use std::arch::x86_64::*;
+
+    /// Adds the lane sums of up to 8 f32 accumulators to `out` with one horizontal-add tree
+    /// (10 instructions for 8 candidates instead of a full reduction each).
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn reduce8_f32<const NT: usize>(a: &[__m256; NT], out: &mut [f64]) {
+        let mut v = [_mm256_setzero_ps(); 8];
+        v[..NT].copy_from_slice(a);
+        let h01 = _mm256_hadd_ps(v[0], v[1]);
+        let h23 = _mm256_hadd_ps(v[2], v[3]);
+        let h45 = _mm256_hadd_ps(v[4], v[5]);
+        let h67 = _mm256_hadd_ps(v[6], v[7]);
+        let q0 = _mm256_hadd_ps(h01, h23);
+        let q1 = _mm256_hadd_ps(h45, h67);
+        let s0 = _mm_add_ps(_mm256_castps256_ps128(q0), _mm256_extractf128_ps(q0, 1));
+        let s1 = _mm_add_ps(_mm256_castps256_ps128(q1), _mm256_extractf128_ps(q1, 1));
+        let mut buf = [0.0f64; 8];
+        _mm256_storeu_pd(buf.as_mut_ptr(), _mm256_cvtps_pd(s0));
+        _mm256_storeu_pd(buf.as_mut_ptr().add(4), _mm256_cvtps_pd(s1));
+        for t in 0..NT {
+            out[t] += buf[t];
+        }
+    }
+
+    simd_families!(avx2_f32, "avx2,fma", f32, __m256, 8, _mm256_loadu_ps, _mm256_storeu_ps, _mm256_mul_ps, _mm256_add_ps, _mm256_fmadd_ps, _mm256_setzero_ps,
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn reduce<const NT: usize>(a: &[__m256; NT], out: &mut [f64]) {
+            super::reduce8_f32::<NT>(a, out)
+        });
+    simd_families!(avx2_f64, "avx2,fma", f64, __m256d, 4, _mm256_loadu_pd, _mm256_storeu_pd, _mm256_mul_pd, _mm256_add_pd, _mm256_fmadd_pd, _mm256_setzero_pd,
+        #[inline]
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn reduce<const NT: usize>(a: &[__m256d; NT], out: &mut [f64]) {
+            for t in 0..NT {
+                let h = _mm_add_pd(_mm256_castpd256_pd128(a[t]), _mm256_extractf128_pd(a[t], 1));
+                out[t] += _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
+            }
+        });
+}
+
+/// The instruction set the sweeps use on this CPU (for reports): AVX2 + FMA when present,
+/// `CTSID_SIMD=none` forces the portable loops. (An AVX-512 variant measured no faster on the
+/// development machine, whose family loop is bound by per-family overhead rather than vector
+/// width, and needs Rust 1.89; it is not included.)
+pub fn simd_level() -> &'static str {
+    static LEVEL: std::sync::OnceLock<&'static str> = std::sync::OnceLock::new();
+    LEVEL.get_or_init(|| {
+        let want = std::env::var("CTSID_SIMD").unwrap_or_default();
+        #[cfg(target_arch = "x86_64")]
+        {
+            let avx2 = std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
+            if avx2 && want != "none" {
+                return "avx2";
+            }
+        }
+        let _ = want;
+        "none"
+    })
+}
+
+/// Adds one block's `sum_i w_i (x_ij - mean_j)^2` to `acc[j]` (f64; for column statistics).
+pub fn centred_block(plan: &Plan, zb: &[f64], bsz: usize, s: &mut Scratch<f64>, mean: &[f64], acc: &mut [f64]) {
+    let nv = plan.n_vars;
+    let w = &s.vb;
+    acc[0] += w.iter().map(|wi| wi * (1.0 - mean[0]).powi(2)).sum::<f64>();
+    for f in &plan.families {
+        let lvl = f.level as usize;
+        if lvl > 0 {
+            let (lo, hi) = s.vals.split_at_mut(lvl * bsz);
+            let parent = &lo[(lvl - 1) * bsz..];
+            let zk = &zb[f.var as usize * bsz..(f.var as usize + 1) * bsz];
+            for i in 0..bsz {
+                hi[i] = parent[i] * zk[i];
+            }
+        }
+        let me = &s.vals[lvl * bsz..(lvl + 1) * bsz];
+        for (t, k) in (f.first_var as usize..nv).enumerate() {
+            let j = f.child_start as usize + t;
+            let m = mean[j];
+            let zk = &zb[k * bsz..(k + 1) * bsz];
+            let mut sum = 0.0;
+            for i in 0..bsz {
+                let d = me[i] * zk[i] - m;
+                sum += w[i] * d * d;
+            }
+            acc[j] += sum;
+        }
+    }
+}

@@ -1,0 +1,454 @@
+//! The LARS / LassoLars path, written once against [`SweepEngine`].
+//!
+//! # Conventions
+//! - Candidates are standardised for selection: with weights w (unit weights when none) and
+//!   `s_i = sqrt(w_i)`, candidate j becomes `x~_j = s * (x_j - m_j) / n_j` with the weighted mean
+//!   `m_j` and centred norm `n_j` from [`SweepEngine::column_stats`]; the label becomes
+//!   `y~ = s * (y - m_y)`. Centring is how the intercept is handled: it is always in the model
+//!   during the path, and the constant monomial (zero centred norm) is never a path candidate.
+//!   Columns whose centred norm is below 1e-8 of their root mean square are constant and excluded.
+//! - Correlations are `c_j = x~_j^T r`; `alpha = max_j |c_j| / n_samples`, as in scikit-learn.
+//! - The step logic follows scikit-learn's `lars_path` exactly (same entering order, same
+//!   breakpoints), including its LAR quirk: when a coefficient would cross zero inside a LAR step,
+//!   its sign in the equiangular system flips and the next iteration adds no variable.
+//! - All active-set algebra is f64: exact columns of the active candidates (from
+//!   [`SweepEngine::columns`]), an incremental Cholesky factor with deletions.
+//! - Correlations are updated incrementally (`c -= gamma * a`, one sweep per step for `a`).
+//!   Each time a candidate enters, its exact correlation is computed from its f64 column; when the
+//!   incremental value differs by more than `refresh_tol` (relative), all correlations are
+//!   recomputed with one exact sweep of the residual before the step goes on.
+//! - A candidate whose entry would make the active Gram matrix singular (Cholesky pivot below
+//!   `collinearity_tol`, i.e. its distance to the span of the active columns, in unit norm) is
+//!   skipped for the rest of the path and reported; nothing becomes NaN.
+
+// `!(x > t)` is deliberate throughout: NaN must fail these checks.
+#![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
+
+use super::cholesky::Cholesky;
+use crate::engine::SweepEngine;
+use crate::error::{Error, Result};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Plain LARS or the lasso modification.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Method {
+    Lars,
+    #[default]
+    LassoLars,
+}
+
+/// Why the path ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StopReason {
+    /// alpha reached `alpha_min` (or every usable candidate is active).
+    AlphaMin,
+    MaxTerms,
+    MaxSteps,
+    /// The last monomial reduced the relative residual by less than epsilon.
+    Relevance,
+    /// The residual vanished (relative norm below 1e-12): an exact fit.
+    ExactFit,
+    /// As many active terms as samples minus one.
+    SampleLimit,
+    /// LassoLars: alpha increased, a sign of accumulated rounding (scikit-learn stops too).
+    AlphaIncreasing,
+    /// The label is constant: nothing to explain.
+    ConstantLabel,
+}
+
+/// Settings of one path.
+#[derive(Debug, Clone, Copy)]
+pub struct PathOptions {
+    pub method: Method,
+    pub max_terms: usize,
+    pub max_steps: usize,
+    pub alpha_min: f64,
+    /// Relevance threshold epsilon (see [`StopReason::Relevance`]); 0 disables it.
+    pub epsilon: f64,
+    pub collinearity_tol: f64,
+    pub refresh_tol: f64,
+}
+
+impl Default for PathOptions {
+    fn default() -> Self {
+        PathOptions {
+            method: Method::LassoLars,
+            max_terms: 40,
+            max_steps: 500,
+            alpha_min: 0.0,
+            epsilon: 0.0,
+            collinearity_tol: 1e-7,
+            refresh_tol: 1e-4,
+        }
+    }
+}
+
+/// One breakpoint of the path: alpha and the active coefficients (standardised units).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Breakpoint {
+    pub alpha: f64,
+    /// Active candidates, in the order they entered.
+    pub active: Vec<usize>,
+    /// Standardised coefficients, aligned with `active`.
+    pub coefs: Vec<f64>,
+    /// ||r|| / ||y~|| at this breakpoint.
+    pub rel_residual: f64,
+}
+
+/// What happened along the path, for reports.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(tag = "event", rename_all = "snake_case")]
+pub enum Event {
+    Added { step: usize, candidate: usize },
+    Dropped { step: usize, candidate: usize },
+    /// Entry refused: the candidate is (numerically) a combination of the active ones.
+    SkippedCollinear { step: usize, candidate: usize, pivot: f64 },
+    /// The incremental correlations drifted; an exact sweep replaced them.
+    Refreshed { step: usize, drift: f64 },
+}
+
+/// Exact data of every candidate that was ever active (for refits and selection).
+#[derive(Debug, Clone, Default)]
+pub struct ColumnStore {
+    pub ids: Vec<usize>,
+    /// Exact weighted mean and centred norm of each stored column.
+    pub mean: Vec<f64>,
+    pub norm: Vec<f64>,
+    /// Standardised weighted columns x~.
+    pub cols: Vec<Vec<f64>>,
+    /// x~^T y~.
+    pub xty: Vec<f64>,
+}
+
+impl ColumnStore {
+    pub fn position(&self, id: usize) -> Option<usize> {
+        self.ids.iter().position(|&j| j == id)
+    }
+}
+
+/// A computed path and everything the selection needs.
+#[derive(Debug, Clone)]
+pub struct Path {
+    pub method: Method,
+    pub breakpoints: Vec<Breakpoint>,
+    pub events: Vec<Event>,
+    pub stop: StopReason,
+    pub sweeps: usize,
+    pub refreshes: usize,
+    /// Candidates excluded from the start because they are constant (the constant monomial included).
+    pub constant_candidates: Vec<usize>,
+    pub store: ColumnStore,
+    /// Weighted label mean and ||y~||.
+    pub y_mean: f64,
+    pub y_norm: f64,
+    pub sqrt_w: Vec<f64>,
+    pub y_tilde: Vec<f64>,
+    pub n_usable: usize,
+}
+
+impl Path {
+    /// Candidates in the order they first entered.
+    pub fn entering_order(&self) -> Vec<usize> {
+        let mut seen = Vec::new();
+        for e in &self.events {
+            if let Event::Added { candidate, .. } = e {
+                if !seen.contains(candidate) {
+                    seen.push(*candidate);
+                }
+            }
+        }
+        seen
+    }
+}
+
+const TINY32: f64 = 1.1754943508222875e-38;
+const EQ_TOL: f64 = f64::EPSILON;
+
+fn min_pos(it: impl Iterator<Item = f64>) -> f64 {
+    it.filter(|x| *x > 0.0).fold(f64::MAX, f64::min)
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+struct Standardiser<'a> {
+    engine: &'a mut dyn SweepEngine,
+    mean: Vec<f64>,
+    norm: Vec<f64>,
+    usable: Vec<bool>,
+    sqrt_w: Vec<f64>,
+    raw: Vec<f64>,
+    scaled: Vec<f64>,
+    sweeps: usize,
+}
+
+impl Standardiser<'_> {
+    /// c_j = x~_j^T u for every candidate (0 for unusable ones).
+    fn corr(&mut self, u: &[f64], out: &mut [f64]) -> Result<()> {
+        for ((s, w), x) in self.scaled.iter_mut().zip(&self.sqrt_w).zip(u) {
+            *s = w * x;
+        }
+        let total: f64 = self.scaled.iter().sum();
+        self.engine.sweep(&self.scaled, &mut self.raw)?;
+        self.sweeps += 1;
+        for j in 0..out.len() {
+            out[j] = if self.usable[j] { (self.raw[j] - self.mean[j] * total) / self.norm[j] } else { 0.0 };
+        }
+        Ok(())
+    }
+}
+
+/// Computes the path of `y` over every candidate of `engine` (see the module docs).
+pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]>, opts: &PathOptions) -> Result<Path> {
+    let n = engine.n_samples();
+    let nc = engine.n_candidates();
+    if y.len() != n {
+        return Err(Error::param("label", format!("{} values for {n} samples", y.len())));
+    }
+    if let Some(i) = y.iter().position(|v| !v.is_finite()) {
+        return Err(Error::InvalidData(format!("the label is not finite at sample {i}")));
+    }
+    let stats = engine.column_stats(weights)?;
+    let w: Vec<f64> = weights.map(<[f64]>::to_vec).unwrap_or_else(|| vec![1.0; n]);
+    let sw: f64 = w.iter().sum();
+    let sqrt_w: Vec<f64> = w.iter().map(|x| x.sqrt()).collect();
+    let y_mean = w.iter().zip(y).map(|(a, b)| a * b).sum::<f64>() / sw;
+    let y_tilde: Vec<f64> = y.iter().zip(&sqrt_w).map(|(v, s)| s * (v - y_mean)).collect();
+    let y_norm = dot(&y_tilde, &y_tilde).sqrt();
+
+    let mut usable = vec![false; nc];
+    let mut constant_candidates = Vec::new();
+    for j in 0..nc {
+        let (m, s) = (stats.mean[j], stats.norm[j]);
+        let rms = (s * s + sw * m * m).sqrt();
+        usable[j] = s.is_finite() && m.is_finite() && s > 1e-8 * rms && s > 0.0;
+        if !usable[j] {
+            constant_candidates.push(j);
+        }
+    }
+    let n_usable = usable.iter().filter(|u| **u).count();
+    let mut sd = Standardiser { engine, mean: stats.mean, norm: stats.norm, usable, sqrt_w: sqrt_w.clone(), raw: vec![0.0; nc], scaled: vec![0.0; n], sweeps: 0 };
+
+    let mut path = Path {
+        method: opts.method,
+        breakpoints: Vec::new(),
+        events: Vec::new(),
+        stop: StopReason::AlphaMin,
+        sweeps: 0,
+        refreshes: 0,
+        constant_candidates,
+        store: ColumnStore::default(),
+        y_mean,
+        y_norm,
+        sqrt_w,
+        y_tilde: y_tilde.clone(),
+        n_usable,
+    };
+    if !(y_norm > 0.0) {
+        path.breakpoints.push(Breakpoint { alpha: 0.0, active: vec![], coefs: vec![], rel_residual: 0.0 });
+        path.stop = StopReason::ConstantLabel;
+        return Ok(path);
+    }
+
+    let lasso = opts.method == Method::LassoLars;
+    let mut cov = vec![0.0; nc];
+    sd.corr(&y_tilde, &mut cov)?;
+    let mut r = y_tilde.clone();
+    let mut in_active = vec![false; nc];
+    let mut skipped = vec![false; nc];
+    let mut active: Vec<usize> = Vec::new();
+    let mut xa: Vec<Vec<f64>> = Vec::new();
+    let mut coef: Vec<f64> = Vec::new();
+    let mut sign: Vec<f64> = Vec::new();
+    let mut chol = Cholesky::default();
+    let mut n_iter = 0usize;
+    let mut drop = false;
+    let mut pending: (Vec<usize>, Vec<f64>) = (vec![], vec![]);
+    let mut a = vec![0.0; nc];
+    let mut u = vec![0.0; n];
+    let mut refreshed_this_iter = false;
+    let mut stop_next: Option<StopReason> = None;
+    let mut prev_alpha = f64::INFINITY;
+    let mut rel_res_at_last_bp = 1.0;
+
+    loop {
+        // Largest |correlation| among the inactive usable candidates (first one on ties, like argmax).
+        let mut c_idx = usize::MAX;
+        let mut big = -1.0f64;
+        for j in 0..nc {
+            if sd.usable[j] && !in_active[j] && !skipped[j] && cov[j].abs() > big {
+                big = cov[j].abs();
+                c_idx = j;
+            }
+        }
+        let c = if c_idx == usize::MAX { 0.0 } else { big };
+        let alpha = c / n as f64;
+        let rel_res = dot(&r, &r).sqrt() / y_norm;
+        // Breakpoint n_iter: coefficients from the end of the last step, alpha from now.
+        let bp = Breakpoint { alpha, active: pending.0.clone(), coefs: pending.1.clone(), rel_residual: rel_res };
+        if path.breakpoints.len() == n_iter + 1 {
+            path.breakpoints[n_iter] = bp;
+        } else {
+            path.breakpoints.push(bp);
+        }
+        if let Some(reason) = stop_next {
+            path.stop = reason;
+            break;
+        }
+        if alpha <= opts.alpha_min + EQ_TOL {
+            if (alpha - opts.alpha_min).abs() > EQ_TOL && n_iter > 0 {
+                // Interpolate back to alpha_min between the last two breakpoints.
+                let prev = path.breakpoints[n_iter - 1].clone();
+                let ss = (prev.alpha - opts.alpha_min) / (prev.alpha - alpha);
+                let cur = &mut path.breakpoints[n_iter];
+                for (k, id) in cur.active.clone().iter().enumerate() {
+                    let p = prev.active.iter().position(|x| x == id).map_or(0.0, |q| prev.coefs[q]);
+                    cur.coefs[k] = p + ss * (cur.coefs[k] - p);
+                }
+            }
+            path.breakpoints[n_iter].alpha = opts.alpha_min;
+            path.stop = StopReason::AlphaMin;
+            break;
+        }
+        if n_iter >= opts.max_steps {
+            path.stop = StopReason::MaxSteps;
+            break;
+        }
+        if !drop && active.len() >= opts.max_terms {
+            path.stop = StopReason::MaxTerms;
+            break;
+        }
+        if !drop && active.len() + 2 > n {
+            path.stop = StopReason::SampleLimit;
+            break;
+        }
+        if rel_res < 1e-12 {
+            path.stop = StopReason::ExactFit;
+            break;
+        }
+        let mut added = false;
+        if !drop {
+            let col = sd.engine.columns(&[c_idx])?.pop().expect("one column");
+            let m = w.iter().zip(&col).map(|(a, b)| a * b).sum::<f64>() / sw;
+            let s = w.iter().zip(&col).map(|(a, b)| a * (b - m) * (b - m)).sum::<f64>().sqrt();
+            if !(s > 0.0) || !s.is_finite() {
+                skipped[c_idx] = true;
+                path.events.push(Event::SkippedCollinear { step: n_iter, candidate: c_idx, pivot: 0.0 });
+                continue;
+            }
+            let xt: Vec<f64> = col.iter().zip(&path.sqrt_w).map(|(x, q)| q * (x - m) / s).collect();
+            // Drift check: the exact correlation of the entering candidate against the incremental one.
+            let exact = dot(&xt, &r);
+            let drift = (exact - cov[c_idx]).abs() / cov[c_idx].abs().max(f64::MIN_POSITIVE);
+            if drift > opts.refresh_tol && !refreshed_this_iter {
+                sd.corr(&r, &mut cov)?;
+                path.refreshes += 1;
+                path.events.push(Event::Refreshed { step: n_iter, drift });
+                refreshed_this_iter = true;
+                continue;
+            }
+            let g: Vec<f64> = xa.par_iter().map(|x| dot(x, &xt)).collect();
+            let (wv, pivot) = chol.pivot(&g, dot(&xt, &xt));
+            let pivot = pivot.max(f64::EPSILON);
+            if pivot < opts.collinearity_tol {
+                skipped[c_idx] = true;
+                path.events.push(Event::SkippedCollinear { step: n_iter, candidate: c_idx, pivot });
+                continue;
+            }
+            chol.append(wv, pivot);
+            if path.store.position(c_idx).is_none() {
+                path.store.ids.push(c_idx);
+                path.store.mean.push(m);
+                path.store.norm.push(s);
+                path.store.xty.push(dot(&xt, &y_tilde));
+                path.store.cols.push(xt.clone());
+            }
+            xa.push(xt);
+            active.push(c_idx);
+            in_active[c_idx] = true;
+            sign.push(if cov[c_idx] > 0.0 { 1.0 } else if cov[c_idx] < 0.0 { -1.0 } else { 0.0 });
+            coef.push(0.0);
+            path.events.push(Event::Added { step: n_iter, candidate: c_idx });
+            added = true;
+        }
+        refreshed_this_iter = false;
+        if lasso && n_iter > 0 && prev_alpha < alpha {
+            path.stop = StopReason::AlphaIncreasing;
+            break;
+        }
+
+        // Equiangular direction.
+        let k = active.len();
+        let mut ls = sign.clone();
+        chol.solve(&mut ls);
+        let s_ls: f64 = ls.iter().zip(&sign).map(|(a, b)| a * b).sum();
+        let aa = if k == 1 && ls[0] == 0.0 {
+            ls[0] = 1.0;
+            1.0
+        } else {
+            1.0 / s_ls.sqrt()
+        };
+        if !aa.is_finite() {
+            return Err(Error::Numerical(format!("the active system became singular at step {n_iter} with {k} terms; raise the collinearity tolerance")));
+        }
+        ls.iter_mut().for_each(|x| *x *= aa);
+        // u = X~_A ls, parallel over sample chunks (O(n k) per step).
+        u.par_chunks_mut(4096).enumerate().for_each(|(c, uc)| {
+            uc.iter_mut().for_each(|x| *x = 0.0);
+            let off = c * 4096;
+            for (col, l) in xa.iter().zip(&ls) {
+                let len = uc.len();
+                uc.iter_mut().zip(&col[off..off + len]).for_each(|(ui, xi)| *ui += l * xi);
+            }
+        });
+        sd.corr(&u, &mut a)?;
+
+        let inactive = |j: usize| sd.usable[j] && !in_active[j] && !skipped[j];
+        let g1 = min_pos((0..nc).filter(|&j| inactive(j)).map(|j| (c - cov[j]) / (aa - a[j] + TINY32)));
+        let g2 = min_pos((0..nc).filter(|&j| inactive(j)).map(|j| (c + cov[j]) / (aa + a[j] + TINY32)));
+        let mut gamma = g1.min(g2).min(c / aa);
+        let z: Vec<f64> = coef.iter().zip(&ls).map(|(cf, l)| -cf / (l + TINY32)).collect();
+        let z_pos = min_pos(z.iter().copied());
+        drop = false;
+        let mut idx: Vec<usize> = Vec::new();
+        if z_pos < gamma {
+            idx = (0..k).filter(|&q| z[q] == z_pos).rev().collect();
+            for &q in &idx {
+                sign[q] = -sign[q];
+            }
+            if lasso {
+                gamma = z_pos;
+            }
+            drop = true;
+        }
+        n_iter += 1;
+        coef.iter_mut().zip(&ls).for_each(|(cf, l)| *cf += gamma * l);
+        cov.iter_mut().zip(&a).for_each(|(cv, av)| *cv -= gamma * av);
+        r.iter_mut().zip(&u).for_each(|(ri, ui)| *ri -= gamma * ui);
+        if drop && lasso {
+            for &q in &idx {
+                chol.delete(q);
+                let id = active.remove(q);
+                let col = xa.remove(q);
+                coef.remove(q);
+                sign.remove(q);
+                in_active[id] = false;
+                cov[id] = dot(&col, &r);
+                path.events.push(Event::Dropped { step: n_iter, candidate: id });
+            }
+        }
+        pending = (active.clone(), coef.clone());
+        prev_alpha = alpha;
+        let new_rel = dot(&r, &r).sqrt() / y_norm;
+        if added && opts.epsilon > 0.0 && rel_res_at_last_bp - new_rel < opts.epsilon {
+            stop_next = Some(StopReason::Relevance);
+        }
+        rel_res_at_last_bp = new_rel;
+    }
+    path.sweeps = sd.sweeps;
+    Ok(path)
+}

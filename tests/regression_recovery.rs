@@ -1,0 +1,226 @@
+//! Recovery of known sparse polynomials, edge cases (collinear, constant and zero columns,
+//! weights) and settings validation.
+
+use ctsid::engine::Features;
+use ctsid::regression::{Method, Model, Regression};
+use ctsid::Error;
+
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E3779B97F4A7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
+        z ^ (z >> 31)
+    }
+    fn uniform(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    }
+    fn normal(&mut self) -> f64 {
+        let (u, v) = ((self.uniform() + 1.0) / 2.0, (self.uniform() + 1.0) / 2.0);
+        (-2.0 * (1.0 - u).ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    }
+}
+
+struct Problem {
+    features: Features,
+    label: Vec<f64>,
+    truth: Vec<(usize, f64)>,
+}
+
+/// `n_true` random terms (indices into the graded-lex basis) with coefficients of magnitude 0.5..2.
+fn problem(seed: u64, nz: usize, d: usize, n: usize, n_true: usize, noise: f64) -> Problem {
+    let mut rng = Rng(seed);
+    let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
+    let cols: Vec<Vec<f64>> = (0..nz).map(|_| (0..n).map(|_| rng.uniform()).collect()).collect();
+    let basis = ctsid::basis::Basis::new(&names, d, Default::default()).unwrap();
+    let mut truth: Vec<(usize, f64)> = Vec::new();
+    while truth.len() < n_true {
+        let j = (rng.next() % basis.len() as u64) as usize;
+        if truth.iter().all(|t| t.0 != j) {
+            let c = (0.5 + 1.5 * (rng.uniform() + 1.0) / 2.0) * if rng.uniform() < 0.0 { -1.0 } else { 1.0 };
+            truth.push((j, c));
+        }
+    }
+    truth.sort_by_key(|t| t.0);
+    let mut label = vec![0.0; n];
+    for &(j, c) in &truth {
+        for (i, l) in label.iter_mut().enumerate() {
+            let z: Vec<f64> = (0..nz).map(|k| cols[k][i]).collect();
+            *l += c * basis.code(j).eval(&z);
+        }
+    }
+    let rms = (label.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt();
+    for l in label.iter_mut() {
+        *l += noise * rms * rng.normal();
+    }
+    Problem { features: Features::new(names, cols), label, truth }
+}
+
+fn support(m: &Model) -> Vec<usize> {
+    m.terms.iter().map(|t| t.index.unwrap()).collect()
+}
+
+#[test]
+fn recovers_ten_terms_among_12376_without_noise() {
+    let p = problem(11, 11, 6, 25_000, 10, 0.0);
+    let model = Regression::builder().degree(6).max_terms(40).build().unwrap().fit(&p.features, &p.label, "y", None).unwrap();
+    let want: Vec<usize> = p.truth.iter().map(|t| t.0).collect();
+    assert_eq!(support(&model), want, "{}\n{:?}", model.equation(), model.diagnostics);
+    for (t, (_, c)) in model.terms.iter().zip(&p.truth) {
+        assert!((t.coefficient - c).abs() <= 1e-6 * c.abs(), "{}: {} vs {c}", t.name, t.coefficient);
+    }
+    assert_eq!(model.diagnostics.n_candidates, 12_376);
+}
+
+#[test]
+fn recovers_the_support_with_one_percent_noise() {
+    for seed in [5, 6] {
+        let p = problem(seed, 11, 6, 25_000, 10, 0.01);
+        let model = Regression::builder().degree(6).max_terms(40).build().unwrap().fit(&p.features, &p.label, "y", None).unwrap();
+        let want: Vec<usize> = p.truth.iter().map(|t| t.0).collect();
+        assert_eq!(support(&model), want, "seed {seed}: {}\n{:?}", model.equation(), model.diagnostics);
+        for (t, (_, c)) in model.terms.iter().zip(&p.truth) {
+            assert!((t.coefficient - c).abs() <= 0.05 * c.abs(), "{}: {} vs {c}", t.name, t.coefficient);
+        }
+    }
+}
+
+#[test]
+fn plain_lars_recovers_a_small_problem_too() {
+    let p = problem(3, 4, 3, 2000, 4, 0.0);
+    let model = Regression::builder().degree(3).method(Method::Lars).build().unwrap().fit(&p.features, &p.label, "y", None).unwrap();
+    assert_eq!(support(&model), p.truth.iter().map(|t| t.0).collect::<Vec<_>>(), "{}", model.equation());
+}
+
+#[test]
+fn relevance_threshold_stops_the_path() {
+    // Noise keeps the path going after the true terms, with small gains per step.
+    let p = problem(3, 4, 3, 2000, 4, 0.05);
+    let reg = |eps: f64| Regression::builder().degree(3).method(Method::Lars).epsilon(eps).build().unwrap();
+    let full = reg(0.0).fit(&p.features, &p.label, "y", None).unwrap();
+    let short = reg(0.05).fit(&p.features, &p.label, "y", None).unwrap();
+    assert_eq!(short.diagnostics.stop, ctsid::regression::StopReason::Relevance);
+    assert!(short.diagnostics.path_steps < full.diagnostics.path_steps, "{} vs {}", short.diagnostics.path_steps, full.diagnostics.path_steps);
+    // Each step kept before the stop lowered the relative residual by at least epsilon.
+    let steps = &short.path;
+    for k in 1..steps.len() - 1 {
+        assert!(steps[k - 1].rel_residual - steps[k].rel_residual >= 0.05, "step {k}");
+    }
+}
+
+#[test]
+fn duplicated_feature_is_skipped_without_nan() {
+    // z1 is a copy of z0 (exactly, or up to 1e-10): every monomial in z1 duplicates one in z0.
+    for offset in [0.0, 1e-10] {
+        let mut rng = Rng(9);
+        let n = 500;
+        let a: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
+        let a2: Vec<f64> = a.iter().map(|x| x + offset * rng.uniform()).collect();
+        let b: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
+        let y: Vec<f64> = (0..n).map(|i| 1.5 * a[i] - 2.0 * a[i] * b[i] + 0.3 + 0.05 * rng.normal()).collect();
+        let f = Features::new(vec!["a".into(), "a2".into(), "b".into()], vec![a, a2, b]);
+        for method in [Method::Lars, Method::LassoLars] {
+            let m = Regression::builder().degree(2).method(method).max_terms(9).build().unwrap().fit(&f, &y, "y", None).unwrap();
+            if offset > 0.0 {
+                // The noise keeps the path going until every distinct monomial is in; then the
+                // 4 near-duplicates (a2, a*a2, a2^2, a2*b) are tried and refused.
+                assert_eq!(m.diagnostics.skipped_collinear.len(), 4, "{method:?}: {:?}", m.diagnostics);
+            }
+            assert!(m.path.iter().all(|p| p.coefficients.iter().all(|c| c.is_finite()) && p.alpha.is_finite()));
+            // a and a2 are interchangeable.
+            let names: Vec<String> = m.terms.iter().map(|t| t.name.replace("a2", "a")).collect();
+            assert!(m.terms.iter().all(|t| t.coefficient.is_finite()));
+            assert_eq!(names, ["1", "a", "a*b"], "{method:?}, offset {offset}: {}", m.equation());
+        }
+    }
+}
+
+#[test]
+fn zero_and_constant_features_are_excluded() {
+    let mut rng = Rng(4);
+    let n = 300;
+    let a: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
+    let y: Vec<f64> = a.iter().map(|x| 2.0 * x * x - 1.0).collect();
+    let f = Features::new(vec!["a".into(), "zero".into(), "three".into()], vec![a, vec![0.0; n], vec![3.0; n]]);
+    let m = Regression::builder().degree(2).build().unwrap().fit(&f, &y, "y", None).unwrap();
+    // Constant candidates: 1, zero, three, zero^2, zero*three, three^2, a*zero.
+    assert_eq!(m.diagnostics.constant_candidates, 7, "{:?}", m.diagnostics);
+    let names: Vec<&str> = m.terms.iter().map(|t| t.name.as_str()).collect();
+    assert_eq!(names, ["1", "a^2"], "{}", m.equation());
+    assert!((m.terms[0].coefficient + 1.0).abs() < 1e-9 && (m.terms[1].coefficient - 2.0).abs() < 1e-9);
+    // A constant label: nothing to fit but the constant.
+    let m = Regression::builder().degree(2).build().unwrap().fit(&f, &vec![4.0; n], "c", None).unwrap();
+    assert_eq!(m.equation(), "c = 4");
+}
+
+#[test]
+fn weights_exclude_bad_samples() {
+    let p = problem(21, 3, 3, 3000, 4, 0.0);
+    let mut y = p.label.clone();
+    let mut w = vec![1.0; y.len()];
+    for i in (0..y.len()).step_by(10) {
+        y[i] += 50.0;
+        w[i] = 0.0;
+    }
+    let reg = Regression::builder().degree(3).build().unwrap();
+    let m = reg.fit(&p.features, &y, "y", Some(&w)).unwrap();
+    assert_eq!(support(&m), p.truth.iter().map(|t| t.0).collect::<Vec<_>>(), "{}", m.equation());
+    let unweighted = reg.fit(&p.features, &y, "y", None).unwrap();
+    assert_ne!(support(&unweighted), support(&m), "the corrupted samples should matter without weights");
+    assert!(reg.fit(&p.features, &y, "y", Some(&w[1..])).is_err());
+    let mut neg = w.clone();
+    neg[3] = -1.0;
+    assert!(matches!(reg.fit(&p.features, &y, "y", Some(&neg)), Err(Error::InvalidParameter { .. })));
+}
+
+#[test]
+fn model_json_and_equation() {
+    let p = problem(8, 2, 2, 400, 3, 0.0);
+    let f = Features::new(vec!["u".into(), "y".into()], vec![p.features.column(0).to_vec(), p.features.column(1).to_vec()]);
+    let m = Regression::builder().degree(2).build().unwrap().fit(&f, &p.label, "y_d1", None).unwrap();
+    let json = serde_json::to_value(&m).unwrap();
+    assert_eq!(json["label"], "y_d1");
+    let terms = json["terms"].as_array().unwrap();
+    assert_eq!(terms.len(), 3);
+    for (t, (j, c)) in terms.iter().zip(&p.truth) {
+        assert!((t["coefficient"].as_f64().unwrap() - c).abs() < 1e-9);
+        let e = t["exponents"].as_object().unwrap();
+        let sum: u64 = e.values().map(|v| v.as_u64().unwrap()).sum();
+        assert_eq!(sum as usize, ctsid::basis::Basis::new(&f.names, 2, Default::default()).unwrap().code(*j).degree());
+    }
+    let back: Model = serde_json::from_value(json).unwrap();
+    assert_eq!(back.terms, m.terms);
+    let eq = m.equation();
+    assert!(eq.starts_with("y_d1 = "), "{eq}");
+    assert!(!eq.contains("+ -"), "{eq}");
+    // A hand-written model with just label and terms parses into terms.
+    let t: Vec<ctsid::regression::Term> = serde_json::from_str(r#"[{"exponents": {"u": 1}, "coefficient": 2.5}, {"exponents": {}, "coefficient": -1}]"#).unwrap();
+    assert_eq!(t[1].exponents.len(), 0);
+}
+
+#[test]
+fn bad_settings_are_refused_before_fitting() {
+    let b = || Regression::builder();
+    assert!(matches!(b().degree(13).build(), Err(Error::InvalidParameter { .. })));
+    assert!(b().max_terms(0).build().is_err());
+    assert!(b().max_steps(0).build().is_err());
+    assert!(b().alpha_min(-1.0).build().is_err());
+    assert!(b().alpha_min(f64::NAN).build().is_err());
+    assert!(b().epsilon(1.0).build().is_err());
+    assert!(b().ebic_gamma(1.5).build().is_err());
+    assert!(b().collinearity_tol(0.0).build().is_err());
+    assert!(b().refresh_tol(-1.0).build().is_err());
+    assert!(b().degree(6).max_terms(10).build().is_ok());
+    // Data errors are typed too.
+    let f = Features::new(vec!["a".into()], vec![vec![0.0, 1.0, f64::NAN]]);
+    assert!(b().build().unwrap().fit(&f, &[1.0, 2.0, 3.0], "y", None).is_err());
+    let f = Features::new(vec!["a".into()], vec![vec![0.0, 1.0, 2.0]]);
+    assert!(b().build().unwrap().fit(&f, &[1.0, 2.0], "y", None).is_err());
+    assert!(b().build().unwrap().fit(&f, &[1.0, f64::INFINITY, 2.0], "y", None).is_err());
+    let too_big = b().degree(12).max_candidates(1000).build().unwrap();
+    let f = Features::new((0..5).map(|k| format!("v{k}")).collect(), vec![vec![0.0; 3]; 5]);
+    assert!(matches!(too_big.fit(&f, &[0.0; 3], "y", None), Err(Error::TooLarge { .. })));
+    assert!(matches!(b().engine(ctsid::regression::EngineChoice::Gpu).build().unwrap().fit(&f, &[0.0; 3], "y", None), Err(Error::Gpu(_))));
+}
