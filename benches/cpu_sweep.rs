@@ -19,11 +19,26 @@ fn setup(precision: Precision) -> (CpuEngine, Vec<f64>) {
     let n = 25_000;
     let mut s = 1u64;
     let names: Vec<String> = (0..11).map(|k| format!("z{k}")).collect();
-    let cols = (0..11).map(|_| (0..n).map(|_| uniform(&mut s)).collect()).collect();
+    let cols = (0..11)
+        .map(|_| (0..n).map(|_| uniform(&mut s)).collect())
+        .collect();
     let f = Features::new(names.clone(), cols);
     let b = Basis::new(&names, 6, BasisLimits::default()).unwrap();
-    let e = CpuEngine::new(&b, &f, CpuOptions { precision, materialize_limit_bytes: 0 }).unwrap();
-    let y = (0..n).map(|i| f.column(0)[i].powi(3) * f.column(4)[i] - 2.0 * f.column(7)[i] * f.column(2)[i] + 0.01 * uniform(&mut s)).collect();
+    let e = CpuEngine::new(
+        &b,
+        &f,
+        CpuOptions {
+            precision,
+            materialize_limit_bytes: 0,
+        },
+    )
+    .unwrap();
+    let y = (0..n)
+        .map(|i| {
+            f.column(0)[i].powi(3) * f.column(4)[i] - 2.0 * f.column(7)[i] * f.column(2)[i]
+                + 0.01 * uniform(&mut s)
+        })
+        .collect();
     (e, y)
 }
 
@@ -31,14 +46,23 @@ fn sweep(c: &mut Criterion) {
     for p in [Precision::F32, Precision::F64] {
         let (mut e, v) = setup(p);
         let mut out = vec![0.0; e.n_candidates()];
-        c.bench_function(&format!("sweep 25000x12376 {p:?}"), |b| b.iter(|| e.sweep(black_box(&v), &mut out).unwrap()));
+        c.bench_function(&format!("sweep 25000x12376 {p:?}"), |b| {
+            b.iter(|| e.sweep(black_box(&v), &mut out).unwrap())
+        });
     }
 }
 
 fn path(c: &mut Criterion) {
     let (mut e, y) = setup(Precision::F32);
-    let opts = PathOptions { method: Method::LassoLars, max_terms: 20, max_steps: 20, ..PathOptions::default() };
-    c.bench_function("lassolars path 20 steps 25000x12376 F32", |b| b.iter(|| lars_path(&mut e, black_box(&y), None, &opts).unwrap()));
+    let opts = PathOptions {
+        method: Method::LassoLars,
+        max_terms: 20,
+        max_steps: 20,
+        ..PathOptions::default()
+    };
+    c.bench_function("lassolars path 20 steps 25000x12376 F32", |b| {
+        b.iter(|| lars_path(&mut e, black_box(&y), None, &opts).unwrap())
+    });
 }
 
 criterion_group! {

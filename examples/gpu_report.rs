@@ -36,7 +36,14 @@ impl Rng {
 }
 
 /// Plain rayon f64 reference: out_j = sum_i prod(z_i[vars of j]) * v_i, parallel over candidates.
-fn naive_f64_sweep(rows: &[f64], n_z: usize, codes: &[Code], v: &[f64], out: &mut [f64], mag: Option<&mut [f64]>) {
+fn naive_f64_sweep(
+    rows: &[f64],
+    n_z: usize,
+    codes: &[Code],
+    v: &[f64],
+    out: &mut [f64],
+    mag: Option<&mut [f64]>,
+) {
     let one = |c: &Code| {
         let vars: Vec<usize> = c.vars().collect();
         let (mut s, mut m) = (0.0, 0.0);
@@ -49,17 +56,28 @@ fn naive_f64_sweep(rows: &[f64], n_z: usize, codes: &[Code], v: &[f64], out: &mu
         (s, m)
     };
     match mag {
-        Some(mag) => out.par_iter_mut().zip(mag.par_iter_mut()).zip(codes.par_iter()).for_each(|((o, g), c)| {
-            let (s, m) = one(c);
-            *o = s;
-            *g = m;
-        }),
-        None => out.par_iter_mut().zip(codes.par_iter()).for_each(|(o, c)| *o = one(c).0),
+        Some(mag) => out
+            .par_iter_mut()
+            .zip(mag.par_iter_mut())
+            .zip(codes.par_iter())
+            .for_each(|((o, g), c)| {
+                let (s, m) = one(c);
+                *o = s;
+                *g = m;
+            }),
+        None => out
+            .par_iter_mut()
+            .zip(codes.par_iter())
+            .for_each(|(o, c)| *o = one(c).0),
     }
 }
 
 fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
-    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1)).and_then(|s| s.parse().ok()).unwrap_or(default)
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(default)
 }
 
 fn main() {
@@ -77,14 +95,21 @@ fn main() {
     let mut failed = false;
     for spec in sizes.split(',') {
         let (n_z, d) = {
-            let mut it = spec.split(':').map(|x| x.trim().parse::<usize>().expect("--sizes takes NZ:D pairs"));
-            (it.next().unwrap(), it.next().expect("--sizes takes NZ:D pairs"))
+            let mut it = spec
+                .split(':')
+                .map(|x| x.trim().parse::<usize>().expect("--sizes takes NZ:D pairs"));
+            (
+                it.next().unwrap(),
+                it.next().expect("--sizes takes NZ:D pairs"),
+            )
         };
         let names: Vec<String> = (0..n_z).map(|k| format!("z{k}")).collect();
         let basis = Basis::new(&names, d, BasisLimits::default()).expect("basis");
         let n_c = basis.len();
         let mut rng = Rng(0xC7510 + n_z as u64 * 100 + d as u64);
-        let cols: Vec<Vec<f64>> = (0..n_z).map(|_| (0..n_s).map(|_| rng.uniform()).collect()).collect();
+        let cols: Vec<Vec<f64>> = (0..n_z)
+            .map(|_| (0..n_s).map(|_| rng.uniform()).collect())
+            .collect();
         let feats = Features::new(names.clone(), cols);
         let mut rows = vec![0.0; n_s * n_z];
         for k in 0..n_z {
@@ -95,7 +120,14 @@ fn main() {
         let v: Vec<f64> = (0..n_s).map(|_| rng.uniform()).collect();
 
         let t0 = Instant::now();
-        let mut eng = match GpuEngine::new(&feats, &basis, GpuOptions { allow_cpu_adapter: !require_real, ..Default::default() }) {
+        let mut eng = match GpuEngine::new(
+            &feats,
+            &basis,
+            GpuOptions {
+                allow_cpu_adapter: !require_real,
+                ..Default::default()
+            },
+        ) {
             Ok(e) => e,
             Err(e) => {
                 eprintln!("gpu_report: {e}");
@@ -103,7 +135,12 @@ fn main() {
             }
         };
         let setup = t0.elapsed().as_secs_f64();
-        eprintln!("# {} candidates (n_z={n_z}, d={d}): {}; layout {:?}", n_c, eng.describe(), eng.layout());
+        eprintln!(
+            "# {} candidates (n_z={n_z}, d={d}): {}; layout {:?}",
+            n_c,
+            eng.describe(),
+            eng.layout()
+        );
 
         // Correctness on a spread subset (first, last, evenly spaced), every element checked.
         let mut out = vec![f64::NAN; n_c];
@@ -120,7 +157,11 @@ fn main() {
         naive_f64_sweep(&rows, n_z, &sub, &v, &mut want, Some(&mut mag));
         let mut worst = 0.0f64;
         for (k, &j) in idx.iter().enumerate() {
-            let rel = if out[j].is_finite() { (out[j] - want[k]).abs() / mag[k].max(f64::MIN_POSITIVE) } else { f64::INFINITY };
+            let rel = if out[j].is_finite() {
+                (out[j] - want[k]).abs() / mag[k].max(f64::MIN_POSITIVE)
+            } else {
+                f64::INFINITY
+            };
             worst = worst.max(rel);
         }
         let ok = worst < 1e-5;
@@ -147,7 +188,11 @@ fn main() {
         let t2 = Instant::now();
         naive_f64_sweep(&rows, n_z, &csub, &v, &mut cout, None);
         let cpu = t2.elapsed().as_secs_f64() * n_c as f64 / csub.len() as f64;
-        let cpu_note = if csub.len() < n_c { " (extrapolated)" } else { "" };
+        let cpu_note = if csub.len() < n_c {
+            " (extrapolated)"
+        } else {
+            ""
+        };
 
         rows_out.push(format!(
             "| {n_s} x {n_c} (n_z={n_z}, d={d}) | {:.3} ms | {:.3} s | {:.1} ms{cpu_note} | {:.1}x | {:.1} % | {worst:.1e} {} | {:.2} s / {:.0} ms |",

@@ -4,20 +4,37 @@ use ctsid::basis::{Basis, BasisLimits};
 use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
 
 fn main() {
-    let a: Vec<usize> = std::env::args().skip(1).map(|s| s.parse().unwrap()).collect();
+    let a: Vec<usize> = std::env::args()
+        .skip(1)
+        .map(|s| s.parse().unwrap())
+        .collect();
     let (nz, d, reps) = (a[0], a[1], a[2]);
-    let prec = if a.get(3) == Some(&64) { Precision::F64 } else { Precision::F32 };
+    let prec = if a.get(3) == Some(&64) {
+        Precision::F64
+    } else {
+        Precision::F32
+    };
     let n = 25_000;
     let mut s = 1u64;
     let mut u = || {
-        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (s >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
     };
     let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
     let cols = (0..nz).map(|_| (0..n).map(|_| u()).collect()).collect();
     let f = Features::new(names.clone(), cols);
     let b = Basis::new(&names, d, BasisLimits::default()).unwrap();
-    let mut e = CpuEngine::new(&b, &f, CpuOptions { precision: prec, materialize_limit_bytes: 0 }).unwrap();
+    let mut e = CpuEngine::new(
+        &b,
+        &f,
+        CpuOptions {
+            precision: prec,
+            materialize_limit_bytes: 0,
+        },
+    )
+    .unwrap();
     let v: Vec<f64> = (0..n).map(|_| u()).collect();
     let mut out = vec![0.0; b.len()];
     let t = std::time::Instant::now();
@@ -25,5 +42,10 @@ fn main() {
         e.sweep(&v, &mut out).unwrap();
     }
     let dt = t.elapsed().as_secs_f64() / reps as f64;
-    eprintln!("pairs per sweep {:.4e}; wall {:.4} s per sweep; checksum {:.6e}", (n * b.len()) as f64, dt, out.iter().sum::<f64>());
+    eprintln!(
+        "pairs per sweep {:.4e}; wall {:.4} s per sweep; checksum {:.6e}",
+        (n * b.len()) as f64,
+        dt,
+        out.iter().sum::<f64>()
+    );
 }

@@ -14,17 +14,23 @@
 //! | model file | [`model`] | `ctsid-model/1` JSON, chains of integrators closed by polynomials |
 //! | simulation | [`simulate`] | Radau IIA with error control, inputs with known breakpoints |
 //! | built-in plants | [`plants`] | throttle and MIMO plants with known truth, seeded excitation and noise |
+//! | identification | [`identify`] | order search (eta-rule), sigma-weighted fits, test profiles, free-run simulation |
+//! | demonstrations | [`demo`] | the paper's throttle experiment and a MIMO plant, judged against truth |
+//! | reports | [`report`] | Markdown / CSV tables and SVG plots |
 //!
 //! Errors are typed ([`Error`]); nothing in the library panics on bad input.
 
 pub mod basis;
+pub mod demo;
 pub mod derivatives;
 pub mod engine;
 pub mod error;
+pub mod identify;
 pub mod model;
 pub mod plants;
 pub mod records;
 pub mod regression;
+pub mod report;
 pub mod simulate;
 
 pub use error::{Error, Result};

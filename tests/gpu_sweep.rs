@@ -29,7 +29,9 @@ fn names(n: usize) -> Vec<String> {
 }
 
 fn features(rng: &mut Rng, n_s: usize, n_z: usize, lo: f64, hi: f64) -> Features {
-    let cols = (0..n_z).map(|_| (0..n_s).map(|_| rng.uniform(lo, hi)).collect()).collect();
+    let cols = (0..n_z)
+        .map(|_| (0..n_s).map(|_| rng.uniform(lo, hi)).collect())
+        .collect();
     Features::new(names(n_z), cols)
 }
 
@@ -74,15 +76,31 @@ fn check_sweep(eng: &mut GpuEngine, f: &Features, b: &Basis, v: &[f64], label: &
     let (want, mag) = reference_sweep(f, b, v);
     let mut worst = 0.0f64;
     for j in 0..b.len() {
-        assert!(out[j].is_finite(), "{label}: candidate {j} ({}) was not written", b.name(j));
+        assert!(
+            out[j].is_finite(),
+            "{label}: candidate {j} ({}) was not written",
+            b.name(j)
+        );
         let rel = (out[j] - want[j]).abs() / mag[j].max(f64::MIN_POSITIVE);
-        assert!(rel < 1e-5, "{label}: candidate {j} ({}): gpu {} vs f64 {} (rel {rel:e})", b.name(j), out[j], want[j]);
+        assert!(
+            rel < 1e-5,
+            "{label}: candidate {j} ({}): gpu {} vs f64 {} (rel {rel:e})",
+            b.name(j),
+            out[j],
+            want[j]
+        );
         worst = worst.max(rel);
     }
     worst
 }
 
-fn run_case(seed: u64, n_s: usize, n_z: usize, degree: usize, opts: GpuOptions) -> Option<GpuEngine> {
+fn run_case(
+    seed: u64,
+    n_s: usize,
+    n_z: usize,
+    degree: usize,
+    opts: GpuOptions,
+) -> Option<GpuEngine> {
     let mut rng = Rng(seed);
     let f = features(&mut rng, n_s, n_z, -1.2, 1.2);
     let b = Basis::new(&names(n_z), degree, BasisLimits::default()).unwrap();
@@ -94,7 +112,13 @@ fn run_case(seed: u64, n_s: usize, n_z: usize, degree: usize, opts: GpuOptions) 
         let scale = rng.uniform(0.1, 10.0);
         let v: Vec<f64> = (0..n_s).map(|_| scale * rng.uniform(-1.0, 1.0)).collect();
         let t1 = std::time::Instant::now();
-        let worst = check_sweep(&mut eng, &f, &b, &v, &format!("n_z={n_z} d={degree} rep {rep}"));
+        let worst = check_sweep(
+            &mut eng,
+            &f,
+            &b,
+            &v,
+            &format!("n_z={n_z} d={degree} rep {rep}"),
+        );
         println!(
             "n_s={n_s} n_z={n_z} d={degree} candidates={}: worst rel err {worst:.2e}; setup {setup:?}, sweep+check {:?}; {}",
             b.len(),
@@ -125,15 +149,26 @@ fn sweep_matches_f64_reference_at_the_degree_and_variable_limits() {
 fn sweep_is_tiled_into_windows_and_blocks() {
     // 6 variables, degree 6: 924 candidates in windows of 512 (2 windows, the second ragged)
     // and blocks of 96 samples over 2999 samples (32 blocks, the last ragged).
-    let opts = GpuOptions { max_window_candidates: Some(512), max_block_samples: 96, ..GpuOptions::default() };
-    let Some(eng) = run_case(0x5EED_0005, 2999, 6, 6, opts) else { return };
+    let opts = GpuOptions {
+        max_window_candidates: Some(512),
+        max_block_samples: 96,
+        ..GpuOptions::default()
+    };
+    let Some(eng) = run_case(0x5EED_0005, 2999, 6, 6, opts) else {
+        return;
+    };
     let l = eng.layout();
     assert!(l.windows.len() >= 2, "{l:?}");
     assert!(l.n_blocks >= 16, "{l:?}");
     assert!(l.windows.windows(2).all(|w| w[0].0 + w[0].1 == w[1].0));
     // Bounded dispatch size also forces windows.
-    let opts = GpuOptions { max_pairs_per_dispatch: 600 * 1000, ..GpuOptions::default() };
-    let Some(eng) = run_case(0x5EED_0006, 1000, 10, 4, opts) else { return };
+    let opts = GpuOptions {
+        max_pairs_per_dispatch: 600 * 1000,
+        ..GpuOptions::default()
+    };
+    let Some(eng) = run_case(0x5EED_0006, 1000, 10, 4, opts) else {
+        return;
+    };
     assert!(eng.layout().windows.len() >= 2, "{:?}", eng.layout());
 }
 
@@ -144,13 +179,26 @@ fn column_stats_match_f64_reference_with_large_means() {
     // Shifted away from zero: means dominate, which is what breaks one-pass f32 formulas.
     let f = features(&mut rng, n_s, n_z, 2.0, 4.0);
     let b = Basis::new(&names(n_z), degree, BasisLimits::default()).unwrap();
-    let Some(mut eng) = engine_or_skip(&f, &b, GpuOptions { max_block_samples: 512, ..GpuOptions::default() }) else { return };
+    let Some(mut eng) = engine_or_skip(
+        &f,
+        &b,
+        GpuOptions {
+            max_block_samples: 512,
+            ..GpuOptions::default()
+        },
+    ) else {
+        return;
+    };
     for weighted in [false, true] {
         let w: Vec<f64> = (0..n_s).map(|_| rng.uniform(0.0, 2.0)).collect();
         let t0 = std::time::Instant::now();
         let st = eng.column_stats(weighted.then_some(&w[..])).unwrap();
         let el = t0.elapsed();
-        let w: Vec<f64> = if weighted { w.iter().map(|&a| a as f32 as f64).collect() } else { vec![1.0; n_s] };
+        let w: Vec<f64> = if weighted {
+            w.iter().map(|&a| a as f32 as f64).collect()
+        } else {
+            vec![1.0; n_s]
+        };
         let wsum: f64 = w.iter().sum();
         let rows: Vec<Vec<f64>> = (0..n_s).map(|i| row(&f, i)).collect();
         let (mut worst_m, mut worst_n) = (0.0f64, 0.0f64);
@@ -166,7 +214,13 @@ fn column_stats_match_f64_reference_with_large_means() {
             // that relative to sum w x^2; the 1e-5 bound applies to the spread itself.
             let en = (st.norm[j] * st.norm[j] - ss).abs() / (ss + 1e-6 * sq);
             assert!(em < 1e-5, "mean of {}: {} vs {m}", b.name(j), st.mean[j]);
-            assert!(en < 1e-5, "norm of {}: {} vs {} (weighted {weighted})", b.name(j), st.norm[j], ss.sqrt());
+            assert!(
+                en < 1e-5,
+                "norm of {}: {} vs {} (weighted {weighted})",
+                b.name(j),
+                st.norm[j],
+                ss.sqrt()
+            );
             worst_m = worst_m.max(em);
             worst_n = worst_n.max(en);
         }
@@ -179,7 +233,9 @@ fn columns_are_exact_and_bad_input_is_refused() {
     let mut rng = Rng(0x5EED_0020);
     let f = features(&mut rng, 300, 5, -2.0, 2.0);
     let b = Basis::new(&names(5), 3, BasisLimits::default()).unwrap();
-    let Some(mut eng) = engine_or_skip(&f, &b, GpuOptions::default()) else { return };
+    let Some(mut eng) = engine_or_skip(&f, &b, GpuOptions::default()) else {
+        return;
+    };
     let idx = [0, 3, b.len() - 1, 17];
     let cols = eng.columns(&idx).unwrap();
     assert_eq!(cols.len(), idx.len());
@@ -189,12 +245,21 @@ fn columns_are_exact_and_bad_input_is_refused() {
             assert_eq!(x, b.code(j).eval(&row(&f, i)));
         }
     }
-    assert!(matches!(eng.columns(&[b.len()]), Err(Error::InvalidParameter { .. })));
+    assert!(matches!(
+        eng.columns(&[b.len()]),
+        Err(Error::InvalidParameter { .. })
+    ));
     let mut out = vec![0.0; b.len()];
-    assert!(matches!(eng.sweep(&[1.0; 299], &mut out), Err(Error::InvalidParameter { .. })));
+    assert!(matches!(
+        eng.sweep(&[1.0; 299], &mut out),
+        Err(Error::InvalidParameter { .. })
+    ));
     let mut bad = vec![1.0; 300];
     bad[7] = f64::NAN;
-    assert!(matches!(eng.sweep(&bad, &mut out), Err(Error::InvalidData(_))));
+    assert!(matches!(
+        eng.sweep(&bad, &mut out),
+        Err(Error::InvalidData(_))
+    ));
     assert!(eng.column_stats(Some(&[0.0; 300])).is_err());
     assert!(eng.column_stats(Some(&vec![-1.0; 300])).is_err());
     // The engine still works after refusing bad input.
@@ -207,8 +272,19 @@ fn memory_budget_is_checked_before_allocating() {
     let mut rng = Rng(0x5EED_0030);
     let f = features(&mut rng, 2000, 6, -1.0, 1.0);
     let b = Basis::new(&names(6), 4, BasisLimits::default()).unwrap();
-    match GpuEngine::new(&f, &b, GpuOptions { memory_budget_bytes: 10_000, ..GpuOptions::default() }) {
-        Err(Error::TooLarge { needed_mib, budget_mib, .. }) => assert!(needed_mib > budget_mib),
+    match GpuEngine::new(
+        &f,
+        &b,
+        GpuOptions {
+            memory_budget_bytes: 10_000,
+            ..GpuOptions::default()
+        },
+    ) {
+        Err(Error::TooLarge {
+            needed_mib,
+            budget_mib,
+            ..
+        }) => assert!(needed_mib > budget_mib),
         Err(Error::NoGpu(msg)) => {
             if std::env::var("CTSID_REQUIRE_GPU").as_deref() == Ok("1") {
                 panic!("CTSID_REQUIRE_GPU=1 but there is no GPU adapter: {msg}");

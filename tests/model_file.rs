@@ -31,9 +31,16 @@ fn err_of(text: &str) -> String {
 #[test]
 fn round_trip_is_exact_and_keeps_extra_fields() {
     let mut m = siso();
-    m.extra.insert("training".into(), serde_json::json!({"p50": 0.01, "runs": [0, 1, 2]}));
-    m.outputs[0].extra.insert("selected_order".into(), serde_json::json!(3));
-    m.outputs[0].terms[1].extra.insert("stderr".into(), serde_json::json!(1.5));
+    m.extra.insert(
+        "training".into(),
+        serde_json::json!({"p50": 0.01, "runs": [0, 1, 2]}),
+    );
+    m.outputs[0]
+        .extra
+        .insert("selected_order".into(), serde_json::json!(3));
+    m.outputs[0].terms[1]
+        .extra
+        .insert("stderr".into(), serde_json::json!(1.5));
     let dir = std::env::temp_dir().join(format!("ctsid-model-rt-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("m.json");
@@ -41,7 +48,10 @@ fn round_trip_is_exact_and_keeps_extra_fields() {
     let back = Model::read(path.to_str().unwrap()).unwrap();
     assert_eq!(back, m);
     // Coefficients survive bit for bit.
-    assert_eq!(back.outputs[0].terms[3].coefficient.to_bits(), (-675.7f64).to_bits());
+    assert_eq!(
+        back.outputs[0].terms[3].coefficient.to_bits(),
+        (-675.7f64).to_bits()
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
@@ -82,7 +92,10 @@ fn mimo_layout_and_cross_derivatives() {
       "outputs":[{"name":"a","order":2,"terms":[{"exponents":{"b_d2":1,"a":1},"coefficient":2}]},
                  {"name":"b","order":3,"terms":[{"exponents":{"a_d1":1,"u2":2},"coefficient":-1}]}]}"#;
     let m = Model::from_json_str(text, "m").unwrap();
-    assert_eq!(m.variable_names(), ["a", "a_d1", "b", "b_d1", "b_d2", "u1", "u2"]);
+    assert_eq!(
+        m.variable_names(),
+        ["a", "a_d1", "b", "b_d1", "b_d2", "u1", "u2"]
+    );
     let c = m.compile().unwrap();
     let x = [1.0, 2.0, 3.0, 4.0, 5.0];
     let u = [7.0, 3.0];
@@ -102,7 +115,10 @@ fn mimo_layout_and_cross_derivatives() {
         c.rhs(&xp, &u, &mut fp);
         c.rhs(&xm, &u, &mut fm);
         for r in 0..5 {
-            assert!((jx[r * 5 + k] - (fp[r] - fm[r]) / 2e-6).abs() < 1e-6, "J[{r}][{k}]");
+            assert!(
+                (jx[r * 5 + k] - (fp[r] - fm[r]) / 2e-6).abs() < 1e-6,
+                "J[{r}][{k}]"
+            );
         }
     }
     assert_eq!(ju[4 * 2 + 1], -2.0 * 2.0 * 3.0); // d(-a_d1*u2^2)/du2
@@ -117,8 +133,13 @@ fn unparsable_json_names_line_and_column() {
 
 #[test]
 fn unknown_format_is_refused() {
-    let e = err_of(r#"{"format":"ctsid-model/9","inputs":[],"outputs":[{"name":"y","order":1,"terms":[]}]}"#);
-    assert!(e.contains("unknown format") && e.contains("ctsid-model/9"), "{e}");
+    let e = err_of(
+        r#"{"format":"ctsid-model/9","inputs":[],"outputs":[{"name":"y","order":1,"terms":[]}]}"#,
+    );
+    assert!(
+        e.contains("unknown format") && e.contains("ctsid-model/9"),
+        "{e}"
+    );
     let e = err_of(r#"{"inputs":[],"outputs":[{"name":"y","order":1,"terms":[]}]}"#);
     assert!(e.contains("format"), "{e}");
 }
@@ -129,7 +150,10 @@ fn unknown_variable_names_the_term_and_name() {
         r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":2,"terms":[
         {"exponents":{"y":1},"coefficient":1},{"exponents":{"v":1},"coefficient":1}]}]}"#,
     );
-    assert!(e.contains("term 2") && e.contains("'v'") && e.contains("unknown variable"), "{e}");
+    assert!(
+        e.contains("term 2") && e.contains("'v'") && e.contains("unknown variable"),
+        "{e}"
+    );
 }
 
 #[test]
@@ -138,7 +162,13 @@ fn derivative_at_or_above_the_order_is_refused() {
         r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":3,"terms":[
         {"exponents":{"y_d3":1},"coefficient":1}]}]}"#,
     );
-    assert!(e.contains("term 1") && e.contains("y_d3") && e.contains("order 3") && e.contains("y..y_d2"), "{e}");
+    assert!(
+        e.contains("term 1")
+            && e.contains("y_d3")
+            && e.contains("order 3")
+            && e.contains("y..y_d2"),
+        "{e}"
+    );
     // MIMO: b's derivatives only up to b's own order - 1, also in a's equation.
     let e = err_of(
         r#"{"format":"ctsid-model/1","inputs":[],"outputs":[{"name":"a","order":3,"terms":[
@@ -154,7 +184,10 @@ fn bad_exponents_and_coefficients_are_refused() {
             r#"{{"format":"ctsid-model/1","inputs":["u"],"outputs":[{{"name":"y","order":1,"terms":[
             {{"exponents":{{"u":{bad}}},"coefficient":1}}]}}]}}"#
         ));
-        assert!(e.contains("term 1") && e.contains("'u'") && e.contains("non-negative integers"), "{bad}: {e}");
+        assert!(
+            e.contains("term 1") && e.contains("'u'") && e.contains("non-negative integers"),
+            "{bad}: {e}"
+        );
     }
     // Non-finite coefficients cannot be written in JSON; they are refused when built in code.
     let mut m = siso();
@@ -169,7 +202,9 @@ fn bad_exponents_and_coefficients_are_refused() {
 
 #[test]
 fn name_clashes_and_degree_are_checked() {
-    let e = err_of(r#"{"format":"ctsid-model/1","inputs":["y"],"outputs":[{"name":"y","order":1,"terms":[]}]}"#);
+    let e = err_of(
+        r#"{"format":"ctsid-model/1","inputs":["y"],"outputs":[{"name":"y","order":1,"terms":[]}]}"#,
+    );
     assert!(e.contains("'y'") && e.contains("twice"), "{e}");
     let e = err_of(
         r#"{"format":"ctsid-model/1","degree":1,"inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"u":2},"coefficient":1}]}]}"#,

@@ -24,11 +24,19 @@ fn throttle_at_zero_patm_is_the_printed_linear_equation() {
     // y''' from the physical state equals the printed equation at arbitrary states and inputs.
     let mut rng = Rng::new(3);
     for _ in 0..100 {
-        let x = [rng.uniform_in(-30.0, 30.0), rng.uniform_in(-100.0, 100.0), rng.uniform_in(-50.0, 50.0)];
+        let x = [
+            rng.uniform_in(-30.0, 30.0),
+            rng.uniform_in(-100.0, 100.0),
+            rng.uniform_in(-50.0, 50.0),
+        ];
         let u = rng.uniform_in(-5.0, 5.0);
         let d = th.derivatives(&x, u, 0.0);
         let lin = 37664.0 - 23978.0 * d[0] - 32032.0 * d[1] - 675.7 * d[2] + 1.222e6 * u;
-        assert!((d[3] - lin).abs() <= 1e-9 * lin.abs().max(1e4), "{} vs {lin}", d[3]);
+        assert!(
+            (d[3] - lin).abs() <= 1e-9 * lin.abs().max(1e4),
+            "{} vs {lin}",
+            d[3]
+        );
         // The true model file evaluates to the same.
         let m = th.true_model(Some(0.003)).unwrap().compile().unwrap();
         let z = [d[0], d[1], d[2], u];
@@ -43,10 +51,14 @@ fn throttle_eigenvalues_and_dc_gain() {
     let mut j = [0.0; 9];
     th.jacobian(&[1.0, 0.0, 0.0], &[0.0], &mut j);
     let jm = DMatrix::from_row_slice(3, 3, &j);
-    let mut ev: Vec<f64> = jm.complex_eigenvalues().iter().map(|z| {
-        assert!(z.im.abs() < 1e-9, "complex eigenvalue {z}");
-        z.re
-    }).collect();
+    let mut ev: Vec<f64> = jm
+        .complex_eigenvalues()
+        .iter()
+        .map(|z| {
+            assert!(z.im.abs() < 1e-9, "complex eigenvalue {z}");
+            z.re
+        })
+        .collect();
     ev.sort_by(|a, b| b.partial_cmp(a).unwrap());
     for (got, want) in ev.iter().zip([-0.76, -50.5, -624.5]) {
         assert!((got - want).abs() < 0.01 * want.abs(), "{ev:?}");
@@ -55,9 +67,20 @@ fn throttle_eigenvalues_and_dc_gain() {
     // simulating a constant input for 40 slow time constants.
     let u = 0.01;
     let x0 = th.rest_state();
-    let tr = simulate(&th, &ConstantInput(vec![u]), &x0, &[0.0, 20.0, 50.0], &SimOptions::default()).unwrap();
+    let tr = simulate(
+        &th,
+        &ConstantInput(vec![u]),
+        &x0,
+        &[0.0, 20.0, 50.0],
+        &SimOptions::default(),
+    )
+    .unwrap();
     let want = th.p.y0 + 1.222e6 / 23978.0 * u;
-    assert!((tr.state(2)[0] - want).abs() < 1e-8, "{} vs {want}", tr.state(2)[0]);
+    assert!(
+        (tr.state(2)[0] - want).abs() < 1e-8,
+        "{} vs {want}",
+        tr.state(2)[0]
+    );
     assert!((1.222e6f64 / 23978.0 - 50.96).abs() < 0.01);
 }
 
@@ -70,16 +93,28 @@ fn check_derivatives(plant: &Plant, tau: f64, n: usize, tol: f64) {
         r.excitation.breakpoints(0.0, r.t[n - 1], &mut corners);
         for (i, d) in r.derivatives.iter().enumerate() {
             for k in 0..d.len() - 1 {
-                let scale = d[k + 1].iter().map(|v| v.abs()).fold(0.0, f64::max).max(1e-12);
+                let scale = d[k + 1]
+                    .iter()
+                    .map(|v| v.abs())
+                    .fold(0.0, f64::max)
+                    .max(1e-12);
                 let mut worst: f64 = 0.0;
                 for s in 1..n - 1 {
-                    if corners.iter().any(|&c| c > r.t[s - 1] - 1e-12 && c < r.t[s + 1] + 1e-12) {
+                    if corners
+                        .iter()
+                        .any(|&c| c > r.t[s - 1] - 1e-12 && c < r.t[s + 1] + 1e-12)
+                    {
                         continue;
                     }
                     let fd = (d[k][s + 1] - d[k][s - 1]) / (2.0 * tau);
                     worst = worst.max((fd - d[k + 1][s]).abs() / scale);
                 }
-                assert!(worst < tol, "{} output {i} derivative {}: relative error {worst:e}", plant.name, k + 1);
+                assert!(
+                    worst < tol,
+                    "{} output {i} derivative {}: relative error {worst:e}",
+                    plant.name,
+                    k + 1
+                );
             }
         }
     }
@@ -87,9 +122,19 @@ fn check_derivatives(plant: &Plant, tau: f64, n: usize, tol: f64) {
 
 #[test]
 fn throttle_exact_derivatives_agree_with_differencing() {
-    check_derivatives(&Plant::throttle(ThrottlePreset::Paper { patm: 0.0 }), 2e-6, 3000, 1e-4);
+    check_derivatives(
+        &Plant::throttle(ThrottlePreset::Paper { patm: 0.0 }),
+        2e-6,
+        3000,
+        1e-4,
+    );
     // The nonlinear aerodynamic term's derivatives too.
-    check_derivatives(&Plant::throttle(ThrottlePreset::Paper { patm: 101_325.0 }), 2e-6, 3000, 1e-4);
+    check_derivatives(
+        &Plant::throttle(ThrottlePreset::Paper { patm: 101_325.0 }),
+        2e-6,
+        3000,
+        1e-4,
+    );
 }
 
 #[test]
@@ -106,7 +151,10 @@ fn excitation_corners_are_exact_and_complete() {
         let mut c = Vec::new();
         e.corners(0.0, 3.0, &mut c);
         for &tc in &c {
-            assert!((e.raw(tc).0.abs() - cfg.u_bar).abs() < 1e-9, "corner at {tc}");
+            assert!(
+                (e.raw(tc).0.abs() - cfg.u_bar).abs() < 1e-9,
+                "corner at {tc}"
+            );
         }
         // Brute-force count of band crossings on a grid 100 times finer than the scan.
         let n = 300_000;
@@ -156,7 +204,13 @@ fn noise_has_the_paper_level() {
     for r in &runs {
         let abs: Vec<f64> = r.y_true[0].iter().map(|v| v.abs()).collect();
         let level = 0.03 * noise::percentile(&abs, 99.0);
-        let sd = (r.y[0].iter().zip(&r.y_true[0]).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / 1000.0).sqrt();
+        let sd = (r.y[0]
+            .iter()
+            .zip(&r.y_true[0])
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            / 1000.0)
+            .sqrt();
         assert!((sd / level - 1.0).abs() < 0.1, "{sd} vs {level}");
     }
     let clean = dataset(&plant, 1, 100, 0.003, 0.0, 1).unwrap();
@@ -169,7 +223,12 @@ fn paper_throttle_swings_tens_of_radians() {
     let runs = dataset(&plant, 10, 1000, 0.003, 0.0, 2).unwrap();
     let swing = runs
         .iter()
-        .map(|r| r.y_true[0].iter().map(|y| (y - std::f64::consts::FRAC_PI_2).abs()).fold(0.0, f64::max))
+        .map(|r| {
+            r.y_true[0]
+                .iter()
+                .map(|y| (y - std::f64::consts::FRAC_PI_2).abs())
+                .fold(0.0, f64::max)
+        })
         .fold(0.0, f64::max);
     assert!(swing > 10.0 && swing < 500.0, "largest swing {swing} rad");
 }
@@ -189,7 +248,10 @@ fn physical_preset_keeps_the_angle_in_range() {
             hi = hi.max(y);
         }
     }
-    assert!(lo >= 0.0 && hi <= std::f64::consts::FRAC_PI_2, "angle in [{lo}, {hi}]");
+    assert!(
+        lo >= 0.0 && hi <= std::f64::consts::FRAC_PI_2,
+        "angle in [{lo}, {hi}]"
+    );
     // And the excitation does move it substantially.
     assert!(hi - lo > 0.3, "angle range [{lo}, {hi}]");
 }
@@ -213,7 +275,10 @@ fn mimo_plant_is_stable_and_of_the_paper_size() {
         for r in &runs {
             for k in 0..1000 {
                 peak = peak.max(r.y_true[i][k].abs());
-                let mut z: Vec<f64> = (0..3).flat_map(|j| (0..3).map(move |d| (j, d))).map(|(j, d)| r.derivatives[j][d][k]).collect();
+                let mut z: Vec<f64> = (0..3)
+                    .flat_map(|j| (0..3).map(move |d| (j, d)))
+                    .map(|(j, d)| r.derivatives[j][d][k])
+                    .collect();
                 z.extend([r.u[0][k], r.u[1][k]]);
                 for (ti, t) in o.terms.iter().enumerate() {
                     let v = t.exponents.iter().fold(t.coefficient, |acc, (n, &e)| {
@@ -229,7 +294,12 @@ fn mimo_plant_is_stable_and_of_the_paper_size() {
         for (t, c) in o.terms.iter().zip(&contrib) {
             let share = (c / count).sqrt() / rms_total;
             // Every true term, coupling included, carries a visible share of the label.
-            assert!(share > 0.02, "{}: term {} carries only {share:.4} of the RMS of the label", o.name, t.monomial());
+            assert!(
+                share > 0.02,
+                "{}: term {} carries only {share:.4} of the RMS of the label",
+                o.name,
+                t.monomial()
+            );
         }
     }
     assert!(peak < 6.0, "outputs reach {peak}");
@@ -247,16 +317,55 @@ fn step_control_keeps_accuracy_on_the_stiff_throttle() {
     let ex = plant.excitation_for(3, 0);
     let t: Vec<f64> = (0..1000).map(|k| k as f64 * 0.003).collect();
     let x0 = th.rest_state();
-    let tight = simulate(&th, &ex, &x0, &t, &SimOptions { rtol: 1e-12, atol: 1e-12, ..Default::default() }).unwrap();
-    let loose = simulate(&th, &ex, &x0, &t, &SimOptions { rtol: 1e-6, atol: 1e-6, ..Default::default() }).unwrap();
+    let tight = simulate(
+        &th,
+        &ex,
+        &x0,
+        &t,
+        &SimOptions {
+            rtol: 1e-12,
+            atol: 1e-12,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let loose = simulate(
+        &th,
+        &ex,
+        &x0,
+        &t,
+        &SimOptions {
+            rtol: 1e-6,
+            atol: 1e-6,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let model = th.true_model(None).unwrap().compile().unwrap();
     let xc = [x0[0], 0.0, 0.0];
     let comp = simulate(&model, &ex, &xc, &t, &SimOptions::default()).unwrap();
     let y_tight = tight.series(0);
-    let range = y_tight.iter().map(|y| (y - x0[0]).abs()).fold(0.0, f64::max);
-    let err = |a: &[f64]| a.iter().zip(&y_tight).map(|(p, q)| (p - q).abs()).fold(0.0, f64::max) / range;
-    assert!(err(&loose.series(0)) < 1e-5, "loose: {:e}", err(&loose.series(0)));
-    assert!(err(&comp.series(0)) < 1e-7, "companion: {:e}", err(&comp.series(0)));
+    let range = y_tight
+        .iter()
+        .map(|y| (y - x0[0]).abs())
+        .fold(0.0, f64::max);
+    let err = |a: &[f64]| {
+        a.iter()
+            .zip(&y_tight)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0, f64::max)
+            / range
+    };
+    assert!(
+        err(&loose.series(0)) < 1e-5,
+        "loose: {:e}",
+        err(&loose.series(0))
+    );
+    assert!(
+        err(&comp.series(0)) < 1e-7,
+        "companion: {:e}",
+        err(&comp.series(0))
+    );
     // The stiffness does not force tiny steps: far fewer than an explicit method's 2/624.5 s.
     assert!(loose.steps < 3000, "{} steps", loose.steps);
 }

@@ -33,13 +33,16 @@ struct Problem {
 fn problem(seed: u64, nz: usize, d: usize, n: usize, n_true: usize, noise: f64) -> Problem {
     let mut rng = Rng(seed);
     let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
-    let cols: Vec<Vec<f64>> = (0..nz).map(|_| (0..n).map(|_| rng.uniform()).collect()).collect();
+    let cols: Vec<Vec<f64>> = (0..nz)
+        .map(|_| (0..n).map(|_| rng.uniform()).collect())
+        .collect();
     let basis = ctsid::basis::Basis::new(&names, d, Default::default()).unwrap();
     let mut truth: Vec<(usize, f64)> = Vec::new();
     while truth.len() < n_true {
         let j = (rng.next() % basis.len() as u64) as usize;
         if truth.iter().all(|t| t.0 != j) {
-            let c = (0.5 + 1.5 * (rng.uniform() + 1.0) / 2.0) * if rng.uniform() < 0.0 { -1.0 } else { 1.0 };
+            let c = (0.5 + 1.5 * (rng.uniform() + 1.0) / 2.0)
+                * if rng.uniform() < 0.0 { -1.0 } else { 1.0 };
             truth.push((j, c));
         }
     }
@@ -55,7 +58,11 @@ fn problem(seed: u64, nz: usize, d: usize, n: usize, n_true: usize, noise: f64) 
     for l in label.iter_mut() {
         *l += noise * rms * rng.normal();
     }
-    Problem { features: Features::new(names, cols), label, truth }
+    Problem {
+        features: Features::new(names, cols),
+        label,
+        truth,
+    }
 }
 
 fn support(m: &Model) -> Vec<usize> {
@@ -65,11 +72,28 @@ fn support(m: &Model) -> Vec<usize> {
 #[test]
 fn recovers_ten_terms_among_12376_without_noise() {
     let p = problem(11, 11, 6, 25_000, 10, 0.0);
-    let model = Regression::builder().degree(6).max_terms(40).build().unwrap().fit(&p.features, &p.label, "y", None).unwrap();
+    let model = Regression::builder()
+        .degree(6)
+        .max_terms(40)
+        .build()
+        .unwrap()
+        .fit(&p.features, &p.label, "y", None)
+        .unwrap();
     let want: Vec<usize> = p.truth.iter().map(|t| t.0).collect();
-    assert_eq!(support(&model), want, "{}\n{:?}", model.equation(), model.diagnostics);
+    assert_eq!(
+        support(&model),
+        want,
+        "{}\n{:?}",
+        model.equation(),
+        model.diagnostics
+    );
     for (t, (_, c)) in model.terms.iter().zip(&p.truth) {
-        assert!((t.coefficient - c).abs() <= 1e-6 * c.abs(), "{}: {} vs {c}", t.name, t.coefficient);
+        assert!(
+            (t.coefficient - c).abs() <= 1e-6 * c.abs(),
+            "{}: {} vs {c}",
+            t.name,
+            t.coefficient
+        );
     }
     assert_eq!(model.diagnostics.n_candidates, 12_376);
 }
@@ -78,11 +102,28 @@ fn recovers_ten_terms_among_12376_without_noise() {
 fn recovers_the_support_with_one_percent_noise() {
     for seed in [5, 6] {
         let p = problem(seed, 11, 6, 25_000, 10, 0.01);
-        let model = Regression::builder().degree(6).max_terms(40).build().unwrap().fit(&p.features, &p.label, "y", None).unwrap();
+        let model = Regression::builder()
+            .degree(6)
+            .max_terms(40)
+            .build()
+            .unwrap()
+            .fit(&p.features, &p.label, "y", None)
+            .unwrap();
         let want: Vec<usize> = p.truth.iter().map(|t| t.0).collect();
-        assert_eq!(support(&model), want, "seed {seed}: {}\n{:?}", model.equation(), model.diagnostics);
+        assert_eq!(
+            support(&model),
+            want,
+            "seed {seed}: {}\n{:?}",
+            model.equation(),
+            model.diagnostics
+        );
         for (t, (_, c)) in model.terms.iter().zip(&p.truth) {
-            assert!((t.coefficient - c).abs() <= 0.05 * c.abs(), "{}: {} vs {c}", t.name, t.coefficient);
+            assert!(
+                (t.coefficient - c).abs() <= 0.05 * c.abs(),
+                "{}: {} vs {c}",
+                t.name,
+                t.coefficient
+            );
         }
     }
 }
@@ -90,23 +131,52 @@ fn recovers_the_support_with_one_percent_noise() {
 #[test]
 fn plain_lars_recovers_a_small_problem_too() {
     let p = problem(3, 4, 3, 2000, 4, 0.0);
-    let model = Regression::builder().degree(3).method(Method::Lars).build().unwrap().fit(&p.features, &p.label, "y", None).unwrap();
-    assert_eq!(support(&model), p.truth.iter().map(|t| t.0).collect::<Vec<_>>(), "{}", model.equation());
+    let model = Regression::builder()
+        .degree(3)
+        .method(Method::Lars)
+        .build()
+        .unwrap()
+        .fit(&p.features, &p.label, "y", None)
+        .unwrap();
+    assert_eq!(
+        support(&model),
+        p.truth.iter().map(|t| t.0).collect::<Vec<_>>(),
+        "{}",
+        model.equation()
+    );
 }
 
 #[test]
 fn relevance_threshold_stops_the_path() {
     // Noise keeps the path going after the true terms, with small gains per step.
     let p = problem(3, 4, 3, 2000, 4, 0.05);
-    let reg = |eps: f64| Regression::builder().degree(3).method(Method::Lars).epsilon(eps).build().unwrap();
+    let reg = |eps: f64| {
+        Regression::builder()
+            .degree(3)
+            .method(Method::Lars)
+            .epsilon(eps)
+            .build()
+            .unwrap()
+    };
     let full = reg(0.0).fit(&p.features, &p.label, "y", None).unwrap();
     let short = reg(0.05).fit(&p.features, &p.label, "y", None).unwrap();
-    assert_eq!(short.diagnostics.stop, ctsid::regression::StopReason::Relevance);
-    assert!(short.diagnostics.path_steps < full.diagnostics.path_steps, "{} vs {}", short.diagnostics.path_steps, full.diagnostics.path_steps);
+    assert_eq!(
+        short.diagnostics.stop,
+        ctsid::regression::StopReason::Relevance
+    );
+    assert!(
+        short.diagnostics.path_steps < full.diagnostics.path_steps,
+        "{} vs {}",
+        short.diagnostics.path_steps,
+        full.diagnostics.path_steps
+    );
     // Each step kept before the stop lowered the relative residual by at least epsilon.
     let steps = &short.path;
     for k in 1..steps.len() - 1 {
-        assert!(steps[k - 1].rel_residual - steps[k].rel_residual >= 0.05, "step {k}");
+        assert!(
+            steps[k - 1].rel_residual - steps[k].rel_residual >= 0.05,
+            "step {k}"
+        );
     }
 }
 
@@ -119,20 +189,42 @@ fn duplicated_feature_is_skipped_without_nan() {
         let a: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
         let a2: Vec<f64> = a.iter().map(|x| x + offset * rng.uniform()).collect();
         let b: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
-        let y: Vec<f64> = (0..n).map(|i| 1.5 * a[i] - 2.0 * a[i] * b[i] + 0.3 + 0.05 * rng.normal()).collect();
+        let y: Vec<f64> = (0..n)
+            .map(|i| 1.5 * a[i] - 2.0 * a[i] * b[i] + 0.3 + 0.05 * rng.normal())
+            .collect();
         let f = Features::new(vec!["a".into(), "a2".into(), "b".into()], vec![a, a2, b]);
         for method in [Method::Lars, Method::LassoLars] {
-            let m = Regression::builder().degree(2).method(method).max_terms(9).build().unwrap().fit(&f, &y, "y", None).unwrap();
+            let m = Regression::builder()
+                .degree(2)
+                .method(method)
+                .max_terms(9)
+                .build()
+                .unwrap()
+                .fit(&f, &y, "y", None)
+                .unwrap();
             if offset > 0.0 {
                 // The noise keeps the path going until every distinct monomial is in; then the
                 // 4 near-duplicates (a2, a*a2, a2^2, a2*b) are tried and refused.
-                assert_eq!(m.diagnostics.skipped_collinear.len(), 4, "{method:?}: {:?}", m.diagnostics);
+                assert_eq!(
+                    m.diagnostics.skipped_collinear.len(),
+                    4,
+                    "{method:?}: {:?}",
+                    m.diagnostics
+                );
             }
-            assert!(m.path.iter().all(|p| p.coefficients.iter().all(|c| c.is_finite()) && p.alpha.is_finite()));
+            assert!(m
+                .path
+                .iter()
+                .all(|p| p.coefficients.iter().all(|c| c.is_finite()) && p.alpha.is_finite()));
             // a and a2 are interchangeable.
             let names: Vec<String> = m.terms.iter().map(|t| t.name.replace("a2", "a")).collect();
             assert!(m.terms.iter().all(|t| t.coefficient.is_finite()));
-            assert_eq!(names, ["1", "a", "a*b"], "{method:?}, offset {offset}: {}", m.equation());
+            assert_eq!(
+                names,
+                ["1", "a", "a*b"],
+                "{method:?}, offset {offset}: {}",
+                m.equation()
+            );
         }
     }
 }
@@ -143,15 +235,30 @@ fn zero_and_constant_features_are_excluded() {
     let n = 300;
     let a: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
     let y: Vec<f64> = a.iter().map(|x| 2.0 * x * x - 1.0).collect();
-    let f = Features::new(vec!["a".into(), "zero".into(), "three".into()], vec![a, vec![0.0; n], vec![3.0; n]]);
-    let m = Regression::builder().degree(2).build().unwrap().fit(&f, &y, "y", None).unwrap();
+    let f = Features::new(
+        vec!["a".into(), "zero".into(), "three".into()],
+        vec![a, vec![0.0; n], vec![3.0; n]],
+    );
+    let m = Regression::builder()
+        .degree(2)
+        .build()
+        .unwrap()
+        .fit(&f, &y, "y", None)
+        .unwrap();
     // Constant candidates: 1, zero, three, zero^2, zero*three, three^2, a*zero.
     assert_eq!(m.diagnostics.constant_candidates, 7, "{:?}", m.diagnostics);
     let names: Vec<&str> = m.terms.iter().map(|t| t.name.as_str()).collect();
     assert_eq!(names, ["1", "a^2"], "{}", m.equation());
-    assert!((m.terms[0].coefficient + 1.0).abs() < 1e-9 && (m.terms[1].coefficient - 2.0).abs() < 1e-9);
+    assert!(
+        (m.terms[0].coefficient + 1.0).abs() < 1e-9 && (m.terms[1].coefficient - 2.0).abs() < 1e-9
+    );
     // A constant label: nothing to fit but the constant.
-    let m = Regression::builder().degree(2).build().unwrap().fit(&f, &vec![4.0; n], "c", None).unwrap();
+    let m = Regression::builder()
+        .degree(2)
+        .build()
+        .unwrap()
+        .fit(&f, &vec![4.0; n], "c", None)
+        .unwrap();
     assert_eq!(m.equation(), "c = 4");
 }
 
@@ -166,20 +273,40 @@ fn weights_exclude_bad_samples() {
     }
     let reg = Regression::builder().degree(3).build().unwrap();
     let m = reg.fit(&p.features, &y, "y", Some(&w)).unwrap();
-    assert_eq!(support(&m), p.truth.iter().map(|t| t.0).collect::<Vec<_>>(), "{}", m.equation());
+    assert_eq!(
+        support(&m),
+        p.truth.iter().map(|t| t.0).collect::<Vec<_>>(),
+        "{}",
+        m.equation()
+    );
     let unweighted = reg.fit(&p.features, &y, "y", None).unwrap();
-    assert_ne!(support(&unweighted), support(&m), "the corrupted samples should matter without weights");
+    assert_ne!(
+        support(&unweighted),
+        support(&m),
+        "the corrupted samples should matter without weights"
+    );
     assert!(reg.fit(&p.features, &y, "y", Some(&w[1..])).is_err());
     let mut neg = w.clone();
     neg[3] = -1.0;
-    assert!(matches!(reg.fit(&p.features, &y, "y", Some(&neg)), Err(Error::InvalidParameter { .. })));
+    assert!(matches!(
+        reg.fit(&p.features, &y, "y", Some(&neg)),
+        Err(Error::InvalidParameter { .. })
+    ));
 }
 
 #[test]
 fn model_json_and_equation() {
     let p = problem(8, 2, 2, 400, 3, 0.0);
-    let f = Features::new(vec!["u".into(), "y".into()], vec![p.features.column(0).to_vec(), p.features.column(1).to_vec()]);
-    let m = Regression::builder().degree(2).build().unwrap().fit(&f, &p.label, "y_d1", None).unwrap();
+    let f = Features::new(
+        vec!["u".into(), "y".into()],
+        vec![p.features.column(0).to_vec(), p.features.column(1).to_vec()],
+    );
+    let m = Regression::builder()
+        .degree(2)
+        .build()
+        .unwrap()
+        .fit(&f, &p.label, "y_d1", None)
+        .unwrap();
     let json = serde_json::to_value(&m).unwrap();
     assert_eq!(json["label"], "y_d1");
     let terms = json["terms"].as_array().unwrap();
@@ -188,7 +315,13 @@ fn model_json_and_equation() {
         assert!((t["coefficient"].as_f64().unwrap() - c).abs() < 1e-9);
         let e = t["exponents"].as_object().unwrap();
         let sum: u64 = e.values().map(|v| v.as_u64().unwrap()).sum();
-        assert_eq!(sum as usize, ctsid::basis::Basis::new(&f.names, 2, Default::default()).unwrap().code(*j).degree());
+        assert_eq!(
+            sum as usize,
+            ctsid::basis::Basis::new(&f.names, 2, Default::default())
+                .unwrap()
+                .code(*j)
+                .degree()
+        );
     }
     let back: Model = serde_json::from_value(json).unwrap();
     assert_eq!(back.terms, m.terms);
@@ -196,14 +329,20 @@ fn model_json_and_equation() {
     assert!(eq.starts_with("y_d1 = "), "{eq}");
     assert!(!eq.contains("+ -"), "{eq}");
     // A hand-written model with just label and terms parses into terms.
-    let t: Vec<ctsid::regression::Term> = serde_json::from_str(r#"[{"exponents": {"u": 1}, "coefficient": 2.5}, {"exponents": {}, "coefficient": -1}]"#).unwrap();
+    let t: Vec<ctsid::regression::Term> = serde_json::from_str(
+        r#"[{"exponents": {"u": 1}, "coefficient": 2.5}, {"exponents": {}, "coefficient": -1}]"#,
+    )
+    .unwrap();
     assert_eq!(t[1].exponents.len(), 0);
 }
 
 #[test]
 fn bad_settings_are_refused_before_fitting() {
     let b = || Regression::builder();
-    assert!(matches!(b().degree(13).build(), Err(Error::InvalidParameter { .. })));
+    assert!(matches!(
+        b().degree(13).build(),
+        Err(Error::InvalidParameter { .. })
+    ));
     assert!(b().max_terms(0).build().is_err());
     assert!(b().max_steps(0).build().is_err());
     assert!(b().alpha_min(-1.0).build().is_err());
@@ -215,12 +354,38 @@ fn bad_settings_are_refused_before_fitting() {
     assert!(b().degree(6).max_terms(10).build().is_ok());
     // Data errors are typed too.
     let f = Features::new(vec!["a".into()], vec![vec![0.0, 1.0, f64::NAN]]);
-    assert!(b().build().unwrap().fit(&f, &[1.0, 2.0, 3.0], "y", None).is_err());
+    assert!(b()
+        .build()
+        .unwrap()
+        .fit(&f, &[1.0, 2.0, 3.0], "y", None)
+        .is_err());
     let f = Features::new(vec!["a".into()], vec![vec![0.0, 1.0, 2.0]]);
-    assert!(b().build().unwrap().fit(&f, &[1.0, 2.0], "y", None).is_err());
-    assert!(b().build().unwrap().fit(&f, &[1.0, f64::INFINITY, 2.0], "y", None).is_err());
+    assert!(b()
+        .build()
+        .unwrap()
+        .fit(&f, &[1.0, 2.0], "y", None)
+        .is_err());
+    assert!(b()
+        .build()
+        .unwrap()
+        .fit(&f, &[1.0, f64::INFINITY, 2.0], "y", None)
+        .is_err());
     let too_big = b().degree(12).max_candidates(1000).build().unwrap();
-    let f = Features::new((0..5).map(|k| format!("v{k}")).collect(), vec![vec![0.0; 3]; 5]);
-    assert!(matches!(too_big.fit(&f, &[0.0; 3], "y", None), Err(Error::TooLarge { .. })));
-    assert!(matches!(b().engine(ctsid::regression::EngineChoice::Gpu).build().unwrap().fit(&f, &[0.0; 3], "y", None), Err(Error::Gpu(_))));
+    let f = Features::new(
+        (0..5).map(|k| format!("v{k}")).collect(),
+        vec![vec![0.0; 3]; 5],
+    );
+    assert!(matches!(
+        too_big.fit(&f, &[0.0; 3], "y", None),
+        Err(Error::TooLarge { .. })
+    ));
+    // --engine gpu never falls back silently: without any adapter it is an error.
+    let gpu = b()
+        .engine(ctsid::regression::EngineChoice::Gpu)
+        .build()
+        .unwrap()
+        .fit(&f, &[0.0; 3], "y", None);
+    if ctsid::engine::gpu::probe_adapters().is_empty() {
+        assert!(matches!(gpu, Err(Error::NoGpu(_))), "{gpu:?}");
+    }
 }

@@ -21,27 +21,69 @@ struct Fixture {
 
 fn load() -> Vec<Fixture> {
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/lars");
-    let mut files: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).filter(|p| p.extension().is_some_and(|e| e == "json")).collect();
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "json"))
+        .collect();
     files.sort();
     assert!(files.len() >= 7, "fixtures missing in {dir}");
     files
         .iter()
         .map(|p| {
             let v: Value = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
-            let mat = |k: &str| -> Vec<Vec<f64>> { v[k].as_array().unwrap().iter().map(|r| r.as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect()).collect() };
-            let vecf = |k: &str| -> Vec<f64> { v[k].as_array().unwrap().iter().map(|x| x.as_f64().unwrap()).collect() };
+            let mat = |k: &str| -> Vec<Vec<f64>> {
+                v[k].as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|r| {
+                        r.as_array()
+                            .unwrap()
+                            .iter()
+                            .map(|x| x.as_f64().unwrap())
+                            .collect()
+                    })
+                    .collect()
+            };
+            let vecf = |k: &str| -> Vec<f64> {
+                v[k].as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_f64().unwrap())
+                    .collect()
+            };
             let x = mat("X");
             let p_ = x[0].len();
             Fixture {
                 name: v["name"].as_str().unwrap().to_string(),
-                method: if v["method"] == "lar" { Method::Lars } else { Method::LassoLars },
+                method: if v["method"] == "lar" {
+                    Method::Lars
+                } else {
+                    Method::LassoLars
+                },
                 z: mat("Z"),
-                exponents: v["exponents"].as_array().unwrap().iter().map(|r| r.as_array().unwrap().iter().map(|e| e.as_u64().unwrap() as u32).collect()).collect(),
+                exponents: v["exponents"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|r| {
+                        r.as_array()
+                            .unwrap()
+                            .iter()
+                            .map(|e| e.as_u64().unwrap() as u32)
+                            .collect()
+                    })
+                    .collect(),
                 x_cols: (0..p_).map(|j| x.iter().map(|r| r[j]).collect()).collect(),
                 y: vecf("y"),
                 alphas: vecf("alphas"),
                 coefs: mat("coefs"),
-                active: v["active"].as_array().unwrap().iter().map(|x| x.as_u64().unwrap() as usize).collect(),
+                active: v["active"]
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| x.as_u64().unwrap() as usize)
+                    .collect(),
             }
         })
         .collect()
@@ -50,25 +92,59 @@ fn load() -> Vec<Fixture> {
 /// Runs the path on `engine` and compares with the fixture; `map` turns an engine candidate into a fixture column.
 fn check(f: &Fixture, engine: &mut dyn SweepEngine, map: impl Fn(usize) -> usize, what: &str) {
     let steps = f.alphas.len() - 1;
-    let opts = PathOptions { method: f.method, max_terms: 10_000, max_steps: steps, ..PathOptions::default() };
+    let opts = PathOptions {
+        method: f.method,
+        max_terms: 10_000,
+        max_steps: steps,
+        ..PathOptions::default()
+    };
     let path = lars_path(engine, &f.y, None, &opts).unwrap();
-    assert_eq!(path.breakpoints.len(), f.alphas.len(), "{} ({what}): number of breakpoints, stop {:?}", f.name, path.stop);
+    assert_eq!(
+        path.breakpoints.len(),
+        f.alphas.len(),
+        "{} ({what}): number of breakpoints, stop {:?}",
+        f.name,
+        path.stop
+    );
     let a0 = f.alphas[0];
     for (k, bp) in path.breakpoints.iter().enumerate() {
         let want = f.alphas[k];
-        assert!((bp.alpha - want).abs() <= 1e-8 * want.abs() + 1e-14 * a0, "{} ({what}): alpha {k}: {} vs {want}", f.name, bp.alpha);
+        assert!(
+            (bp.alpha - want).abs() <= 1e-8 * want.abs() + 1e-14 * a0,
+            "{} ({what}): alpha {k}: {} vs {want}",
+            f.name,
+            bp.alpha
+        );
         let mut dense = vec![0.0; f.coefs[k].len()];
         for (id, c) in bp.active.iter().zip(&bp.coefs) {
             dense[map(*id)] = *c;
         }
         let scale = f.coefs[k].iter().fold(0.0f64, |m, x| m.max(x.abs()));
         for (j, (got, want)) in dense.iter().zip(&f.coefs[k]).enumerate() {
-            assert!((got - want).abs() <= 1e-8 * scale, "{} ({what}): breakpoint {k} coef {j}: {got} vs {want}", f.name);
+            assert!(
+                (got - want).abs() <= 1e-8 * scale,
+                "{} ({what}): breakpoint {k} coef {j}: {got} vs {want}",
+                f.name
+            );
         }
     }
-    let last: Vec<usize> = path.breakpoints.last().unwrap().active.iter().map(|j| map(*j)).collect();
-    assert_eq!(last, f.active, "{} ({what}): final active set and its order", f.name);
-    assert!(path.events.iter().all(|e| !matches!(e, ctsid::regression::Event::SkippedCollinear { .. })));
+    let last: Vec<usize> = path
+        .breakpoints
+        .last()
+        .unwrap()
+        .active
+        .iter()
+        .map(|j| map(*j))
+        .collect();
+    assert_eq!(
+        last, f.active,
+        "{} ({what}): final active set and its order",
+        f.name
+    );
+    assert!(path
+        .events
+        .iter()
+        .all(|e| !matches!(e, ctsid::regression::Event::SkippedCollinear { .. })));
 }
 
 #[test]
@@ -83,19 +159,51 @@ fn sklearn_paths_on_the_given_design() {
 fn sklearn_paths_from_z_through_the_basis_and_cpu_engine() {
     for f in load() {
         let nz = f.z[0].len();
-        let degree = f.exponents.iter().map(|e| e.iter().sum::<u32>()).max().unwrap() as usize;
+        let degree = f
+            .exponents
+            .iter()
+            .map(|e| e.iter().sum::<u32>())
+            .max()
+            .unwrap() as usize;
         let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
         let basis = Basis::new(&names, degree, BasisLimits::default()).unwrap();
         // The fixture's columns are the basis without the constant, in the same order.
         assert_eq!(basis.len(), f.exponents.len() + 1, "{}", f.name);
         for (j, e) in f.exponents.iter().enumerate() {
-            assert_eq!(basis.code(j + 1), Code::from_exponents(e).unwrap(), "{}: column {j}", f.name);
+            assert_eq!(
+                basis.code(j + 1),
+                Code::from_exponents(e).unwrap(),
+                "{}: column {j}",
+                f.name
+            );
         }
-        let feats = Features::new(names.clone(), (0..nz).map(|k| f.z.iter().map(|r| r[k]).collect()).collect());
+        let feats = Features::new(
+            names.clone(),
+            (0..nz)
+                .map(|k| f.z.iter().map(|r| r[k]).collect())
+                .collect(),
+        );
         for materialize in [0, usize::MAX] {
-            let mut e = CpuEngine::new(&basis, &feats, CpuOptions { precision: Precision::F64, materialize_limit_bytes: materialize }).unwrap();
+            let mut e = CpuEngine::new(
+                &basis,
+                &feats,
+                CpuOptions {
+                    precision: Precision::F64,
+                    materialize_limit_bytes: materialize,
+                },
+            )
+            .unwrap();
             assert_eq!(e.is_materialized(), materialize > 0);
-            check(&f, &mut e, |j| j - 1, if materialize > 0 { "basis, materialised" } else { "basis, on the fly" });
+            check(
+                &f,
+                &mut e,
+                |j| j - 1,
+                if materialize > 0 {
+                    "basis, materialised"
+                } else {
+                    "basis, on the fly"
+                },
+            );
         }
     }
 }
@@ -106,14 +214,29 @@ fn exact_refreshes_do_not_change_the_path() {
     for f in load() {
         let mut e = DenseEngine::from_columns(&f.x_cols).unwrap();
         let steps = f.alphas.len() - 1;
-        let opts = PathOptions { method: f.method, max_terms: 10_000, max_steps: steps, refresh_tol: 0.0, ..PathOptions::default() };
+        let opts = PathOptions {
+            method: f.method,
+            max_terms: 10_000,
+            max_steps: steps,
+            refresh_tol: 0.0,
+            ..PathOptions::default()
+        };
         let path = lars_path(&mut e, &f.y, None, &opts).unwrap();
         assert!(path.refreshes > 0, "{}", f.name);
-        let scale = f.coefs.last().unwrap().iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let scale = f
+            .coefs
+            .last()
+            .unwrap()
+            .iter()
+            .fold(0.0f64, |m, x| m.max(x.abs()));
         let last = path.breakpoints.last().unwrap();
         assert_eq!(path.breakpoints.len(), f.alphas.len(), "{}", f.name);
         for (id, c) in last.active.iter().zip(&last.coefs) {
-            assert!((c - f.coefs.last().unwrap()[*id]).abs() <= 1e-8 * scale, "{}", f.name);
+            assert!(
+                (c - f.coefs.last().unwrap()[*id]).abs() <= 1e-8 * scale,
+                "{}",
+                f.name
+            );
         }
     }
 }
@@ -124,7 +247,13 @@ fn alpha_min_interpolates_like_scikit_learn() {
         let k = 4;
         let alpha_min = 0.5 * (f.alphas[k - 1] + f.alphas[k]);
         let mut e = DenseEngine::from_columns(&f.x_cols).unwrap();
-        let opts = PathOptions { method: f.method, max_terms: 10_000, max_steps: 10_000, alpha_min, ..PathOptions::default() };
+        let opts = PathOptions {
+            method: f.method,
+            max_terms: 10_000,
+            max_steps: 10_000,
+            alpha_min,
+            ..PathOptions::default()
+        };
         let path = lars_path(&mut e, &f.y, None, &opts).unwrap();
         assert_eq!(path.stop, ctsid::regression::StopReason::AlphaMin);
         assert_eq!(path.breakpoints.len(), k + 1, "{}", f.name);
@@ -148,20 +277,59 @@ fn f32_sweeps_keep_the_entering_order_of_well_separated_paths() {
     // The f32 engine only steers the path; on these small problems it must pick the same terms.
     for f in load().iter().filter(|f| f.name.contains("small")) {
         let nz = f.z[0].len();
-        let degree = f.exponents.iter().map(|e| e.iter().sum::<u32>()).max().unwrap() as usize;
+        let degree = f
+            .exponents
+            .iter()
+            .map(|e| e.iter().sum::<u32>())
+            .max()
+            .unwrap() as usize;
         let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
         let basis = Basis::new(&names, degree, BasisLimits::default()).unwrap();
-        let feats = Features::new(names.clone(), (0..nz).map(|k| f.z.iter().map(|r| r[k]).collect()).collect());
-        let mut e = CpuEngine::new(&basis, &feats, CpuOptions { precision: Precision::F32, materialize_limit_bytes: 0 }).unwrap();
-        let opts = PathOptions { method: f.method, max_terms: 10_000, max_steps: 8, ..PathOptions::default() };
+        let feats = Features::new(
+            names.clone(),
+            (0..nz)
+                .map(|k| f.z.iter().map(|r| r[k]).collect())
+                .collect(),
+        );
+        let mut e = CpuEngine::new(
+            &basis,
+            &feats,
+            CpuOptions {
+                precision: Precision::F32,
+                materialize_limit_bytes: 0,
+            },
+        )
+        .unwrap();
+        let opts = PathOptions {
+            method: f.method,
+            max_terms: 10_000,
+            max_steps: 8,
+            ..PathOptions::default()
+        };
         let path = lars_path(&mut e, &f.y, None, &opts).unwrap();
-        let got: Vec<usize> = path.breakpoints.last().unwrap().active.iter().map(|j| j - 1).collect();
-        let want: Vec<usize> = f.coefs[8].iter().enumerate().filter(|(_, c)| **c != 0.0).map(|(j, _)| j).collect();
+        let got: Vec<usize> = path
+            .breakpoints
+            .last()
+            .unwrap()
+            .active
+            .iter()
+            .map(|j| j - 1)
+            .collect();
+        let want: Vec<usize> = f.coefs[8]
+            .iter()
+            .enumerate()
+            .filter(|(_, c)| **c != 0.0)
+            .map(|(j, _)| j)
+            .collect();
         let mut g = got.clone();
         g.sort_unstable();
         assert_eq!(g, want, "{}", f.name);
         for (k, bp) in path.breakpoints.iter().enumerate() {
-            assert!((bp.alpha - f.alphas[k]).abs() <= 1e-4 * f.alphas[k], "{}: alpha {k}", f.name);
+            assert!(
+                (bp.alpha - f.alphas[k]).abs() <= 1e-4 * f.alphas[k],
+                "{}: alpha {k}",
+                f.name
+            );
         }
     }
 }

@@ -12,13 +12,23 @@ fn tmpdir(name: &str) -> PathBuf {
 }
 
 fn ctsid(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ctsid")).args(args).output().unwrap();
-    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
+    let out = Command::new(env!("CARGO_BIN_EXE_ctsid"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
 }
 
 /// NRMSE (%) on the `all` line for `output`.
 fn overall_nrmse(stdout: &str, output: &str) -> f64 {
-    let line = stdout.lines().find(|l| l.split_whitespace().take(2).eq(["all", output])).expect(stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.split_whitespace().take(2).eq(["all", output]))
+        .expect(stdout);
     line.split_whitespace().last().unwrap().parse().unwrap()
 }
 
@@ -27,7 +37,12 @@ fn fails_with(args: &[&str], needle: &str) {
     assert_ne!(code, 0, "{args:?} succeeded");
     let lines: Vec<&str> = err.trim_end().lines().collect();
     assert_eq!(lines.len(), 1, "not one line: {err}");
-    assert!(lines[0].starts_with("error: ") && lines[0].contains(needle), "{:?}: {}", args, lines[0]);
+    assert!(
+        lines[0].starts_with("error: ") && lines[0].contains(needle),
+        "{:?}: {}",
+        args,
+        lines[0]
+    );
 }
 
 #[test]
@@ -38,7 +53,11 @@ fn true_throttle_model_reproduces_its_data() {
     let data = d.join("data.csv");
     write_csv(&plant, &runs, data.to_str().unwrap(), true).unwrap();
     let model = d.join("model.json");
-    plant.true_model(Some(0.003)).unwrap().write(model.to_str().unwrap()).unwrap();
+    plant
+        .true_model(Some(0.003))
+        .unwrap()
+        .write(model.to_str().unwrap())
+        .unwrap();
     let sim = d.join("sim.csv");
     let (code, out, err) = ctsid(&[
         "simulate",
@@ -77,11 +96,22 @@ fn true_mimo_model_reproduces_noisy_data() {
     let data = d.join("data.csv");
     write_csv(&plant, &runs, data.to_str().unwrap(), true).unwrap();
     let model = d.join("model.json");
-    plant.true_model(Some(0.003)).unwrap().write(model.to_str().unwrap()).unwrap();
+    plant
+        .true_model(Some(0.003))
+        .unwrap()
+        .write(model.to_str().unwrap())
+        .unwrap();
     let sim = d.join("sim.csv");
     // tau from the model file, no time column.
-    let (code, out, err) =
-        ctsid(&["simulate", model.to_str().unwrap(), data.to_str().unwrap(), "--run-column", "run", "-o", sim.to_str().unwrap()]);
+    let (code, out, err) = ctsid(&[
+        "simulate",
+        model.to_str().unwrap(),
+        data.to_str().unwrap(),
+        "--run-column",
+        "run",
+        "-o",
+        sim.to_str().unwrap(),
+    ]);
     assert_eq!(code, 0, "{err}");
     // Against the truth (the measured output carries 3 % noise): NRMSE of y_sim vs y_true.
     let mut rdr = csv::Reader::from_path(&sim).unwrap();
@@ -92,7 +122,8 @@ fn true_mimo_model_reproduces_noisy_data() {
         rows.iter().map(|r| r[c].parse().unwrap()).collect()
     };
     for y in ["y1", "y2", "y3"] {
-        let (rms, nrmse) = ctsid::simulate::rms_nrmse(&col(&format!("{y}_sim")), &col(&format!("{y}_true")));
+        let (rms, nrmse) =
+            ctsid::simulate::rms_nrmse(&col(&format!("{y}_sim")), &col(&format!("{y}_true")));
         eprintln!("{y}: rms {rms:e} nrmse vs truth {:.3} %", 100.0 * nrmse);
         assert!(nrmse < 0.03, "{y}: NRMSE against the truth {nrmse}\n{out}");
         // The printed NRMSE is against the noisy measurement: near the noise's own share.
@@ -109,7 +140,13 @@ fn true_mimo_model_reproduces_noisy_data() {
     }
     let wm = d.join("wrong.json");
     wrong.write(wm.to_str().unwrap()).unwrap();
-    let (_, out2, _) = ctsid(&["simulate", wm.to_str().unwrap(), data.to_str().unwrap(), "--run-column", "run"]);
+    let (_, out2, _) = ctsid(&[
+        "simulate",
+        wm.to_str().unwrap(),
+        data.to_str().unwrap(),
+        "--run-column",
+        "run",
+    ]);
     assert!(overall_nrmse(&out2, "y1") > 50.0, "{out2}");
     std::fs::remove_dir_all(&d).ok();
 }
@@ -136,34 +173,87 @@ fn errors_are_one_line() {
     // Works as a baseline.
     let (code, _, err) = ctsid(&["simulate", m, dp, "--run-column", "run"]);
     assert_eq!(code, 0, "{err}");
-    fails_with(&["simulate", m, dp, "--run-column", "batch"], "no column named 'batch'");
-    fails_with(&["simulate", m, dp, "--run-column", "run", "--time-column", "time"], "no column named 'time'");
+    fails_with(
+        &["simulate", m, dp, "--run-column", "batch"],
+        "no column named 'batch'",
+    );
+    fails_with(
+        &[
+            "simulate",
+            m,
+            dp,
+            "--run-column",
+            "run",
+            "--time-column",
+            "time",
+        ],
+        "no column named 'time'",
+    );
     // Missing output / input columns.
     let nod = d.join("noy.csv");
     std::fs::write(&nod, "run,u\n0,1\n").unwrap();
-    fails_with(&["simulate", m, nod.to_str().unwrap(), "--run-column", "run"], "no column named 'y'");
+    fails_with(
+        &["simulate", m, nod.to_str().unwrap(), "--run-column", "run"],
+        "no column named 'y'",
+    );
     // Model file that does not parse, or names unknown variables.
     let bad = d.join("bad.json");
     std::fs::write(&bad, "{\"format\": \"ctsid-model/1\", \"inputs\": [").unwrap();
-    fails_with(&["simulate", bad.to_str().unwrap(), dp, "--run-column", "run"], "model file");
+    fails_with(
+        &["simulate", bad.to_str().unwrap(), dp, "--run-column", "run"],
+        "model file",
+    );
     std::fs::write(
         &bad,
         r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"w":1},"coefficient":1}]}]}"#,
     )
     .unwrap();
-    fails_with(&["simulate", bad.to_str().unwrap(), dp, "--run-column", "run"], "unknown variable 'w'");
+    fails_with(
+        &["simulate", bad.to_str().unwrap(), dp, "--run-column", "run"],
+        "unknown variable 'w'",
+    );
     // Too-short run.
     let short = d.join("short.csv");
     std::fs::write(&short, "run,u,y\n0,1,0\n0,1,0\n0,1,0\n").unwrap();
-    fails_with(&["simulate", m, short.to_str().unwrap(), "--run-column", "run"], "needs at least");
+    fails_with(
+        &[
+            "simulate",
+            m,
+            short.to_str().unwrap(),
+            "--run-column",
+            "run",
+        ],
+        "needs at least",
+    );
     // Non-numeric value, named by row and column.
     let nan = d.join("nan.csv");
     std::fs::write(&nan, s.replacen("0,0,1,0\n", "0,0,1,abc\n", 1)).unwrap();
-    fails_with(&["simulate", m, nan.to_str().unwrap(), "--run-column", "run"], "row 2, column 'y'");
+    fails_with(
+        &["simulate", m, nan.to_str().unwrap(), "--run-column", "run"],
+        "row 2, column 'y'",
+    );
     // No tau anywhere.
     let notau = d.join("notau.json");
-    std::fs::write(&notau, std::fs::read_to_string(&model).unwrap().replace("\"tau\":0.01,", "")).unwrap();
-    fails_with(&["simulate", notau.to_str().unwrap(), dp, "--run-column", "run"], "--tau");
-    fails_with(&["simulate", m, dp, "--run-column", "run", "--tau=-1"], "tau");
+    std::fs::write(
+        &notau,
+        std::fs::read_to_string(&model)
+            .unwrap()
+            .replace("\"tau\":0.01,", ""),
+    )
+    .unwrap();
+    fails_with(
+        &[
+            "simulate",
+            notau.to_str().unwrap(),
+            dp,
+            "--run-column",
+            "run",
+        ],
+        "--tau",
+    );
+    fails_with(
+        &["simulate", m, dp, "--run-column", "run", "--tau=-1"],
+        "tau",
+    );
     std::fs::remove_dir_all(&d).ok();
 }

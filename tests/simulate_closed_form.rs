@@ -12,32 +12,63 @@ fn grid(n: usize, tau: f64) -> Vec<f64> {
 }
 
 fn siso(order: usize, terms: Vec<Term>) -> ctsid::model::CompiledModel {
-    Model::new(&["u"], vec![OutputEquation::new("y", order, terms)], None).compile().unwrap()
+    Model::new(&["u"], vec![OutputEquation::new("y", order, terms)], None)
+        .compile()
+        .unwrap()
 }
 
 #[test]
 fn first_order_step() {
     // y' = -2 y + u, u = 1, y(0) = 3: y = 0.5 + 2.5 e^{-2t}
-    let m = siso(1, vec![Term::new(&[("y", 1)], -2.0), Term::new(&[("u", 1)], 1.0)]);
+    let m = siso(
+        1,
+        vec![Term::new(&[("y", 1)], -2.0), Term::new(&[("u", 1)], 1.0)],
+    );
     let t = grid(201, 0.01);
-    let tr = simulate(&m, &ConstantInput(vec![1.0]), &[3.0], &t, &SimOptions::default()).unwrap();
+    let tr = simulate(
+        &m,
+        &ConstantInput(vec![1.0]),
+        &[3.0],
+        &t,
+        &SimOptions::default(),
+    )
+    .unwrap();
     for (k, &tk) in t.iter().enumerate() {
         let exact = 0.5 + 2.5 * (-2.0 * tk).exp();
-        assert!((tr.state(k)[0] - exact).abs() < 1e-9, "t={tk}: {} vs {exact}", tr.state(k)[0]);
+        assert!(
+            (tr.state(k)[0] - exact).abs() < 1e-9,
+            "t={tk}: {} vs {exact}",
+            tr.state(k)[0]
+        );
     }
 }
 
 #[test]
 fn second_order_damped_oscillator() {
     // y'' = -4 y - 0.4 y': y = e^{-0.2t} (cos(wt) + 0.2/w sin(wt)), w = sqrt(4 - 0.04)
-    let m = siso(2, vec![Term::new(&[("y", 1)], -4.0), Term::new(&[("y_d1", 1)], -0.4)]);
+    let m = siso(
+        2,
+        vec![
+            Term::new(&[("y", 1)], -4.0),
+            Term::new(&[("y_d1", 1)], -0.4),
+        ],
+    );
     let t = grid(1001, 0.01);
-    let tr = simulate(&m, &ConstantInput(vec![0.0]), &[1.0, 0.0], &t, &SimOptions::default()).unwrap();
+    let tr = simulate(
+        &m,
+        &ConstantInput(vec![0.0]),
+        &[1.0, 0.0],
+        &t,
+        &SimOptions::default(),
+    )
+    .unwrap();
     let w = (4.0f64 - 0.04).sqrt();
     for (k, &tk) in t.iter().enumerate() {
         let e = (-0.2 * tk).exp();
         let y = e * ((w * tk).cos() + 0.2 / w * (w * tk).sin());
-        let yd = e * (-0.2 * ((w * tk).cos() + 0.2 / w * (w * tk).sin()) + (-w * (w * tk).sin() + 0.2 * (w * tk).cos()));
+        let yd = e
+            * (-0.2 * ((w * tk).cos() + 0.2 / w * (w * tk).sin())
+                + (-w * (w * tk).sin() + 0.2 * (w * tk).cos()));
         assert!((tr.state(k)[0] - y).abs() < 1e-8, "y at t={tk}");
         assert!((tr.state(k)[1] - yd).abs() < 1e-8, "y' at t={tk}");
     }
@@ -48,10 +79,22 @@ fn third_order_step_response() {
     // y''' = -6y - 11y' - 6y'' + 6u, u = 1, rest: y = 1 - 3e^{-t} + 3e^{-2t} - e^{-3t}
     let m = siso(
         3,
-        vec![Term::new(&[("y", 1)], -6.0), Term::new(&[("y_d1", 1)], -11.0), Term::new(&[("y_d2", 1)], -6.0), Term::new(&[("u", 1)], 6.0)],
+        vec![
+            Term::new(&[("y", 1)], -6.0),
+            Term::new(&[("y_d1", 1)], -11.0),
+            Term::new(&[("y_d2", 1)], -6.0),
+            Term::new(&[("u", 1)], 6.0),
+        ],
     );
     let t = grid(501, 0.01);
-    let tr = simulate(&m, &ConstantInput(vec![1.0]), &[0.0; 3], &t, &SimOptions::default()).unwrap();
+    let tr = simulate(
+        &m,
+        &ConstantInput(vec![1.0]),
+        &[0.0; 3],
+        &t,
+        &SimOptions::default(),
+    )
+    .unwrap();
     for (k, &tk) in t.iter().enumerate() {
         let y = 1.0 - 3.0 * (-tk).exp() + 3.0 * (-2.0 * tk).exp() - (-3.0 * tk).exp();
         let ydd = -3.0 * (-tk).exp() + 12.0 * (-2.0 * tk).exp() - 9.0 * (-3.0 * tk).exp();
@@ -65,7 +108,14 @@ fn nonlinear_riccati() {
     // y' = -y^2, y(0) = 1: y = 1/(t+1)
     let m = siso(1, vec![Term::new(&[("y", 2)], -1.0)]);
     let t = grid(301, 0.01);
-    let tr = simulate(&m, &ConstantInput(vec![0.0]), &[1.0], &t, &SimOptions::default()).unwrap();
+    let tr = simulate(
+        &m,
+        &ConstantInput(vec![0.0]),
+        &[1.0],
+        &t,
+        &SimOptions::default(),
+    )
+    .unwrap();
     for (k, &tk) in t.iter().enumerate() {
         assert!((tr.state(k)[0] - 1.0 / (tk + 1.0)).abs() < 1e-10, "t={tk}");
     }
@@ -79,12 +129,19 @@ fn hand_written_model_file_against_closed_form() {
       "outputs": [{"name": "y", "order": 2, "terms": [
         {"exponents": {"y": 1}, "coefficient": -1},
         {"exponents": {"u": 1}, "coefficient": 1}]}]}"#;
-    let m = Model::from_json_str(text, "hand.json").unwrap().compile().unwrap();
+    let m = Model::from_json_str(text, "hand.json")
+        .unwrap()
+        .compile()
+        .unwrap();
     let t = grid(201, 0.05);
     let u = vec![t.clone()];
     let tr = simulate_model(&m, &[0.0, 0.0], &t, &u, &SimOptions::default()).unwrap();
     for (k, &tk) in t.iter().enumerate() {
-        assert!((tr.state(k)[0] - (tk - tk.sin())).abs() < 1e-9, "t={tk}: {}", tr.state(k)[0]);
+        assert!(
+            (tr.state(k)[0] - (tk - tk.sin())).abs() < 1e-9,
+            "t={tk}: {}",
+            tr.state(k)[0]
+        );
     }
 }
 
@@ -94,7 +151,14 @@ fn interpolated_input_is_integrated_exactly_between_samples() {
     let m = siso(1, vec![Term::new(&[("u", 1)], 1.0)]);
     let t = grid(400, 0.003);
     let u: Vec<f64> = (0..400).map(|k| ((k * 7919) % 13) as f64 - 6.0).collect();
-    let tr = simulate_model(&m, &[0.0], &t, std::slice::from_ref(&u), &SimOptions::default()).unwrap();
+    let tr = simulate_model(
+        &m,
+        &[0.0],
+        &t,
+        std::slice::from_ref(&u),
+        &SimOptions::default(),
+    )
+    .unwrap();
     let mut acc = 0.0;
     for k in 1..400 {
         acc += 0.5 * 0.003 * (u[k - 1] + u[k]);
@@ -127,18 +191,43 @@ fn lands_on_reported_input_corners() {
     let m = siso(1, vec![Term::new(&[("u", 1)], 1.0)]);
     let tc = 0.3217;
     let t = grid(11, 0.1);
-    let exact = |t: f64| if t <= tc { 0.5 * (tc * tc - (tc - t).powi(2)) } else { 0.5 * tc * tc + 0.5 * (t - tc).powi(2) };
-    let opts = SimOptions { rtol: 1e-12, atol: 1e-14, ..Default::default() };
+    let exact = |t: f64| {
+        if t <= tc {
+            0.5 * (tc * tc - (tc - t).powi(2))
+        } else {
+            0.5 * tc * tc + 0.5 * (t - tc).powi(2)
+        }
+    };
+    let opts = SimOptions {
+        rtol: 1e-12,
+        atol: 1e-14,
+        ..Default::default()
+    };
     let tr = simulate(&m, &Kink { tc, report: true }, &[0.0], &t, &opts).unwrap();
     for (k, &tk) in t.iter().enumerate() {
-        assert!((tr.state(k)[0] - exact(tk)).abs() < 1e-13, "t={tk}: {} vs {}", tr.state(k)[0], exact(tk));
+        assert!(
+            (tr.state(k)[0] - exact(tk)).abs() < 1e-13,
+            "t={tk}: {} vs {}",
+            tr.state(k)[0],
+            exact(tk)
+        );
     }
 }
 
 fn companion(a: &[f64]) -> DMatrix<f64> {
     // x' = A x for y^(n) = sum a_k y^(k)
     let n = a.len();
-    DMatrix::from_fn(n, n, |r, c| if r + 1 < n { if c == r + 1 { 1.0 } else { 0.0 } } else { a[c] })
+    DMatrix::from_fn(n, n, |r, c| {
+        if r + 1 < n {
+            if c == r + 1 {
+                1.0
+            } else {
+                0.0
+            }
+        } else {
+            a[c]
+        }
+    })
 }
 
 struct Linear {
@@ -168,11 +257,18 @@ fn stiff_throttle_spectrum_matches_matrix_exponential() {
     a[(3, 3)] = -2e5;
     a[(3, 0)] = 1e5; // the fast state follows y
     let b = DVector::from_vec(vec![0.0, 0.0, 1.222e6, 0.0]);
-    let sys = Linear { a: a.clone(), b: b.clone() };
+    let sys = Linear {
+        a: a.clone(),
+        b: b.clone(),
+    };
     let u = 0.7;
     let x0 = DVector::from_vec(vec![1.5, 0.0, 0.0, 0.75]);
     let t = grid(1001, 0.003);
-    let opts = SimOptions { rtol: 1e-9, atol: 1e-9, ..Default::default() };
+    let opts = SimOptions {
+        rtol: 1e-9,
+        atol: 1e-9,
+        ..Default::default()
+    };
     let tr = simulate(&sys, &ConstantInput(vec![u]), x0.as_slice(), &t, &opts).unwrap();
     let ainv = a.clone().try_inverse().unwrap();
     let exact: Vec<DVector<f64>> = t
@@ -192,7 +288,12 @@ fn stiff_throttle_spectrum_matches_matrix_exponential() {
     }
     assert!(worst < 1e-7, "worst relative error {worst:e}");
     // Stability, not the fast mode, sets the step: a few steps per sample interval at most.
-    assert!(tr.steps + tr.rejected < 4 * 1000, "steps {} rejected {}", tr.steps, tr.rejected);
+    assert!(
+        tr.steps + tr.rejected < 4 * 1000,
+        "steps {} rejected {}",
+        tr.steps,
+        tr.rejected
+    );
 }
 
 #[test]
@@ -200,7 +301,10 @@ fn finite_time_blow_up_is_reported_with_time_and_state() {
     // y' = y^2, y(0) = 1: y = 1/(1 - t), infinite at t = 1.
     let m = siso(1, vec![Term::new(&[("y", 2)], 1.0)]);
     let t = grid(201, 0.01);
-    let opts = SimOptions { run: "run 7".into(), ..Default::default() };
+    let opts = SimOptions {
+        run: "run 7".into(),
+        ..Default::default()
+    };
     let err = simulate(&m, &ConstantInput(vec![0.0]), &[1.0], &t, &opts).unwrap_err();
     match &err {
         Error::Diverged { run, time, state } => {
@@ -217,9 +321,30 @@ fn finite_time_blow_up_is_reported_with_time_and_state() {
 #[test]
 fn bad_arguments_are_errors() {
     let m = siso(2, vec![Term::new(&[("y", 1)], -1.0)]);
-    assert!(simulate(&m, &ConstantInput(vec![0.0]), &[1.0], &[0.0, 1.0], &SimOptions::default()).is_err());
-    assert!(simulate(&m, &ConstantInput(vec![0.0]), &[1.0, 0.0], &[0.0, 0.0], &SimOptions::default()).is_err());
-    assert!(simulate(&m, &ConstantInput(vec![0.0, 1.0]), &[1.0, 0.0], &[0.0, 1.0], &SimOptions::default()).is_err());
+    assert!(simulate(
+        &m,
+        &ConstantInput(vec![0.0]),
+        &[1.0],
+        &[0.0, 1.0],
+        &SimOptions::default()
+    )
+    .is_err());
+    assert!(simulate(
+        &m,
+        &ConstantInput(vec![0.0]),
+        &[1.0, 0.0],
+        &[0.0, 0.0],
+        &SimOptions::default()
+    )
+    .is_err());
+    assert!(simulate(
+        &m,
+        &ConstantInput(vec![0.0, 1.0]),
+        &[1.0, 0.0],
+        &[0.0, 1.0],
+        &SimOptions::default()
+    )
+    .is_err());
 }
 
 #[test]
@@ -229,17 +354,48 @@ fn initial_state_fit_recovers_the_state_from_noisy_samples() {
     // y''' = -6y - 11y' - 6y'' + 6u from x0 = (0.2, -1.0, 3.0), u = 1, with 1 % noise.
     let m = siso(
         3,
-        vec![Term::new(&[("y", 1)], -6.0), Term::new(&[("y_d1", 1)], -11.0), Term::new(&[("y_d2", 1)], -6.0), Term::new(&[("u", 1)], 6.0)],
+        vec![
+            Term::new(&[("y", 1)], -6.0),
+            Term::new(&[("y_d1", 1)], -11.0),
+            Term::new(&[("y_d2", 1)], -6.0),
+            Term::new(&[("u", 1)], 6.0),
+        ],
     );
     let t = grid(400, 0.005);
     let x_true = [0.2, -1.0, 3.0];
-    let tr = simulate(&m, &ConstantInput(vec![1.0]), &x_true, &t, &SimOptions::default()).unwrap();
+    let tr = simulate(
+        &m,
+        &ConstantInput(vec![1.0]),
+        &x_true,
+        &t,
+        &SimOptions::default(),
+    )
+    .unwrap();
     let mut rng = Rng::new(5);
-    let y: Vec<f64> = tr.series(0).iter().map(|v| v + 0.01 * rng.normal()).collect();
+    let y: Vec<f64> = tr
+        .series(0)
+        .iter()
+        .map(|v| v + 0.01 * rng.normal())
+        .collect();
     let u = vec![vec![1.0; 400]];
     let guess = estimate_initial_derivatives(&t, &y, 3, "r", "test").unwrap();
-    let fit = fit_initial_state(&m, &t, std::slice::from_ref(&y), &u, &guess, 200, &SimOptions::default());
-    let err = |x: &[f64]| (0..3).map(|k| (x[k] - x_true[k]).abs() / [1.0, 5.0, 20.0][k]).fold(0.0, f64::max);
+    let fit = fit_initial_state(
+        &m,
+        &t,
+        std::slice::from_ref(&y),
+        &u,
+        &guess,
+        200,
+        &SimOptions::default(),
+    );
+    let err = |x: &[f64]| {
+        (0..3)
+            .map(|k| (x[k] - x_true[k]).abs() / [1.0, 5.0, 20.0][k])
+            .fold(0.0, f64::max)
+    };
     assert!(err(&fit) < 0.05, "fit {fit:?}");
-    assert!(err(&fit) < err(&guess), "fit {fit:?} not better than guess {guess:?}");
+    assert!(
+        err(&fit) < err(&guess),
+        "fit {fit:?} not better than guess {guess:?}"
+    );
 }

@@ -1,6 +1,8 @@
 //! Subcommand definitions and dispatch. Each subcommand lives in its own file.
 
+mod demo;
 mod derive;
+mod identify;
 mod score;
 mod simulate;
 
@@ -22,6 +24,10 @@ pub struct Cli {
 
 #[derive(Subcommand, Debug)]
 pub enum Command {
+    /// Identify y^(n) = P(y, ..., u) from measured runs: order search, fit, test, simulation.
+    Identify(identify::IdentifyArgs),
+    /// Built-in demonstrations on plants with known truth (the main job on built-in data).
+    Demo(demo::DemoArgs),
     /// Derivatives of one column (per run), with a per-sample standard deviation.
     Derive(derive::DeriveArgs),
     /// Simulate a model file on every run of a record and report RMS / NRMSE.
@@ -34,6 +40,8 @@ pub enum Command {
 
 pub fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Identify(a) => identify::run(a),
+        Command::Demo(a) => demo::run(a),
         Command::Derive(a) => derive::run(a),
         Command::Simulate(args) => simulate::run(args),
         Command::ScoreDerivatives(a) => score::run(a),

@@ -58,23 +58,54 @@ pub enum EngineArg {
 /// Reads the named columns of a CSV file as f64, with row numbers (1-based, header = row 1) in errors.
 fn read_columns(path: &std::path::Path, wanted: &[String]) -> Result<Vec<Vec<f64>>> {
     let p = path.display().to_string();
-    let mut rdr = csv::ReaderBuilder::new().trim(csv::Trim::All).from_path(path).map_err(|e| Error::Io { path: p.clone(), message: e.to_string() })?;
-    let headers = rdr.headers().map_err(|e| Error::Csv { path: p.clone(), row: 1, message: e.to_string() })?.clone();
+    let mut rdr = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .map_err(|e| Error::Io {
+            path: p.clone(),
+            message: e.to_string(),
+        })?;
+    let headers = rdr
+        .headers()
+        .map_err(|e| Error::Csv {
+            path: p.clone(),
+            row: 1,
+            message: e.to_string(),
+        })?
+        .clone();
     let idx: Vec<usize> = wanted
         .iter()
         .map(|w| {
-            headers.iter().position(|h| h == w).ok_or_else(|| Error::MissingColumn { path: p.clone(), column: w.clone(), available: headers.iter().collect::<Vec<_>>().join(", ") })
+            headers
+                .iter()
+                .position(|h| h == w)
+                .ok_or_else(|| Error::MissingColumn {
+                    path: p.clone(),
+                    column: w.clone(),
+                    available: headers.iter().collect::<Vec<_>>().join(", "),
+                })
         })
         .collect::<Result<_>>()?;
     let mut cols = vec![Vec::new(); wanted.len()];
     for (r, rec) in rdr.records().enumerate() {
         let row = r + 2;
-        let rec = rec.map_err(|e| Error::Csv { path: p.clone(), row, message: e.to_string() })?;
+        let rec = rec.map_err(|e| Error::Csv {
+            path: p.clone(),
+            row,
+            message: e.to_string(),
+        })?;
         for (c, &k) in idx.iter().enumerate() {
             let s = rec.get(k).unwrap_or("");
             match s.parse::<f64>() {
                 Ok(v) if v.is_finite() => cols[c].push(v),
-                _ => return Err(Error::NonFinite { path: p.clone(), row, column: wanted[c].clone(), value: s.to_string() }),
+                _ => {
+                    return Err(Error::NonFinite {
+                        path: p.clone(),
+                        row,
+                        column: wanted[c].clone(),
+                        value: s.to_string(),
+                    })
+                }
             }
         }
     }
@@ -94,9 +125,18 @@ pub fn run(a: RegressArgs) -> Result<()> {
         MethodArg::Lars => Method::Lars,
         MethodArg::Lassolars => Method::LassoLars,
     };
-    let reg = Regression::builder().degree(a.degree).max_terms(a.max_terms).method(method).engine(engine).epsilon(a.epsilon).build()?;
+    let reg = Regression::builder()
+        .degree(a.degree)
+        .max_terms(a.max_terms)
+        .method(method)
+        .engine(engine)
+        .epsilon(a.epsilon)
+        .build()?;
     if let Some(dup) = a.features.iter().find(|f| **f == a.label) {
-        return Err(Error::param("features", format!("'{dup}' is also the label")));
+        return Err(Error::param(
+            "features",
+            format!("'{dup}' is also the label"),
+        ));
     }
     let mut wanted = a.features.clone();
     wanted.push(a.label.clone());
@@ -129,11 +169,18 @@ pub fn run(a: RegressArgs) -> Result<()> {
         d.r2
     );
     if !d.skipped_collinear.is_empty() {
-        println!("skipped as collinear with the active set: {}", d.skipped_collinear.join(", "));
+        println!(
+            "skipped as collinear with the active set: {}",
+            d.skipped_collinear.join(", ")
+        );
     }
     if let Some(out) = &a.output {
-        let text = serde_json::to_string_pretty(&model).map_err(|e| Error::InvalidData(e.to_string()))?;
-        std::fs::write(out, text).map_err(|e| Error::Io { path: out.display().to_string(), message: e.to_string() })?;
+        let text =
+            serde_json::to_string_pretty(&model).map_err(|e| Error::InvalidData(e.to_string()))?;
+        std::fs::write(out, text).map_err(|e| Error::Io {
+            path: out.display().to_string(),
+            message: e.to_string(),
+        })?;
         println!("model written to {}", out.display());
     }
     Ok(())

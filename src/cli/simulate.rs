@@ -15,7 +15,10 @@
 
 use clap::Args;
 use ctsid::model::Model;
-use ctsid::simulate::{estimate_initial_derivatives, fit_initial_state, initial_window, rms_nrmse, simulate_model, SimOptions};
+use ctsid::simulate::{
+    estimate_initial_derivatives, fit_initial_state, initial_window, rms_nrmse, simulate_model,
+    SimOptions,
+};
 use ctsid::{Error, Result};
 
 #[derive(Args, Debug)]
@@ -57,27 +60,45 @@ mod table {
             let mut rdr = csv::ReaderBuilder::new()
                 .trim(csv::Trim::All)
                 .from_path(path)
-                .map_err(|e| Error::Io { path: path.into(), message: e.to_string() })?;
+                .map_err(|e| Error::Io {
+                    path: path.into(),
+                    message: e.to_string(),
+                })?;
             let headers: Vec<String> = rdr
                 .headers()
-                .map_err(|e| Error::Csv { path: path.into(), row: 1, message: e.to_string() })?
+                .map_err(|e| Error::Csv {
+                    path: path.into(),
+                    row: 1,
+                    message: e.to_string(),
+                })?
                 .iter()
                 .map(|s| s.to_string())
                 .collect();
             let mut rows = Vec::new();
             for (k, r) in rdr.records().enumerate() {
                 // Row numbers are file lines: the header is row 1.
-                rows.push(r.map_err(|e| Error::Csv { path: path.into(), row: k + 2, message: e.to_string() })?);
+                rows.push(r.map_err(|e| Error::Csv {
+                    path: path.into(),
+                    row: k + 2,
+                    message: e.to_string(),
+                })?);
             }
-            Ok(Table { path: path.into(), headers, rows })
+            Ok(Table {
+                path: path.into(),
+                headers,
+                rows,
+            })
         }
 
         pub fn column(&self, name: &str) -> Result<usize> {
-            self.headers.iter().position(|h| h == name).ok_or_else(|| Error::MissingColumn {
-                path: self.path.clone(),
-                column: name.into(),
-                available: self.headers.join(", "),
-            })
+            self.headers
+                .iter()
+                .position(|h| h == name)
+                .ok_or_else(|| Error::MissingColumn {
+                    path: self.path.clone(),
+                    column: name.into(),
+                    available: self.headers.join(", "),
+                })
         }
 
         /// Values of column `c` at the given row indices, as finite numbers.
@@ -85,12 +106,15 @@ mod table {
             rows.iter()
                 .map(|&r| {
                     let s = self.rows[r].get(c).unwrap_or("");
-                    s.parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| Error::NonFinite {
-                        path: self.path.clone(),
-                        row: r + 2,
-                        column: self.headers[c].clone(),
-                        value: s.into(),
-                    })
+                    s.parse::<f64>()
+                        .ok()
+                        .filter(|v| v.is_finite())
+                        .ok_or_else(|| Error::NonFinite {
+                            path: self.path.clone(),
+                            row: r + 2,
+                            column: self.headers[c].clone(),
+                            value: s.into(),
+                        })
                 })
                 .collect()
         }
@@ -122,18 +146,37 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     }
     let tab = table::Table::read(&args.data)?;
     let run_col = tab.column(&args.run_column)?;
-    let out_cols: Vec<usize> = model.outputs.iter().map(|o| tab.column(&o.name)).collect::<Result<_>>()?;
-    let in_cols: Vec<usize> = model.inputs.iter().map(|u| tab.column(u)).collect::<Result<_>>()?;
-    let time_col = args.time_column.as_deref().map(|c| tab.column(c)).transpose()?;
+    let out_cols: Vec<usize> = model
+        .outputs
+        .iter()
+        .map(|o| tab.column(&o.name))
+        .collect::<Result<_>>()?;
+    let in_cols: Vec<usize> = model
+        .inputs
+        .iter()
+        .map(|u| tab.column(u))
+        .collect::<Result<_>>()?;
+    let time_col = args
+        .time_column
+        .as_deref()
+        .map(|c| tab.column(c))
+        .transpose()?;
     let tau = match (time_col, args.tau.or(model.tau)) {
         (Some(_), t) => t,
         (None, Some(t)) => Some(t),
         (None, None) => return Err(Error::MissingTau),
     };
-    let sim_names: Vec<String> = model.outputs.iter().map(|o| format!("{}_sim", o.name)).collect();
+    let sim_names: Vec<String> = model
+        .outputs
+        .iter()
+        .map(|o| format!("{}_sim", o.name))
+        .collect();
     if args.output.is_some() {
         if let Some(n) = sim_names.iter().find(|n| tab.headers.contains(n)) {
-            return Err(Error::InvalidData(format!("{}: already has a column '{n}'; rename it or simulate another file", tab.path)));
+            return Err(Error::InvalidData(format!(
+                "{}: already has a column '{n}'; rename it or simulate another file",
+                tab.path
+            )));
         }
     }
     let runs = tab.runs(run_col);
@@ -144,7 +187,10 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     let mut sim_values = vec![vec![f64::NAN; n_out]; tab.rows.len()];
     let mut pooled_sim: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let mut pooled_meas: Vec<Vec<f64>> = vec![Vec::new(); n_out];
-    println!("{:<12} {:<12} {:>14} {:>10}", "run", "output", "RMS", "NRMSE %");
+    println!(
+        "{:<12} {:<12} {:>14} {:>10}",
+        "run", "output", "RMS", "NRMSE %"
+    );
     for (id, rows) in &runs {
         let t: Vec<f64> = match time_col {
             Some(c) => {
@@ -163,7 +209,11 @@ pub fn run(args: SimulateArgs) -> Result<()> {
                 if let (Some(given), true) = (args.tau, t.len() > 1) {
                     let step = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
                     if (step - given).abs() > 1e-6 * given {
-                        return Err(Error::TauMismatch { given, from_time: step, column: tab.headers[c].clone() });
+                        return Err(Error::TauMismatch {
+                            given,
+                            from_time: step,
+                            column: tab.headers[c].clone(),
+                        });
                     }
                 }
                 t
@@ -173,21 +223,43 @@ pub fn run(args: SimulateArgs) -> Result<()> {
                 (0..rows.len()).map(|k| k as f64 * tau).collect()
             }
         };
-        let ys: Vec<Vec<f64>> = out_cols.iter().map(|&c| tab.numbers(c, rows)).collect::<Result<_>>()?;
-        let us: Vec<Vec<f64>> = in_cols.iter().map(|&c| tab.numbers(c, rows)).collect::<Result<_>>()?;
+        let ys: Vec<Vec<f64>> = out_cols
+            .iter()
+            .map(|&c| tab.numbers(c, rows))
+            .collect::<Result<_>>()?;
+        let us: Vec<Vec<f64>> = in_cols
+            .iter()
+            .map(|&c| tab.numbers(c, rows))
+            .collect::<Result<_>>()?;
         let mut x0 = Vec::with_capacity(compiled.n_state());
         for (i, o) in model.outputs.iter().enumerate() {
-            let what = format!("estimating the initial state of output '{}' (order {})", o.name, o.order);
-            x0.extend(estimate_initial_derivatives(&t, &ys[i], o.order, id, &what)?);
+            let what = format!(
+                "estimating the initial state of output '{}' (order {})",
+                o.name, o.order
+            );
+            x0.extend(estimate_initial_derivatives(
+                &t, &ys[i], o.order, id, &what,
+            )?);
         }
-        let opts = SimOptions { run: id.clone(), ..Default::default() };
-        let window = args.init_window.max(initial_window(compiled.orders().iter().copied().max().unwrap_or(1)));
+        let opts = SimOptions {
+            run: id.clone(),
+            ..Default::default()
+        };
+        let window = args.init_window.max(initial_window(
+            compiled.orders().iter().copied().max().unwrap_or(1),
+        ));
         let x0 = fit_initial_state(&compiled, &t, &ys, &us, &x0, window, &opts);
         let traj = simulate_model(&compiled, &x0, &t, &us, &opts)?;
         for (i, o) in model.outputs.iter().enumerate() {
             let sim = traj.series(compiled.offset(i));
             let (rms, nrmse) = rms_nrmse(&sim, &ys[i]);
-            println!("{:<12} {:<12} {:>14.6e} {:>10.4}", id, o.name, rms, 100.0 * nrmse);
+            println!(
+                "{:<12} {:<12} {:>14.6e} {:>10.4}",
+                id,
+                o.name,
+                rms,
+                100.0 * nrmse
+            );
             for (k, &r) in rows.iter().enumerate() {
                 sim_values[r][i] = sim[k];
             }
@@ -197,10 +269,19 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     }
     for (i, o) in model.outputs.iter().enumerate() {
         let (rms, nrmse) = rms_nrmse(&pooled_sim[i], &pooled_meas[i]);
-        println!("{:<12} {:<12} {:>14.6e} {:>10.4}", "all", o.name, rms, 100.0 * nrmse);
+        println!(
+            "{:<12} {:<12} {:>14.6e} {:>10.4}",
+            "all",
+            o.name,
+            rms,
+            100.0 * nrmse
+        );
     }
     if let Some(path) = &args.output {
-        let io = |e: &dyn std::fmt::Display| Error::Io { path: path.clone(), message: e.to_string() };
+        let io = |e: &dyn std::fmt::Display| Error::Io {
+            path: path.clone(),
+            message: e.to_string(),
+        };
         let mut w = csv::Writer::from_path(path).map_err(|e| io(&e))?;
         let mut header = tab.headers.clone();
         header.extend(sim_names.iter().cloned());

@@ -38,7 +38,20 @@ pub struct EtcOptions {
 
 impl Default for EtcOptions {
     fn default() -> Self {
-        EtcOptions { patm: 0.0, physical: false, runs: 100, train: 25, samples: 1000, tau: 0.003, noise: 0.03, seed: 1, degree: 3, engine: EngineChoice::Auto, out: None, progress: true }
+        EtcOptions {
+            patm: 0.0,
+            physical: false,
+            runs: 100,
+            train: 25,
+            samples: 1000,
+            tau: 0.003,
+            noise: 0.03,
+            seed: 1,
+            degree: 3,
+            engine: EngineChoice::Auto,
+            out: None,
+            progress: true,
+        }
     }
 }
 
@@ -49,16 +62,32 @@ fn prof_cells(p: &Profile) -> Vec<String> {
 /// Runs the experiment; returns the report text (also printed by the CLI).
 pub fn run(o: &EtcOptions) -> Result<String> {
     let t_all = std::time::Instant::now();
-    let plant = if o.physical { Plant::throttle(ThrottlePreset::Physical) } else { Plant::throttle(ThrottlePreset::Paper { patm: o.patm }) };
-    let patm = if o.physical { crate::plants::throttle::PATM_STD } else { o.patm };
+    let plant = if o.physical {
+        Plant::throttle(ThrottlePreset::Physical)
+    } else {
+        Plant::throttle(ThrottlePreset::Paper { patm: o.patm })
+    };
+    let patm = if o.physical {
+        crate::plants::throttle::PATM_STD
+    } else {
+        o.patm
+    };
     let inputs = plant.input_names();
     let outputs = plant.output_names();
     let split_ids: Vec<usize> = (0..o.runs).collect();
     let ids: Vec<String> = split_ids.iter().map(|i| i.to_string()).collect();
-    let split = Split::new((0..o.train).collect(), None, (o.train..o.runs).collect(), &ids)?;
+    let split = Split::new(
+        (0..o.train).collect(),
+        None,
+        (o.train..o.runs).collect(),
+        &ids,
+    )?;
     let truth = plant.true_model(Some(o.tau));
     let mut out = String::new();
-    let _ = writeln!(out, "# Electronic throttle (the source paper's experiment)\n");
+    let _ = writeln!(
+        out,
+        "# Electronic throttle (the source paper's experiment)\n"
+    );
     let _ = writeln!(
         out,
         "{} runs x {} samples, tau = {} s, {} train / {} test, noise {} % and 0 %, degree {}, seed {}, Patm = {} Pa{}.",
@@ -79,7 +108,21 @@ pub fn run(o: &EtcOptions) -> Result<String> {
     let _ = writeln!(out);
 
     let mut tables: Vec<(String, Table)> = Vec::new();
-    let mut profile_table = Table::new(&["data", "order n", "n terms", "train p50", "p80", "p90", "p95", "p98", "p99", "p100", "5-fold p95", "5-fold p100", "selected"]);
+    let mut profile_table = Table::new(&[
+        "data",
+        "order n",
+        "n terms",
+        "train p50",
+        "p80",
+        "p90",
+        "p95",
+        "p98",
+        "p99",
+        "p100",
+        "5-fold p95",
+        "5-fold p100",
+        "selected",
+    ]);
     let mut noisy: Option<(Identification, Vec<crate::plants::Run>)> = None;
     for &eta in &[0.0, o.noise] {
         let runs = dataset(&plant, o.runs, o.samples, o.tau, eta, o.seed)?;
@@ -90,11 +133,23 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         let id = identify(&rs, &split, &s)?;
         let rep = &id.outputs[0];
         for c in &rep.candidates {
-            let mut row = vec![if eta == 0.0 { "noise-free".to_string() } else { format!("{} % noise", eta * 100.0) }, c.order.to_string(), c.n_terms.to_string()];
+            let mut row = vec![
+                if eta == 0.0 {
+                    "noise-free".to_string()
+                } else {
+                    format!("{} % noise", eta * 100.0)
+                },
+                c.order.to_string(),
+                c.n_terms.to_string(),
+            ];
             row.extend(prof_cells(&c.train));
             row.push(format!("{:.3}", c.validation.p95()));
             row.push(format!("{:.3}", c.validation.p100()));
-            row.push(if c.order == rep.order { "<- selected".into() } else { String::new() });
+            row.push(if c.order == rep.order {
+                "<- selected".into()
+            } else {
+                String::new()
+            });
             profile_table.row(row);
         }
         if eta > 0.0 {
@@ -104,12 +159,23 @@ pub fn run(o: &EtcOptions) -> Result<String> {
     let _ = writeln!(out, "## Error profile per order on the training runs (p_q = percentile(|e|, q) / median(|label|)), eta-rule on 5-fold validation\n\n{}", profile_table.markdown());
     tables.push(("profiles".into(), profile_table));
     let (id_noisy, runs) = noisy.unwrap();
-    let _ = writeln!(out, "Selected order: {} (noise-free run above, noisy below; the truth is 3).\n", id_noisy.outputs[0].order);
+    let _ = writeln!(
+        out,
+        "Selected order: {} (noise-free run above, noisy below; the truth is 3).\n",
+        id_noisy.outputs[0].order
+    );
 
     // Fixed n = 3 at d = 3 and d = 1: test percentiles against our labels and the true y'''.
     let rs = records(&runs, &inputs, &outputs, o.tau)?;
-    let mut test_table = Table::new(&["model", "against", "p50", "p80", "p90", "p95", "p98", "p99", "p100"]);
-    test_table.row(std::iter::once("paper (n = 3, d = 3)".into()).chain(std::iter::once("its own labels".into())).chain(PAPER_TEST.iter().map(|v| format!("{v:.2}"))).collect());
+    let mut test_table = Table::new(&[
+        "model", "against", "p50", "p80", "p90", "p95", "p98", "p99", "p100",
+    ]);
+    test_table.row(
+        std::iter::once("paper (n = 3, d = 3)".into())
+            .chain(std::iter::once("its own labels".into()))
+            .chain(PAPER_TEST.iter().map(|v| format!("{v:.2}")))
+            .collect(),
+    );
     let mut main_id = None;
     for d in [o.degree, 1] {
         let mut s = Settings::new(outputs.clone(), inputs.clone(), d);
@@ -117,60 +183,151 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         s.engine = o.engine;
         let id = identify(&rs, &split, &s)?;
         let own = id.outputs[0].test.unwrap();
-        test_table.row([format!("ours (n = 3, d = {d})"), "our labels".into()].into_iter().chain(prof_cells(&own)).collect());
+        test_table.row(
+            [format!("ours (n = 3, d = {d})"), "our labels".into()]
+                .into_iter()
+                .chain(prof_cells(&own))
+                .collect(),
+        );
         let vs_truth = profile_vs_true_label(&id, &runs, &split);
-        test_table.row([format!("ours (n = 3, d = {d})"), "true y'''".into()].into_iter().chain(prof_cells(&vs_truth)).collect());
+        test_table.row(
+            [format!("ours (n = 3, d = {d})"), "true y'''".into()]
+                .into_iter()
+                .chain(prof_cells(&vs_truth))
+                .collect(),
+        );
         if d == o.degree {
             main_id = Some(id);
         }
     }
     let id = main_id.unwrap();
-    let _ = writeln!(out, "## Test runs ({}), n = 3\n\n{}", o.runs - o.train, test_table.markdown());
+    let _ = writeln!(
+        out,
+        "## Test runs ({}), n = 3\n\n{}",
+        o.runs - o.train,
+        test_table.markdown()
+    );
     tables.push(("test_percentiles".into(), test_table));
 
     // The equation against the truth.
-    let _ = writeln!(out, "## Identified equation (3 % noise, n = 3, d = {})\n\n    {}\n", o.degree, id.model.outputs[0].to_text());
+    let _ = writeln!(
+        out,
+        "## Identified equation (3 % noise, n = 3, d = {})\n\n    {}\n",
+        o.degree,
+        id.model.outputs[0].to_text()
+    );
     if let Some(tm) = &truth {
-        let _ = writeln!(out, "True equation (Patm = 0):\n\n    {}\n", tm.outputs[0].to_text());
+        let _ = writeln!(
+            out,
+            "True equation (Patm = 0):\n\n    {}\n",
+            tm.outputs[0].to_text()
+        );
         let (rows, extra) = coefficient_errors(&id.model, tm, 0);
         let mut t = Table::new(&["term", "true", "identified", "relative error"]);
         for (m, tc, c, e) in rows {
-            t.row(vec![m, format!("{tc:.5e}"), format!("{c:.5e}"), format!("{:+.2} %", 100.0 * e)]);
+            t.row(vec![
+                m,
+                format!("{tc:.5e}"),
+                format!("{c:.5e}"),
+                format!("{:+.2} %", 100.0 * e),
+            ]);
         }
-        let _ = writeln!(out, "{}\nTerms not in the truth: {}\n", t.markdown(), if extra.is_empty() { "none".into() } else { extra.join(", ") });
+        let _ = writeln!(
+            out,
+            "{}\nTerms not in the truth: {}\n",
+            t.markdown(),
+            if extra.is_empty() {
+                "none".into()
+            } else {
+                extra.join(", ")
+            }
+        );
         tables.push(("coefficients".into(), t));
     } else {
-        let _ = writeln!(out, "(No polynomial truth at Patm > 0: the aerodynamic term is not a polynomial.)\n");
+        let _ = writeln!(
+            out,
+            "(No polynomial truth at Patm > 0: the aerodynamic term is not a polynomial.)\n"
+        );
     }
 
     // Derivatives against the truth on the test runs.
     let mut dt = Table::new(&["derivative", "p50", "p95", "p100", "2-sigma coverage"]);
     for k in 0..=3 {
-        let est: Vec<&[f64]> = split.test.iter().map(|&r| id.derivatives[0][r].values[k].as_slice()).collect();
-        let tru: Vec<&[f64]> = split.test.iter().map(|&r| runs[r].derivatives[0][k].as_slice()).collect();
+        let est: Vec<&[f64]> = split
+            .test
+            .iter()
+            .map(|&r| id.derivatives[0][r].values[k].as_slice())
+            .collect();
+        let tru: Vec<&[f64]> = split
+            .test
+            .iter()
+            .map(|&r| runs[r].derivatives[0][k].as_slice())
+            .collect();
         let p = truth_profile(&est, &tru);
         let (mut inside, mut all) = (0usize, 0usize);
         for &r in &split.test {
             let d = &id.derivatives[0][r];
             for i in 0..d.values[k].len() {
                 all += 1;
-                inside += ((d.values[k][i] - runs[r].derivatives[0][k][i]).abs() <= 2.0 * d.sigma[k][i]) as usize;
+                inside += ((d.values[k][i] - runs[r].derivatives[0][k][i]).abs()
+                    <= 2.0 * d.sigma[k][i]) as usize;
             }
         }
-        dt.row(vec![if k == 0 { "y".into() } else { format!("y_d{k}") }, format!("{:.4}", p[0]), format!("{:.4}", p[1]), format!("{:.4}", p[2]), format!("{:.3}", inside as f64 / all as f64)]);
+        dt.row(vec![
+            if k == 0 {
+                "y".into()
+            } else {
+                format!("y_d{k}")
+            },
+            format!("{:.4}", p[0]),
+            format!("{:.4}", p[1]),
+            format!("{:.4}", p[2]),
+            format!("{:.3}", inside as f64 / all as f64),
+        ]);
     }
     let _ = writeln!(out, "## Reconstructed derivatives against the true ones (test runs, normalised by median |truth|)\n\n{}", dt.markdown());
     tables.push(("derivatives".into(), dt));
 
     // Free-run simulation.
     let (med, max, pooled, div) = nrmse_vs_truth(&id, &runs, 0);
-    let meas: Vec<f64> = id.simulations.iter().filter(|s| s.error.is_none()).map(|s| s.nrmse[0]).collect();
-    let mut st = Table::new(&["free-run simulation on test runs", "median", "max", "pooled"]);
-    st.row(vec!["NRMSE against the true output".into(), format!("{:.3} %", 100.0 * med), format!("{:.3} %", 100.0 * max), format!("{:.3} %", 100.0 * pooled)]);
-    st.row(vec!["NRMSE against the measurement".into(), format!("{:.3} %", 100.0 * percentile(&meas, 50.0)), format!("{:.3} %", 100.0 * meas.iter().cloned().fold(0.0, f64::max)), "-".into()]);
-    let _ = writeln!(out, "## Free-run simulation ({} test runs, {} diverged)\n\n{}", id.simulations.len(), div, st.markdown());
+    let meas: Vec<f64> = id
+        .simulations
+        .iter()
+        .filter(|s| s.error.is_none())
+        .map(|s| s.nrmse[0])
+        .collect();
+    let mut st = Table::new(&[
+        "free-run simulation on test runs",
+        "median",
+        "max",
+        "pooled",
+    ]);
+    st.row(vec![
+        "NRMSE against the true output".into(),
+        format!("{:.3} %", 100.0 * med),
+        format!("{:.3} %", 100.0 * max),
+        format!("{:.3} %", 100.0 * pooled),
+    ]);
+    st.row(vec![
+        "NRMSE against the measurement".into(),
+        format!("{:.3} %", 100.0 * percentile(&meas, 50.0)),
+        format!("{:.3} %", 100.0 * meas.iter().cloned().fold(0.0, f64::max)),
+        "-".into(),
+    ]);
+    let _ = writeln!(
+        out,
+        "## Free-run simulation ({} test runs, {} diverged)\n\n{}",
+        id.simulations.len(),
+        div,
+        st.markdown()
+    );
     tables.push(("simulation".into(), st));
-    let _ = writeln!(out, "Sample weighting: {}.\nTotal time {:.1} s.", id.weighting, t_all.elapsed().as_secs_f64());
+    let _ = writeln!(
+        out,
+        "Sample weighting: {}.\nTotal time {:.1} s.",
+        id.weighting,
+        t_all.elapsed().as_secs_f64()
+    );
 
     if let Some(dir) = &o.out {
         write_file(dir, "report.md", &out)?;
@@ -184,10 +341,20 @@ pub fn run(o: &EtcOptions) -> Result<String> {
 }
 
 /// Test profile of the fixed-order model against the true y''' (same sample mask as our labels).
-fn profile_vs_true_label(id: &Identification, runs: &[crate::plants::Run], split: &Split) -> Profile {
-    let Ok(c) = id.model.compile() else { return Profile([f64::NAN; 7]) };
+fn profile_vs_true_label(
+    id: &Identification,
+    runs: &[crate::plants::Run],
+    split: &Split,
+) -> Profile {
+    let Ok(c) = id.model.compile() else {
+        return Profile([f64::NAN; 7]);
+    };
     let n = id.model.outputs[0].order;
-    let all_sig: Vec<f64> = split.train.iter().flat_map(|&r| id.derivatives[0][r].sigma[n].iter().copied()).collect();
+    let all_sig: Vec<f64> = split
+        .train
+        .iter()
+        .flat_map(|&r| id.derivatives[0][r].sigma[n].iter().copied())
+        .collect();
     let sref = percentile(&all_sig, 50.0);
     let (mut e, mut l) = (Vec::new(), Vec::new());
     let mut z = vec![0.0; n + 1];
@@ -209,26 +376,102 @@ fn profile_vs_true_label(id: &Identification, runs: &[crate::plants::Run], split
     Profile::new(&e, &l)
 }
 
-fn plots(dir: &std::path::Path, id: &Identification, runs: &[crate::plants::Run], r: usize, _tau: f64) -> Result<()> {
+fn plots(
+    dir: &std::path::Path,
+    id: &Identification,
+    runs: &[crate::plants::Run],
+    r: usize,
+    _tau: f64,
+) -> Result<()> {
     let run = &runs[r];
     let t = &run.t;
-    let s = |label, y, color| svg::Series { label, x: t, y, color, band: None, dashed: false };
-    write_file(dir, "excitation.svg", &svg::line_plot(&format!("Excitation, test run {r}"), "t (s)", "u", &[s("u", &run.u[0], "black")]))?;
-    write_file(dir, "measurement.svg", &svg::line_plot(&format!("Measurement, test run {r}"), "t (s)", "y (rad)", &[s("measured", &run.y[0], "gray"), s("true", &run.y_true[0], "black")]))?;
+    let s = |label, y, color| svg::Series {
+        label,
+        x: t,
+        y,
+        color,
+        band: None,
+        dashed: false,
+    };
+    write_file(
+        dir,
+        "excitation.svg",
+        &svg::line_plot(
+            &format!("Excitation, test run {r}"),
+            "t (s)",
+            "u",
+            &[s("u", &run.u[0], "black")],
+        ),
+    )?;
+    write_file(
+        dir,
+        "measurement.svg",
+        &svg::line_plot(
+            &format!("Measurement, test run {r}"),
+            "t (s)",
+            "y (rad)",
+            &[
+                s("measured", &run.y[0], "gray"),
+                s("true", &run.y_true[0], "black"),
+            ],
+        ),
+    )?;
     let d = &id.derivatives[0][r];
     for k in 1..=3 {
-        let lo: Vec<f64> = (0..t.len()).map(|i| d.values[k][i] - 2.0 * d.sigma[k][i]).collect();
-        let hi: Vec<f64> = (0..t.len()).map(|i| d.values[k][i] + 2.0 * d.sigma[k][i]).collect();
-        let est = svg::Series { label: "estimate +- 2 sigma", x: t, y: &d.values[k], color: "steelblue", band: Some((&lo, &hi)), dashed: false };
-        let tru = svg::Series { label: "truth", x: t, y: &run.derivatives[0][k], color: "black", band: None, dashed: true };
-        write_file(dir, &format!("derivative_{k}.svg"), &svg::line_plot(&format!("y_d{k}, test run {r}"), "t (s)", &format!("y_d{k}"), &[est, tru]))?;
+        let lo: Vec<f64> = (0..t.len())
+            .map(|i| d.values[k][i] - 2.0 * d.sigma[k][i])
+            .collect();
+        let hi: Vec<f64> = (0..t.len())
+            .map(|i| d.values[k][i] + 2.0 * d.sigma[k][i])
+            .collect();
+        let est = svg::Series {
+            label: "estimate +- 2 sigma",
+            x: t,
+            y: &d.values[k],
+            color: "steelblue",
+            band: Some((&lo, &hi)),
+            dashed: false,
+        };
+        let tru = svg::Series {
+            label: "truth",
+            x: t,
+            y: &run.derivatives[0][k],
+            color: "black",
+            band: None,
+            dashed: true,
+        };
+        write_file(
+            dir,
+            &format!("derivative_{k}.svg"),
+            &svg::line_plot(
+                &format!("y_d{k}, test run {r}"),
+                "t (s)",
+                &format!("y_d{k}"),
+                &[est, tru],
+            ),
+        )?;
     }
-    if let Some(sim) = id.simulations.iter().find(|x| x.run == r.to_string() && x.error.is_none()) {
+    if let Some(sim) = id
+        .simulations
+        .iter()
+        .find(|x| x.run == r.to_string() && x.error.is_none())
+    {
         let plot = svg::line_plot(
             &format!("Free-run simulation, test run {r}"),
             "t (s)",
             "y (rad)",
-            &[s("measured", &run.y[0], "gray"), s("true", &run.y_true[0], "black"), svg::Series { label: "simulated model", x: t, y: &sim.simulated[0], color: "red", band: None, dashed: true }],
+            &[
+                s("measured", &run.y[0], "gray"),
+                s("true", &run.y_true[0], "black"),
+                svg::Series {
+                    label: "simulated model",
+                    x: t,
+                    y: &sim.simulated[0],
+                    color: "red",
+                    band: None,
+                    dashed: true,
+                },
+            ],
         );
         write_file(dir, "simulation.svg", &plot)?;
     }

@@ -27,7 +27,18 @@ pub struct MimoOptions {
 
 impl Default for MimoOptions {
     fn default() -> Self {
-        MimoOptions { runs: 40, train: 25, samples: 1000, tau: 0.01, noise: 0.0, seed: 1, degrees: vec![2, 4, 6], engines: vec![EngineChoice::Cpu], out: None, progress: true }
+        MimoOptions {
+            runs: 40,
+            train: 25,
+            samples: 1000,
+            tau: 0.01,
+            noise: 0.0,
+            seed: 1,
+            degrees: vec![2, 4, 6],
+            engines: vec![EngineChoice::Cpu],
+            out: None,
+            progress: true,
+        }
     }
 }
 
@@ -35,18 +46,34 @@ pub fn run(o: &MimoOptions) -> Result<String> {
     let plant = Plant::mimo();
     let inputs = plant.input_names();
     let outputs = plant.output_names();
-    let truth = plant.true_model(Some(o.tau)).expect("the MIMO plant has a polynomial truth");
+    let truth = plant
+        .true_model(Some(o.tau))
+        .expect("the MIMO plant has a polynomial truth");
     let runs = dataset(&plant, o.runs, o.samples, o.tau, o.noise, o.seed)?;
     let rs = records(&runs, &inputs, &outputs, o.tau)?;
     let ids: Vec<String> = (0..o.runs).map(|i| i.to_string()).collect();
-    let split = Split::new((0..o.train).collect(), None, (o.train..o.runs).collect(), &ids)?;
+    let split = Split::new(
+        (0..o.train).collect(),
+        None,
+        (o.train..o.runs).collect(),
+        &ids,
+    )?;
     let mut out = String::new();
     let _ = writeln!(out, "# MIMO plant: 2 inputs, 3 outputs of order 3 (dim z = 11)\n\n{} runs x {} samples, tau = {} s, noise {} %, {} train / {} test.\n", o.runs, o.samples, o.tau, o.noise * 100.0, o.train, o.runs - o.train);
     let _ = writeln!(out, "True equations:\n");
     for eq in &truth.outputs {
         let _ = writeln!(out, "    {}", eq.to_text());
     }
-    let mut summary = Table::new(&["degree", "candidates / output", "engine", "time (s)", "true terms found", "extra terms", "max coef. error", "test NRMSE vs truth (pooled)"]);
+    let mut summary = Table::new(&[
+        "degree",
+        "candidates / output",
+        "engine",
+        "time (s)",
+        "true terms found",
+        "extra terms",
+        "max coef. error",
+        "test NRMSE vs truth (pooled)",
+    ]);
     for &d in &o.degrees {
         for &engine in &o.engines {
             let mut s = Settings::new(outputs.clone(), inputs.clone(), d);
@@ -57,7 +84,16 @@ pub fn run(o: &MimoOptions) -> Result<String> {
             let id = match identify(&rs, &split, &s) {
                 Ok(id) => id,
                 Err(e) => {
-                    summary.row(vec![d.to_string(), crate::basis::count(11, d).unwrap_or(0).to_string(), format!("{engine:?}"), "-".into(), format!("failed: {e}"), "-".into(), "-".into(), "-".into()]);
+                    summary.row(vec![
+                        d.to_string(),
+                        crate::basis::count(11, d).unwrap_or(0).to_string(),
+                        format!("{engine:?}"),
+                        "-".into(),
+                        format!("failed: {e}"),
+                        "-".into(),
+                        "-".into(),
+                        "-".into(),
+                    ]);
                     continue;
                 }
             };
@@ -72,8 +108,19 @@ pub fn run(o: &MimoOptions) -> Result<String> {
                 worst = rows.iter().map(|r| r.3.abs()).fold(worst, f64::max);
                 let _ = writeln!(out, "    {}", id.model.outputs[i].to_text());
             }
-            let nr: Vec<String> = (0..outputs.len()).map(|i| format!("{:.2} %", 100.0 * nrmse_vs_truth(&id, &runs, i).2)).collect();
-            summary.row(vec![d.to_string(), crate::basis::count(11, d).unwrap_or(0).to_string(), id.outputs[0].engine.clone(), format!("{secs:.2}"), format!("{found} / {total}"), extra.to_string(), format!("{:.2} %", 100.0 * worst), nr.join(", ")]);
+            let nr: Vec<String> = (0..outputs.len())
+                .map(|i| format!("{:.2} %", 100.0 * nrmse_vs_truth(&id, &runs, i).2))
+                .collect();
+            summary.row(vec![
+                d.to_string(),
+                crate::basis::count(11, d).unwrap_or(0).to_string(),
+                id.outputs[0].engine.clone(),
+                format!("{secs:.2}"),
+                format!("{found} / {total}"),
+                extra.to_string(),
+                format!("{:.2} %", 100.0 * worst),
+                nr.join(", "),
+            ]);
         }
     }
     let _ = writeln!(out, "\n## Summary\n\n{}", summary.markdown());

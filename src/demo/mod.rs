@@ -13,14 +13,24 @@ use crate::records::{RecordSet, Run};
 use crate::Result;
 
 /// A record set (channels: inputs then outputs, by name) from generated plant runs.
-pub fn records(runs: &[PlantRun], inputs: &[String], outputs: &[String], tau: f64) -> Result<RecordSet> {
+pub fn records(
+    runs: &[PlantRun],
+    inputs: &[String],
+    outputs: &[String],
+    tau: f64,
+) -> Result<RecordSet> {
     let names: Vec<String> = inputs.iter().chain(outputs).cloned().collect();
     let recs = runs
         .iter()
         .map(|r| {
             let mut channels = r.u.clone();
             channels.extend(r.y.iter().cloned());
-            Run { id: r.id.to_string(), channels, t0: r.t[0], rows: (0..r.t.len()).map(|i| i + 2).collect() }
+            Run {
+                id: r.id.to_string(),
+                channels,
+                t0: r.t[0],
+                rows: (0..r.t.len()).map(|i| i + 2).collect(),
+            }
         })
         .collect();
     RecordSet::new(tau, names, recs)
@@ -35,17 +45,27 @@ pub fn truth_profile(est: &[&[f64]], truth: &[&[f64]]) -> [f64; 3] {
         t.extend(b.iter().map(|y| y.abs()));
     }
     let med = percentile(&t, 50.0).max(1e-300);
-    [percentile(&e, 50.0) / med, percentile(&e, 95.0) / med, percentile(&e, 100.0) / med]
+    [
+        percentile(&e, 50.0) / med,
+        percentile(&e, 95.0) / med,
+        percentile(&e, 100.0) / med,
+    ]
 }
 
 /// Free-run NRMSE of the simulated test runs against the noise-free output: RMS error over the
 /// standard deviation of the true output, per run; returns (median, max, pooled).
-pub fn nrmse_vs_truth(id: &Identification, runs: &[PlantRun], output: usize) -> (f64, f64, f64, usize) {
+pub fn nrmse_vs_truth(
+    id: &Identification,
+    runs: &[PlantRun],
+    output: usize,
+) -> (f64, f64, f64, usize) {
     let mut per = Vec::new();
     let (mut se, mut sv, mut n) = (0.0, 0.0, 0usize);
     let mut diverged = 0;
     for s in &id.simulations {
-        let Some(r) = runs.iter().find(|r| r.id.to_string() == s.run) else { continue };
+        let Some(r) = runs.iter().find(|r| r.id.to_string() == s.run) else {
+            continue;
+        };
         if s.error.is_some() || s.simulated.is_empty() {
             diverged += 1;
             continue;
@@ -53,7 +73,11 @@ pub fn nrmse_vs_truth(id: &Identification, runs: &[PlantRun], output: usize) -> 
         let truth = &r.y_true[output];
         let mean = truth.iter().sum::<f64>() / truth.len() as f64;
         let var = truth.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
-        let err = s.simulated[output].iter().zip(truth).map(|(a, b)| (a - b).powi(2)).sum::<f64>();
+        let err = s.simulated[output]
+            .iter()
+            .zip(truth)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>();
         per.push((err / var.max(1e-300)).sqrt());
         se += err;
         sv += var;
@@ -63,19 +87,43 @@ pub fn nrmse_vs_truth(id: &Identification, runs: &[PlantRun], output: usize) -> 
     if per.is_empty() {
         return (f64::NAN, f64::NAN, f64::NAN, diverged);
     }
-    (percentile(&per, 50.0), per.iter().cloned().fold(0.0, f64::max), (se / sv.max(1e-300)).sqrt(), diverged)
+    (
+        percentile(&per, 50.0),
+        per.iter().cloned().fold(0.0, f64::max),
+        (se / sv.max(1e-300)).sqrt(),
+        diverged,
+    )
 }
 
 /// Relative error of each true coefficient in an identified equation (missing terms count as
 /// -100 %), and the terms identified but not in the truth.
-pub fn coefficient_errors(found: &ModelFile, truth: &ModelFile, output: usize) -> (Vec<(String, f64, f64, f64)>, Vec<String>) {
+pub fn coefficient_errors(
+    found: &ModelFile,
+    truth: &ModelFile,
+    output: usize,
+) -> (Vec<(String, f64, f64, f64)>, Vec<String>) {
     let f = &found.outputs[output];
     let t = &truth.outputs[output];
     let mut rows = Vec::new();
     for tt in &t.terms {
-        let c = f.terms.iter().find(|x| x.exponents == tt.exponents).map(|x| x.coefficient).unwrap_or(0.0);
-        rows.push((tt.monomial(), tt.coefficient, c, (c - tt.coefficient) / tt.coefficient));
+        let c = f
+            .terms
+            .iter()
+            .find(|x| x.exponents == tt.exponents)
+            .map(|x| x.coefficient)
+            .unwrap_or(0.0);
+        rows.push((
+            tt.monomial(),
+            tt.coefficient,
+            c,
+            (c - tt.coefficient) / tt.coefficient,
+        ));
     }
-    let extra = f.terms.iter().filter(|x| !t.terms.iter().any(|y| y.exponents == x.exponents)).map(|x| format!("{:+.4e}*{}", x.coefficient, x.monomial())).collect();
+    let extra = f
+        .terms
+        .iter()
+        .filter(|x| !t.terms.iter().any(|y| y.exponents == x.exponents))
+        .map(|x| format!("{:+.4e}*{}", x.coefficient, x.monomial()))
+        .collect();
     (rows, extra)
 }

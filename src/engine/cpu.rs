@@ -34,8 +34,8 @@ pub use dense::DenseEngine;
 use super::{ColumnStats, Features, Precision, SweepEngine};
 use crate::basis::Basis;
 use crate::error::{Error, Result};
-use kernel::{Elem, Plan};
 pub use kernel::simd_level;
+use kernel::{Elem, Plan};
 use rayon::prelude::*;
 
 /// Settings of the CPU engine.
@@ -49,7 +49,10 @@ pub struct CpuOptions {
 
 impl Default for CpuOptions {
     fn default() -> Self {
-        CpuOptions { precision: Precision::F64, materialize_limit_bytes: 8 << 20 }
+        CpuOptions {
+            precision: Precision::F64,
+            materialize_limit_bytes: 8 << 20,
+        }
     }
 }
 
@@ -75,7 +78,11 @@ impl CpuEngine {
         if features.n_vars() != basis.n_vars() {
             return Err(Error::param(
                 "features",
-                format!("the basis has {} variables but the data has {}", basis.n_vars(), features.n_vars()),
+                format!(
+                    "the basis has {} variables but the data has {}",
+                    basis.n_vars(),
+                    features.n_vars()
+                ),
             ));
         }
         if features.n_samples == 0 {
@@ -93,7 +100,9 @@ impl CpuEngine {
         let dense_bytes = (n as u128) * (nc as u128) * 8;
         let dense = if dense_bytes <= options.materialize_limit_bytes as u128 {
             let mut data = vec![0.0; n * nc];
-            data.par_chunks_mut(n).enumerate().for_each(|(j, col)| eval_column(basis, features, j, col));
+            data.par_chunks_mut(n)
+                .enumerate()
+                .for_each(|(j, col)| eval_column(basis, features, j, col));
             Some(DenseEngine::from_column_major(n, nc, data))
         } else {
             None
@@ -175,7 +184,12 @@ impl CpuEngine {
         (0..n_blocks)
             .into_par_iter()
             .fold(
-                || (vec![0.0f64; nc], kernel::Scratch::<f64>::new(self.plan.degree(), nz, bsz)),
+                || {
+                    (
+                        vec![0.0f64; nc],
+                        kernel::Scratch::<f64>::new(self.plan.degree(), nz, bsz),
+                    )
+                },
                 |(mut acc, mut scratch), b| {
                     let zb = &self.z_blocks64[b * nz * bsz..(b + 1) * nz * bsz];
                     let s0 = b * bsz;
@@ -206,10 +220,16 @@ fn eval_column(basis: &Basis, features: &Features, j: usize, out: &mut [f64]) {
 pub(crate) fn check_weights(weights: Option<&[f64]>, n: usize) -> Result<()> {
     if let Some(w) = weights {
         if w.len() != n {
-            return Err(Error::param("weights", format!("{} weights for {n} samples", w.len())));
+            return Err(Error::param(
+                "weights",
+                format!("{} weights for {n} samples", w.len()),
+            ));
         }
         if let Some(i) = w.iter().position(|x| !x.is_finite() || *x < 0.0) {
-            return Err(Error::param("weights", format!("weight {} at sample {i} is negative or not finite", w[i])));
+            return Err(Error::param(
+                "weights",
+                format!("weight {} at sample {i} is negative or not finite", w[i]),
+            ));
         }
         if !w.iter().any(|x| *x > 0.0) {
             return Err(Error::param("weights", "all weights are zero"));
@@ -220,8 +240,17 @@ pub(crate) fn check_weights(weights: Option<&[f64]>, n: usize) -> Result<()> {
 
 impl SweepEngine for CpuEngine {
     fn describe(&self) -> String {
-        let mode = if self.dense.is_some() { "materialised f64".to_string() } else { format!("on-the-fly {:?}, {}", self.precision, kernel::simd_level()).to_lowercase() };
-        format!("cpu ({mode}, {} threads, {} x {})", rayon::current_num_threads(), self.n_samples, self.basis.len())
+        let mode = if self.dense.is_some() {
+            "materialised f64".to_string()
+        } else {
+            format!("on-the-fly {:?}, {}", self.precision, kernel::simd_level()).to_lowercase()
+        };
+        format!(
+            "cpu ({mode}, {} threads, {} x {})",
+            rayon::current_num_threads(),
+            self.n_samples,
+            self.basis.len()
+        )
     }
 
     fn n_samples(&self) -> usize {
@@ -250,7 +279,16 @@ impl SweepEngine for CpuEngine {
 
     fn sweep(&mut self, v: &[f64], out: &mut [f64]) -> Result<()> {
         if v.len() != self.n_samples || out.len() != self.basis.len() {
-            return Err(Error::param("sweep", format!("vector lengths {} / {} do not match {} samples / {} candidates", v.len(), out.len(), self.n_samples, self.basis.len())));
+            return Err(Error::param(
+                "sweep",
+                format!(
+                    "vector lengths {} / {} do not match {} samples / {} candidates",
+                    v.len(),
+                    out.len(),
+                    self.n_samples,
+                    self.basis.len()
+                ),
+            ));
         }
         if let Some(d) = self.dense.as_mut() {
             return d.sweep(v, out);
@@ -264,12 +302,22 @@ impl SweepEngine for CpuEngine {
 
     fn columns(&mut self, idx: &[usize]) -> Result<Vec<Vec<f64>>> {
         let n = self.n_samples;
-        let feats = Features { n_samples: n, names: self.basis.names().to_vec(), data: std::mem::take(&mut self.z64) };
+        let feats = Features {
+            n_samples: n,
+            names: self.basis.names().to_vec(),
+            data: std::mem::take(&mut self.z64),
+        };
         let mut res = Vec::with_capacity(idx.len());
         for &j in idx {
             if j >= self.basis.len() {
                 self.z64 = feats.data;
-                return Err(Error::param("columns", format!("candidate {j} is out of range ({} candidates)", self.basis.len())));
+                return Err(Error::param(
+                    "columns",
+                    format!(
+                        "candidate {j} is out of range ({} candidates)",
+                        self.basis.len()
+                    ),
+                ));
             }
             let mut col = vec![0.0; n];
             eval_column(&self.basis, &feats, j, &mut col);
@@ -286,22 +334,37 @@ mod tests {
     use crate::basis::BasisLimits;
 
     fn lcg(seed: &mut u64) -> f64 {
-        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((*seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
     }
 
     fn problem(nz: usize, d: usize, n: usize) -> (Basis, Features) {
         let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
         let mut s = 7u64;
-        let cols = (0..nz).map(|_| (0..n).map(|_| lcg(&mut s)).collect()).collect();
-        (Basis::new(&names, d, BasisLimits::default()).unwrap(), Features::new(names, cols))
+        let cols = (0..nz)
+            .map(|_| (0..n).map(|_| lcg(&mut s)).collect())
+            .collect();
+        (
+            Basis::new(&names, d, BasisLimits::default()).unwrap(),
+            Features::new(names, cols),
+        )
     }
 
     #[test]
     fn on_the_fly_sweeps_and_stats_match_materialised() {
         for (nz, d, n) in [(3, 4, 300), (5, 3, 1000), (2, 0, 50), (4, 1, 129)] {
             let (b, f) = problem(nz, d, n);
-            let mut dense = CpuEngine::new(&b, &f, CpuOptions { materialize_limit_bytes: usize::MAX, ..Default::default() }).unwrap();
+            let mut dense = CpuEngine::new(
+                &b,
+                &f,
+                CpuOptions {
+                    materialize_limit_bytes: usize::MAX,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
             assert!(dense.is_materialized());
             let mut s = 3u64;
             let v: Vec<f64> = (0..n).map(|_| lcg(&mut s)).collect();
@@ -310,20 +373,40 @@ mod tests {
             dense.sweep(&v, &mut reference).unwrap();
             let rs = dense.column_stats(Some(&w)).unwrap();
             for precision in [Precision::F64, Precision::F32] {
-                let mut e = CpuEngine::new(&b, &f, CpuOptions { precision, materialize_limit_bytes: 0 }).unwrap();
+                let mut e = CpuEngine::new(
+                    &b,
+                    &f,
+                    CpuOptions {
+                        precision,
+                        materialize_limit_bytes: 0,
+                    },
+                )
+                .unwrap();
                 assert!(!e.is_materialized());
                 let mut out = vec![f64::NAN; b.len()];
                 e.sweep(&v, &mut out).unwrap();
                 let cols = e.columns(&(0..b.len()).collect::<Vec<_>>()).unwrap();
-                let tol = if precision == Precision::F64 { 1e-13 } else { 1e-5 };
+                let tol = if precision == Precision::F64 {
+                    1e-13
+                } else {
+                    1e-5
+                };
                 for j in 0..b.len() {
                     let scale: f64 = cols[j].iter().zip(&v).map(|(x, y)| (x * y).abs()).sum();
-                    assert!((out[j] - reference[j]).abs() <= tol * scale, "{precision:?} candidate {j}: {} vs {}", out[j], reference[j]);
+                    assert!(
+                        (out[j] - reference[j]).abs() <= tol * scale,
+                        "{precision:?} candidate {j}: {} vs {}",
+                        out[j],
+                        reference[j]
+                    );
                 }
                 let st = e.column_stats(Some(&w)).unwrap();
                 for j in 0..b.len() {
                     assert!((st.mean[j] - rs.mean[j]).abs() <= 1e-12 * (1.0 + rs.mean[j].abs()));
-                    assert!((st.norm[j] - rs.norm[j]).abs() <= 1e-10 * (1.0 + rs.norm[j]), "norm {j}");
+                    assert!(
+                        (st.norm[j] - rs.norm[j]).abs() <= 1e-10 * (1.0 + rs.norm[j]),
+                        "norm {j}"
+                    );
                 }
             }
         }
@@ -332,7 +415,15 @@ mod tests {
     #[test]
     fn columns_are_exact_monomials() {
         let (b, f) = problem(3, 3, 20);
-        let mut e = CpuEngine::new(&b, &f, CpuOptions { materialize_limit_bytes: 0, ..Default::default() }).unwrap();
+        let mut e = CpuEngine::new(
+            &b,
+            &f,
+            CpuOptions {
+                materialize_limit_bytes: 0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         let cols = e.columns(&[0, 5, b.len() - 1]).unwrap();
         for (c, j) in cols.iter().zip([0, 5, b.len() - 1]) {
             for i in 0..20 {

@@ -115,13 +115,18 @@ fn type_rank(t: wgpu::DeviceType) -> u32 {
 /// Every Vulkan adapter, best first (discrete, integrated, virtual, other, CPU).
 pub fn probe_adapters() -> Vec<AdapterSummary> {
     let instance = new_instance();
-    let mut v: Vec<AdapterSummary> = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN))
-        .iter()
-        .map(|a| {
-            let i = a.get_info();
-            AdapterSummary { name: i.name, device_type: i.device_type, driver: format!("{} {}", i.driver, i.driver_info) }
-        })
-        .collect();
+    let mut v: Vec<AdapterSummary> =
+        pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN))
+            .iter()
+            .map(|a| {
+                let i = a.get_info();
+                AdapterSummary {
+                    name: i.name,
+                    device_type: i.device_type,
+                    driver: format!("{} {}", i.driver, i.driver_info),
+                }
+            })
+            .collect();
     v.sort_by_key(|a| type_rank(a.device_type));
     v
 }
@@ -188,7 +193,11 @@ pub struct GpuEngine {
 }
 
 /// Factor degree, table length, factors per candidate and chunk for a problem (pure; see docs).
-fn plan_factors(n_z: usize, degree: usize, shared_bytes: u32) -> Result<(usize, usize, usize, usize)> {
+fn plan_factors(
+    n_z: usize,
+    degree: usize,
+    shared_bytes: u32,
+) -> Result<(usize, usize, usize, usize)> {
     let shared_floats = shared_bytes as usize / 4;
     let mut best: Option<(f64, usize, usize, usize, usize)> = None;
     for fd in 1..=3usize.min(degree.max(1)) {
@@ -217,7 +226,10 @@ fn plan_factors(n_z: usize, degree: usize, shared_bytes: u32) -> Result<(usize, 
 }
 
 fn shader_header(consts: &[(&str, u32)]) -> String {
-    consts.iter().map(|(k, v)| format!("const {k}: u32 = {v}u;\n")).collect()
+    consts
+        .iter()
+        .map(|(k, v)| format!("const {k}: u32 = {v}u;\n"))
+        .collect()
 }
 
 fn mib(b: u64) -> f64 {
@@ -231,16 +243,32 @@ impl GpuEngine {
         let n_z = features.n_vars();
         let n_c = basis.len();
         if n_z != basis.n_vars() {
-            return Err(Error::param("features", format!("{n_z} feature columns but the basis has {} variables", basis.n_vars())));
+            return Err(Error::param(
+                "features",
+                format!(
+                    "{n_z} feature columns but the basis has {} variables",
+                    basis.n_vars()
+                ),
+            ));
         }
         if n_s == 0 || n_c == 0 {
-            return Err(Error::param("features", "the GPU engine needs at least one sample and one candidate"));
+            return Err(Error::param(
+                "features",
+                "the GPU engine needs at least one sample and one candidate",
+            ));
         }
         if n_s > u32::MAX as usize / 64 || n_c > u32::MAX as usize / 64 {
-            return Err(Error::param("features", "more samples or candidates than the GPU engine indexes (u32)"));
+            return Err(Error::param(
+                "features",
+                "more samples or candidates than the GPU engine indexes (u32)",
+            ));
         }
         if let Some(k) = features.data.iter().position(|x| !x.is_finite()) {
-            return Err(Error::InvalidData(format!("feature '{}' has a non-finite value at sample {}", features.names[k / n_s], k % n_s)));
+            return Err(Error::InvalidData(format!(
+                "feature '{}' has a non-finite value at sample {}",
+                features.names[k / n_s],
+                k % n_s
+            )));
         }
 
         let instance = new_instance();
@@ -249,12 +277,20 @@ impl GpuEngine {
         let seen: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
         let adapter = adapters
             .into_iter()
-            .find(|a| options.allow_cpu_adapter || a.get_info().device_type != wgpu::DeviceType::Cpu)
+            .find(|a| {
+                options.allow_cpu_adapter || a.get_info().device_type != wgpu::DeviceType::Cpu
+            })
             .ok_or_else(|| {
                 if seen.is_empty() {
-                    Error::NoGpu("no Vulkan adapter found (is a Vulkan driver installed?); use --engine cpu".into())
+                    Error::NoGpu(
+                        "no Vulkan adapter found (is a Vulkan driver installed?); use --engine cpu"
+                            .into(),
+                    )
                 } else {
-                    Error::NoGpu(format!("only CPU (software) Vulkan adapters found ({}); use --engine cpu", seen.join(", ")))
+                    Error::NoGpu(format!(
+                        "only CPU (software) Vulkan adapters found ({}); use --engine cpu",
+                        seen.join(", ")
+                    ))
                 }
             })?;
         let info = adapter.get_info();
@@ -273,11 +309,18 @@ impl GpuEngine {
 
         // ---- plan ----
         let degree = basis.degree();
-        let (fd, ts, nf, chunk) = plan_factors(n_z, degree, limits.max_compute_workgroup_storage_size)?;
+        let (fd, ts, nf, chunk) =
+            plan_factors(n_z, degree, limits.max_compute_workgroup_storage_size)?;
         let nw = nf.div_ceil(2);
         let tiles_total = n_c.div_ceil(TILE as usize);
-        let target_wg: usize = if info.device_type == wgpu::DeviceType::Cpu { 16 } else { 4096 };
-        let max_blocks = n_s.div_ceil(chunk).min(limits.max_compute_workgroups_per_dimension as usize);
+        let target_wg: usize = if info.device_type == wgpu::DeviceType::Cpu {
+            16
+        } else {
+            4096
+        };
+        let max_blocks = n_s
+            .div_ceil(chunk)
+            .min(limits.max_compute_workgroups_per_dimension as usize);
         let n_blocks = n_s
             .div_ceil(options.max_block_samples.max(chunk))
             .max(target_wg.div_ceil(tiles_total))
@@ -298,9 +341,14 @@ impl GpuEngine {
         window = (window / tile).max(1) * tile;
         let align = limits.min_storage_buffer_offset_alignment as usize;
         if !(window * 8).is_multiple_of(align) {
-            return Err(Error::Gpu(format!("storage offset alignment {align} does not divide the window size")));
+            return Err(Error::Gpu(format!(
+                "storage offset alignment {align} does not divide the window size"
+            )));
         }
-        let spans: Vec<(usize, usize)> = (0..n_c).step_by(window).map(|s| (s, window.min(n_c - s))).collect();
+        let spans: Vec<(usize, usize)> = (0..n_c)
+            .step_by(window)
+            .map(|s| (s, window.min(n_c - s)))
+            .collect();
 
         // ---- memory: estimate first, refuse with the numbers ----
         let sizes: [(&str, u64, bool); 8] = [
@@ -324,12 +372,19 @@ impl GpuEngine {
         }
         for (what, bytes, bound_whole) in sizes {
             if bytes > limits.max_buffer_size || (bound_whole && bytes > max_bind) {
-                let cap = if bound_whole { max_bind.min(limits.max_buffer_size) } else { limits.max_buffer_size };
+                let cap = if bound_whole {
+                    max_bind.min(limits.max_buffer_size)
+                } else {
+                    limits.max_buffer_size
+                };
                 return Err(Error::TooLarge {
                     what: format!("the GPU {what} buffer for {n_s} samples x {n_c} candidates"),
                     needed_mib: mib(bytes),
                     budget_mib: mib(cap),
-                    hint: format!("{} allows no larger buffer; use fewer samples or --engine cpu", info.name),
+                    hint: format!(
+                        "{} allows no larger buffer; use fewer samples or --engine cpu",
+                        info.name
+                    ),
                 });
             }
         }
@@ -338,7 +393,12 @@ impl GpuEngine {
         let fnames: Vec<String> = (0..n_z).map(|k| format!("z{k}")).collect();
         let fbasis = Basis::new(&fnames, fd, Default::default())?;
         debug_assert_eq!(fbasis.len(), ts);
-        let findex: HashMap<Code, u32> = fbasis.codes().iter().enumerate().map(|(i, c)| (*c, i as u32)).collect();
+        let findex: HashMap<Code, u32> = fbasis
+            .codes()
+            .iter()
+            .enumerate()
+            .map(|(i, c)| (*c, i as u32))
+            .collect();
         let recipe: Vec<u32> = (0..ts)
             .map(|f| match (fbasis.parent(f), fbasis.last_var(f)) {
                 (Some(p), Some(v)) => p as u32 | ((v as u32) << 16),
@@ -380,14 +440,27 @@ impl GpuEngine {
         let recipe_buf = storage("recipe", bytemuck::cast_slice(&recipe));
         let cand_buf = storage("cand", bytemuck::cast_slice(&cand));
         let plain = |label: &str, size: u64, usage: wgpu::BufferUsages| {
-            device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size, usage, mapped_at_creation: false })
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
         };
         let st = wgpu::BufferUsages::STORAGE;
         let v_buf = plain("v", (n_s * 4) as u64, st | wgpu::BufferUsages::COPY_DST);
         let mean_buf = plain("mean", (n_c * 4) as u64, st | wgpu::BufferUsages::COPY_DST);
         let partial_buf = plain("partial", (n_blocks * window * 8) as u64, st);
-        let out_buf = plain("out", (n_c * 8) as u64, st | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST);
-        let staging = plain("staging", (n_c * 8) as u64, wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST);
+        let out_buf = plain(
+            "out",
+            (n_c * 8) as u64,
+            st | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        );
+        let staging = plain(
+            "staging",
+            (n_c * 8) as u64,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
 
         let header = shader_header(&[
             ("WG", WG),
@@ -404,16 +477,32 @@ impl GpuEngine {
             ("LEVEL_END3", level_end[3]),
         ]);
         let module = |label: &str, src: String| {
-            device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(label), source: wgpu::ShaderSource::Wgsl(src.into()) })
+            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(label),
+                source: wgpu::ShaderSource::Wgsl(src.into()),
+            })
         };
-        let sweep_mod = module("sweep", format!("{header}const MODE: u32 = 0u;\n{SWEEP_WGSL}"));
-        let centred_mod = module("centred", format!("{header}const MODE: u32 = 1u;\n{SWEEP_WGSL}"));
-        let finalize_mod = module("finalize", format!("{}{FINALIZE_WGSL}", shader_header(&[("WG", WG)])));
+        let sweep_mod = module(
+            "sweep",
+            format!("{header}const MODE: u32 = 0u;\n{SWEEP_WGSL}"),
+        );
+        let centred_mod = module(
+            "centred",
+            format!("{header}const MODE: u32 = 1u;\n{SWEEP_WGSL}"),
+        );
+        let finalize_mod = module(
+            "finalize",
+            format!("{}{FINALIZE_WGSL}", shader_header(&[("WG", WG)])),
+        );
 
         let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
             binding,
             visibility: wgpu::ShaderStages::COMPUTE,
-            ty: wgpu::BindingType::Buffer { ty, has_dynamic_offset: false, min_binding_size: None },
+            ty: wgpu::BindingType::Buffer {
+                ty,
+                has_dynamic_offset: false,
+                min_binding_size: None,
+            },
             count: None,
         };
         let ro = wgpu::BufferBindingType::Storage { read_only: true };
@@ -421,7 +510,15 @@ impl GpuEngine {
         let uni = wgpu::BufferBindingType::Uniform;
         let sweep_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("sweep"),
-            entries: &[entry(0, uni), entry(1, ro), entry(2, ro), entry(3, ro), entry(4, ro), entry(5, ro), entry(6, rw)],
+            entries: &[
+                entry(0, uni),
+                entry(1, ro),
+                entry(2, ro),
+                entry(3, ro),
+                entry(4, ro),
+                entry(5, ro),
+                entry(6, rw),
+            ],
         });
         let finalize_bgl = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("finalize"),
@@ -452,7 +549,16 @@ impl GpuEngine {
         let windows: Vec<Window> = spans
             .iter()
             .map(|&(start, len)| {
-                let params: [u32; 8] = [start as u32, len as u32, n_s as u32, block_samples as u32, n_blocks as u32, window as u32, 0, 0];
+                let params: [u32; 8] = [
+                    start as u32,
+                    len as u32,
+                    n_s as u32,
+                    block_samples as u32,
+                    n_blocks as u32,
+                    window as u32,
+                    0,
+                    0,
+                ];
                 let pbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
                     label: Some("params"),
                     contents: bytemuck::cast_slice(&params),
@@ -462,21 +568,48 @@ impl GpuEngine {
                     label: Some("sweep"),
                     layout: &sweep_bgl,
                     entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: whole(&pbuf) },
-                        wgpu::BindGroupEntry { binding: 1, resource: whole(&z_buf) },
-                        wgpu::BindGroupEntry { binding: 2, resource: whole(&v_buf) },
-                        wgpu::BindGroupEntry { binding: 3, resource: whole(&recipe_buf) },
-                        wgpu::BindGroupEntry { binding: 4, resource: whole(&cand_buf) },
-                        wgpu::BindGroupEntry { binding: 5, resource: whole(&mean_buf) },
-                        wgpu::BindGroupEntry { binding: 6, resource: whole(&partial_buf) },
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: whole(&pbuf),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: whole(&z_buf),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 2,
+                            resource: whole(&v_buf),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 3,
+                            resource: whole(&recipe_buf),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 4,
+                            resource: whole(&cand_buf),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 5,
+                            resource: whole(&mean_buf),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 6,
+                            resource: whole(&partial_buf),
+                        },
                     ],
                 });
                 let finalize_bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
                     label: Some("finalize"),
                     layout: &finalize_bgl,
                     entries: &[
-                        wgpu::BindGroupEntry { binding: 0, resource: whole(&pbuf) },
-                        wgpu::BindGroupEntry { binding: 1, resource: whole(&partial_buf) },
+                        wgpu::BindGroupEntry {
+                            binding: 0,
+                            resource: whole(&pbuf),
+                        },
+                        wgpu::BindGroupEntry {
+                            binding: 1,
+                            resource: whole(&partial_buf),
+                        },
                         wgpu::BindGroupEntry {
                             binding: 2,
                             resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
@@ -487,17 +620,28 @@ impl GpuEngine {
                         },
                     ],
                 });
-                Window { start, len, sweep_bg, finalize_bg }
+                Window {
+                    start,
+                    len,
+                    sweep_bg,
+                    finalize_bg,
+                }
             })
             .collect();
 
         let verr = pollster::block_on(val.pop());
         let merr = pollster::block_on(oom.pop());
         if let Some(e) = merr {
-            return Err(Error::Gpu(format!("out of device memory while uploading {n_s} x {n_c} ({:.0} MiB): {e}", mib(total))));
+            return Err(Error::Gpu(format!(
+                "out of device memory while uploading {n_s} x {n_c} ({:.0} MiB): {e}",
+                mib(total)
+            )));
         }
         if let Some(e) = verr {
-            return Err(Error::Gpu(format!("setup failed validation: {}", one_line(&e.to_string()))));
+            return Err(Error::Gpu(format!(
+                "setup failed validation: {}",
+                one_line(&e.to_string())
+            )));
         }
 
         let layout = GpuLayout {
@@ -546,10 +690,25 @@ impl GpuEngine {
     }
 
     fn check(&self) -> Result<()> {
-        if let Some(msg) = self.sink.lost.lock().unwrap_or_else(|p| p.into_inner()).as_ref() {
-            return Err(Error::Gpu(format!("device lost ({}); use --engine cpu", one_line(msg))));
+        if let Some(msg) = self
+            .sink
+            .lost
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .as_ref()
+        {
+            return Err(Error::Gpu(format!(
+                "device lost ({}); use --engine cpu",
+                one_line(msg)
+            )));
         }
-        if let Some(msg) = self.sink.uncaptured.lock().unwrap_or_else(|p| p.into_inner()).first() {
+        if let Some(msg) = self
+            .sink
+            .uncaptured
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .first()
+        {
             return Err(Error::Gpu(format!("device error: {}", one_line(msg))));
         }
         Ok(())
@@ -560,15 +719,27 @@ impl GpuEngine {
         self.check()?;
         let oom = self.device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
         let val = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        self.queue.write_buffer(&self.v_buf, 0, bytemuck::cast_slice(v));
+        self.queue
+            .write_buffer(&self.v_buf, 0, bytemuck::cast_slice(v));
         let tiles_y = self.layout.n_blocks as u32;
-        let pipe = if mode == Mode::Sweep { &self.sweep_pipe } else { &self.centred_pipe };
+        let pipe = if mode == Mode::Sweep {
+            &self.sweep_pipe
+        } else {
+            &self.centred_pipe
+        };
         // One command buffer per window: each is bounded in work (see GpuOptions).
         let mut cbs = Vec::with_capacity(self.windows.len() + 1);
         for w in &self.windows {
-            let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("window") });
+            let mut enc = self
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                    label: Some("window"),
+                });
             {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("sweep"), timestamp_writes: None });
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: Some("sweep"),
+                    timestamp_writes: None,
+                });
                 pass.set_pipeline(pipe);
                 pass.set_bind_group(0, &w.sweep_bg, &[]);
                 pass.dispatch_workgroups(w.len.div_ceil(TILE as usize) as u32, tiles_y, 1);
@@ -580,7 +751,11 @@ impl GpuEngine {
             cbs.push(enc.finish());
         }
         let bytes = (self.n_candidates * 8) as u64;
-        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("read-back") });
+        let mut enc = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor {
+                label: Some("read-back"),
+            });
         enc.copy_buffer_to_buffer(&self.out_buf, 0, &self.staging, 0, bytes);
         cbs.push(enc.finish());
         let idx = self.queue.submit(cbs);
@@ -592,14 +767,23 @@ impl GpuEngine {
         });
         let verr = pollster::block_on(val.pop());
         let merr = pollster::block_on(oom.pop());
-        let polled = self.device.poll(wgpu::PollType::Wait { submission_index: Some(idx), timeout: Some(self.timeout) });
+        let polled = self.device.poll(wgpu::PollType::Wait {
+            submission_index: Some(idx),
+            timeout: Some(self.timeout),
+        });
         if let Some(e) = verr.or(merr) {
             self.staging.unmap();
-            return Err(Error::Gpu(format!("sweep failed: {}", one_line(&e.to_string()))));
+            return Err(Error::Gpu(format!(
+                "sweep failed: {}",
+                one_line(&e.to_string())
+            )));
         }
         if let Err(e) = polled {
             self.check()?;
-            return Err(Error::Gpu(format!("waiting for the sweep failed after {:?}: {e}", self.timeout)));
+            return Err(Error::Gpu(format!(
+                "waiting for the sweep failed after {:?}: {e}",
+                self.timeout
+            )));
         }
         match rx.try_recv() {
             Ok(Ok(())) => {}
@@ -609,11 +793,15 @@ impl GpuEngine {
             }
             Err(_) => {
                 self.check()?;
-                return Err(Error::Gpu("the results were not ready after the device finished".into()));
+                return Err(Error::Gpu(
+                    "the results were not ready after the device finished".into(),
+                ));
             }
         }
         {
-            let view = slice.get_mapped_range().map_err(|e| Error::Gpu(format!("cannot map the results: {e:?}")))?;
+            let view = slice
+                .get_mapped_range()
+                .map_err(|e| Error::Gpu(format!("cannot map the results: {e:?}")))?;
             match bytemuck::try_cast_slice::<u8, [f32; 2]>(&view) {
                 Ok(pairs) => {
                     for (o, p) in out.iter_mut().zip(pairs) {
@@ -640,11 +828,18 @@ fn install_sink(device: &wgpu::Device) -> Arc<ErrorSink> {
     let sink = Arc::new(ErrorSink::default());
     let s = sink.clone();
     device.on_uncaptured_error(Arc::new(move |e: wgpu::Error| {
-        s.uncaptured.lock().unwrap_or_else(|p| p.into_inner()).push(e.to_string());
+        s.uncaptured
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .push(e.to_string());
     }));
     let s = sink.clone();
     device.set_device_lost_callback(move |reason, msg| {
-        *s.lost.lock().unwrap_or_else(|p| p.into_inner()) = Some(if msg.is_empty() { format!("{reason:?}") } else { format!("{reason:?}: {msg}") });
+        *s.lost.lock().unwrap_or_else(|p| p.into_inner()) = Some(if msg.is_empty() {
+            format!("{reason:?}")
+        } else {
+            format!("{reason:?}: {msg}")
+        });
     });
     sink
 }
@@ -655,10 +850,19 @@ fn one_line(s: &str) -> String {
 
 fn to_f32(what: &str, x: &[f64], n: usize) -> Result<Vec<f32>> {
     if x.len() != n {
-        return Err(Error::param(what, format!("length {} but there are {n} samples", x.len())));
+        return Err(Error::param(
+            what,
+            format!("length {} but there are {n} samples", x.len()),
+        ));
     }
-    if let Some(i) = x.iter().position(|a| !a.is_finite() || a.abs() > f32::MAX as f64) {
-        return Err(Error::InvalidData(format!("{what}[{i}] = {} is not a finite f32 value", x[i])));
+    if let Some(i) = x
+        .iter()
+        .position(|a| !a.is_finite() || a.abs() > f32::MAX as f64)
+    {
+        return Err(Error::InvalidData(format!(
+            "{what}[{i}] = {} is not a finite f32 value",
+            x[i]
+        )));
     }
     Ok(x.iter().map(|&a| a as f32).collect())
 }
@@ -696,13 +900,17 @@ impl SweepEngine for GpuEngine {
         // The GPU sees the f32 weights; use exactly those on the host side too.
         let wsum: f64 = w32.iter().map(|&a| a as f64).sum();
         if wsum <= 0.0 {
-            return Err(Error::param("weights", "sum to zero; at least one sample needs a positive weight"));
+            return Err(Error::param(
+                "weights",
+                "sum to zero; at least one sample needs a positive weight",
+            ));
         }
         let mut s1 = vec![0.0; self.n_candidates];
         self.run(Mode::Sweep, &w32, &mut s1)?;
         let mean: Vec<f64> = s1.iter().map(|s| s / wsum).collect();
         let mean32: Vec<f32> = mean.iter().map(|&m| m as f32).collect();
-        self.queue.write_buffer(&self.mean_buf, 0, bytemuck::cast_slice(&mean32));
+        self.queue
+            .write_buffer(&self.mean_buf, 0, bytemuck::cast_slice(&mean32));
         let mut q = vec![0.0; self.n_candidates];
         self.run(Mode::Centred, &w32, &mut q)?;
         let norm = q
@@ -719,7 +927,14 @@ impl SweepEngine for GpuEngine {
 
     fn sweep(&mut self, v: &[f64], out: &mut [f64]) -> Result<()> {
         if out.len() != self.n_candidates {
-            return Err(Error::param("out", format!("length {} but there are {} candidates", out.len(), self.n_candidates)));
+            return Err(Error::param(
+                "out",
+                format!(
+                    "length {} but there are {} candidates",
+                    out.len(),
+                    self.n_candidates
+                ),
+            ));
         }
         let v32 = to_f32("v", v, self.n_samples)?;
         self.run(Mode::Sweep, &v32, out)
@@ -729,7 +944,13 @@ impl SweepEngine for GpuEngine {
         idx.iter()
             .map(|&j| {
                 let code = *self.codes.get(j).ok_or_else(|| {
-                    Error::param("columns", format!("candidate {j} does not exist (there are {})", self.n_candidates))
+                    Error::param(
+                        "columns",
+                        format!(
+                            "candidate {j} does not exist (there are {})",
+                            self.n_candidates
+                        ),
+                    )
                 })?;
                 // Same operation order as Code::eval, so the values are bit-identical to it.
                 let mut col = vec![1.0; self.n_samples];
@@ -753,7 +974,13 @@ mod tests {
     }
 
     fn tiny_engine() -> Option<GpuEngine> {
-        let cols = (0..3).map(|k| (0..200).map(|i| ((i * 7 + k * 3) % 11) as f64 / 5.0 - 1.0).collect()).collect();
+        let cols = (0..3)
+            .map(|k| {
+                (0..200)
+                    .map(|i| ((i * 7 + k * 3) % 11) as f64 / 5.0 - 1.0)
+                    .collect()
+            })
+            .collect();
         let f = Features::new(vec!["a".into(), "b".into(), "c".into()], cols);
         let b = Basis::new(&f.names, 3, Default::default()).unwrap();
         match GpuEngine::new(&f, &b, GpuOptions::default()) {
@@ -769,7 +996,10 @@ mod tests {
     #[test]
     fn validation_errors_are_caught_or_recorded_never_a_panic() {
         let Some(eng) = tiny_engine() else { return };
-        let bad = || wgpu::ShaderModuleDescriptor { label: Some("bad"), source: wgpu::ShaderSource::Wgsl("fn main( {".into()) };
+        let bad = || wgpu::ShaderModuleDescriptor {
+            label: Some("bad"),
+            source: wgpu::ShaderSource::Wgsl("fn main( {".into()),
+        };
         // Inside an error scope: the scope gets it, the recorder does not.
         let val = eng.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let _m = eng.device.create_shader_module(bad());

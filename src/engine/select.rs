@@ -35,7 +35,10 @@ impl FromStr for EngineChoice {
             "auto" => Ok(EngineChoice::Auto),
             "cpu" => Ok(EngineChoice::Cpu),
             "gpu" => Ok(EngineChoice::Gpu),
-            other => Err(Error::param("engine", format!("'{other}'; expected cpu, gpu or auto"))),
+            other => Err(Error::param(
+                "engine",
+                format!("'{other}'; expected cpu, gpu or auto"),
+            )),
         }
     }
 }
@@ -73,9 +76,16 @@ pub const AUTO_MIN_PAIRS: u64 = 50_000_000;
 
 /// Decides which engine runs a problem of `n_samples x n_candidates`, given the adapters present
 /// (best first, as [`crate::engine::gpu::probe_adapters`] returns them). Pure.
-pub fn decide(choice: EngineChoice, n_samples: usize, n_candidates: usize, adapters: &[AdapterSummary]) -> Result<Decision> {
+pub fn decide(
+    choice: EngineChoice,
+    n_samples: usize,
+    n_candidates: usize,
+    adapters: &[AdapterSummary],
+) -> Result<Decision> {
     let pairs = n_samples as u64 * n_candidates as u64;
-    let real = adapters.iter().find(|a| a.device_type != wgpu::DeviceType::Cpu);
+    let real = adapters
+        .iter()
+        .find(|a| a.device_type != wgpu::DeviceType::Cpu);
     match choice {
         EngineChoice::Cpu => Ok(Decision { kind: EngineKind::Cpu, reason: "cpu engine: requested with --engine cpu".into() }),
         EngineChoice::Gpu => match real.or(adapters.first()) {
@@ -113,7 +123,11 @@ pub fn decide(choice: EngineChoice, n_samples: usize, n_candidates: usize, adapt
 
 /// [`decide`] with the adapters of this machine.
 pub fn choose(choice: EngineChoice, n_samples: usize, n_candidates: usize) -> Result<Decision> {
-    let adapters = if choice == EngineChoice::Cpu { Vec::new() } else { crate::engine::gpu::probe_adapters() };
+    let adapters = if choice == EngineChoice::Cpu {
+        Vec::new()
+    } else {
+        crate::engine::gpu::probe_adapters()
+    };
     decide(choice, n_samples, n_candidates, &adapters)
 }
 
@@ -122,14 +136,22 @@ mod tests {
     use super::*;
 
     fn ad(name: &str, t: wgpu::DeviceType) -> AdapterSummary {
-        AdapterSummary { name: name.into(), device_type: t, driver: String::new() }
+        AdapterSummary {
+            name: name.into(),
+            device_type: t,
+            driver: String::new(),
+        }
     }
 
     #[test]
     fn parses_choices() {
         assert_eq!("AUTO".parse::<EngineChoice>().unwrap(), EngineChoice::Auto);
         assert_eq!("gpu".parse::<EngineChoice>().unwrap(), EngineChoice::Gpu);
-        assert!("cuda".parse::<EngineChoice>().unwrap_err().to_string().contains("cpu, gpu or auto"));
+        assert!("cuda"
+            .parse::<EngineChoice>()
+            .unwrap_err()
+            .to_string()
+            .contains("cpu, gpu or auto"));
     }
 
     #[test]
@@ -137,7 +159,11 @@ mod tests {
         let lvp = [ad("llvmpipe", wgpu::DeviceType::Cpu)];
         let d = decide(EngineChoice::Auto, 25_000, 497_420, &lvp).unwrap();
         assert_eq!(d.kind, EngineKind::Cpu);
-        assert!(d.reason.contains("software") && d.reason.contains("llvmpipe"), "{}", d.reason);
+        assert!(
+            d.reason.contains("software") && d.reason.contains("llvmpipe"),
+            "{}",
+            d.reason
+        );
         let d = decide(EngineChoice::Auto, 25_000, 497_420, &[]).unwrap();
         assert_eq!(d.kind, EngineKind::Cpu);
         assert!(d.reason.contains("no GPU adapter"), "{}", d.reason);
@@ -145,7 +171,10 @@ mod tests {
 
     #[test]
     fn auto_uses_a_real_gpu_only_for_large_problems() {
-        let h100 = [ad("NVIDIA H100", wgpu::DeviceType::DiscreteGpu), ad("llvmpipe", wgpu::DeviceType::Cpu)];
+        let h100 = [
+            ad("NVIDIA H100", wgpu::DeviceType::DiscreteGpu),
+            ad("llvmpipe", wgpu::DeviceType::Cpu),
+        ];
         let big = decide(EngineChoice::Auto, 25_000, 12_376, &h100).unwrap();
         assert_eq!(big.kind, EngineKind::Gpu);
         assert!(big.reason.contains("H100"));
@@ -157,10 +186,18 @@ mod tests {
     #[test]
     fn gpu_takes_any_adapter_or_fails_clearly() {
         let lvp = [ad("llvmpipe", wgpu::DeviceType::Cpu)];
-        assert_eq!(decide(EngineChoice::Gpu, 10, 10, &lvp).unwrap().kind, EngineKind::Gpu);
+        assert_eq!(
+            decide(EngineChoice::Gpu, 10, 10, &lvp).unwrap().kind,
+            EngineKind::Gpu
+        );
         let e = decide(EngineChoice::Gpu, 10, 10, &[]).unwrap_err();
         assert!(matches!(e, Error::NoGpu(_)));
         assert!(e.to_string().contains("--engine cpu"));
-        assert_eq!(decide(EngineChoice::Cpu, 1 << 20, 1 << 20, &lvp).unwrap().kind, EngineKind::Cpu);
+        assert_eq!(
+            decide(EngineChoice::Cpu, 1 << 20, 1 << 20, &lvp)
+                .unwrap()
+                .kind,
+            EngineKind::Cpu
+        );
     }
 }

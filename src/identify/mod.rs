@@ -32,6 +32,9 @@ use crate::records::RecordSet;
 use crate::regression::{EngineChoice, Method, Regression};
 use crate::simulate::{fit_initial_state, rms_nrmse, simulate_model, SimOptions};
 
+/// Reweighting passes of the robust fit.
+pub const ROBUST_ITERATIONS: usize = 3;
+
 /// Samples used to refine each simulated run's initial state.
 pub const INIT_WINDOW: usize = 200;
 use profile::{eta_rule, Profile};
@@ -64,7 +67,18 @@ pub struct Settings {
 
 impl Settings {
     pub fn new(outputs: Vec<String>, inputs: Vec<String>, degree: usize) -> Settings {
-        Settings { outputs, inputs, orders: Orders::Search(vec![1, 2, 3, 4]), degree, eta: 1.2, folds: 5, engine: EngineChoice::Auto, max_terms: 40, weighting: true, progress: false }
+        Settings {
+            outputs,
+            inputs,
+            orders: Orders::Search(vec![1, 2, 3, 4]),
+            degree,
+            eta: 1.2,
+            folds: 5,
+            engine: EngineChoice::Auto,
+            max_terms: 40,
+            weighting: true,
+            progress: false,
+        }
     }
 
     pub fn validate(&self) -> Result<()> {
@@ -74,26 +88,48 @@ impl Settings {
         let mut all: Vec<&String> = self.outputs.iter().chain(&self.inputs).collect();
         all.sort();
         if let Some(w) = all.windows(2).find(|w| w[0] == w[1]) {
-            return Err(Error::param("channels", format!("'{}' is named twice", w[0])));
+            return Err(Error::param(
+                "channels",
+                format!("'{}' is named twice", w[0]),
+            ));
         }
         match &self.orders {
-            Orders::Search(c) if c.is_empty() => return Err(Error::param("orders", "no candidate order")),
+            Orders::Search(c) if c.is_empty() => {
+                return Err(Error::param("orders", "no candidate order"))
+            }
             Orders::Search(c) | Orders::Fixed(c) => {
                 if let Some(o) = c.iter().find(|&&o| o == 0 || o > 6) {
-                    return Err(Error::param("orders", format!("order {o} is outside 1..=6")));
+                    return Err(Error::param(
+                        "orders",
+                        format!("order {o} is outside 1..=6"),
+                    ));
                 }
             }
         }
         if let Orders::Fixed(c) = &self.orders {
             if c.len() != self.outputs.len() {
-                return Err(Error::param("order", format!("{} orders for {} outputs; give one per output", c.len(), self.outputs.len())));
+                return Err(Error::param(
+                    "order",
+                    format!(
+                        "{} orders for {} outputs; give one per output",
+                        c.len(),
+                        self.outputs.len()
+                    ),
+                ));
             }
         }
         if !(self.eta >= 1.0 && self.eta.is_finite()) {
             return Err(Error::param("eta", format!("{} must be >= 1", self.eta)));
         }
         if self.degree == 0 || self.degree > crate::basis::MAX_DEGREE {
-            return Err(Error::param("degree", format!("{} is outside 1..={}", self.degree, crate::basis::MAX_DEGREE)));
+            return Err(Error::param(
+                "degree",
+                format!(
+                    "{} is outside 1..={}",
+                    self.degree,
+                    crate::basis::MAX_DEGREE
+                ),
+            ));
         }
         Ok(())
     }
@@ -160,9 +196,19 @@ pub struct Identification {
 impl Identification {
     /// Overall free-run NRMSE per output over the simulated test runs (root of mean squares).
     pub fn test_nrmse(&self) -> Vec<f64> {
-        let ok: Vec<&RunSimulation> = self.simulations.iter().filter(|s| s.error.is_none()).collect();
+        let ok: Vec<&RunSimulation> = self
+            .simulations
+            .iter()
+            .filter(|s| s.error.is_none())
+            .collect();
         (0..self.outputs.len())
-            .map(|o| if ok.is_empty() { f64::NAN } else { (ok.iter().map(|s| s.nrmse[o].powi(2)).sum::<f64>() / ok.len() as f64).sqrt() })
+            .map(|o| {
+                if ok.is_empty() {
+                    f64::NAN
+                } else {
+                    (ok.iter().map(|s| s.nrmse[o].powi(2)).sum::<f64>() / ok.len() as f64).sqrt()
+                }
+            })
             .collect()
     }
 }
@@ -189,7 +235,12 @@ impl Prepared<'_> {
     }
 
     /// Features, label and weights of output i on the given runs.
-    fn design(&self, i: usize, ord: &[usize], runs: &[usize]) -> (Features, Vec<f64>, Vec<f64>, usize) {
+    fn design(
+        &self,
+        i: usize,
+        ord: &[usize],
+        runs: &[usize],
+    ) -> (Features, Vec<f64>, Vec<f64>, usize) {
         let names = self.names(ord);
         let mut cols: Vec<Vec<f64>> = vec![Vec::new(); names.len()];
         let mut label = Vec::new();
@@ -227,18 +278,60 @@ impl Prepared<'_> {
     }
 
     fn regression(&self) -> Result<Regression> {
-        Regression::builder().degree(self.settings.degree).method(Method::LassoLars).max_terms(self.settings.max_terms).engine(self.settings.engine).build()
+        Regression::builder()
+            .degree(self.settings.degree)
+            .method(Method::LassoLars)
+            .max_terms(self.settings.max_terms)
+            .engine(self.settings.engine)
+            .build()
     }
 
     /// Fits output i with orders `ord` on `fit_runs` and returns the model.
+    ///
+    /// Confidence weights come first; then iteratively reweighted fits with Tukey's bisquare on
+    /// the residuals (scale from their median absolute deviation) remove what sigma cannot see:
+    /// a jump of the input at t = 0 or a transient shorter than tau puts a few labels orders of
+    /// magnitude off, and least squares would bend every coefficient towards them.
     fn fit(&self, i: usize, ord: &[usize], fit_runs: &[usize]) -> Result<crate::regression::Model> {
-        let (f, y, w, _) = self.design(i, ord, fit_runs);
+        let (f, y, w0, _) = self.design(i, ord, fit_runs);
         let label = derivative_name(&self.settings.outputs[i], ord[i]);
-        self.regression()?.fit(&f, &y, &label, Some(&w))
+        let reg = self.regression()?;
+        let mut w = w0.clone();
+        let mut model = reg.fit(&f, &y, &label, Some(&w))?;
+        for _ in 0..ROBUST_ITERATIONS {
+            let pred = model.predict(&f)?;
+            let r: Vec<f64> = y.iter().zip(&pred).map(|(a, b)| a - b).collect();
+            let abs: Vec<f64> = r
+                .iter()
+                .zip(&w0)
+                .filter(|(_, w)| **w > 0.0)
+                .map(|(r, w)| (r * w.sqrt()).abs())
+                .collect();
+            let scale = 1.4826 * crate::derivatives::score::percentile(&abs, 50.0);
+            if !(scale > 0.0) {
+                break;
+            }
+            for s in 0..y.len() {
+                let u = r[s] * w0[s].sqrt() / (4.685 * scale);
+                w[s] = if u.abs() >= 1.0 {
+                    0.0
+                } else {
+                    w0[s] * (1.0 - u * u).powi(2)
+                };
+            }
+            model = reg.fit(&f, &y, &label, Some(&w))?;
+        }
+        Ok(model)
     }
 
     /// Residuals and labels of a model on some runs (only samples with a usable label).
-    fn residuals(&self, model: &crate::regression::Model, i: usize, ord: &[usize], runs: &[usize]) -> Result<(Vec<f64>, Vec<f64>)> {
+    fn residuals(
+        &self,
+        model: &crate::regression::Model,
+        i: usize,
+        ord: &[usize],
+        runs: &[usize],
+    ) -> Result<(Vec<f64>, Vec<f64>)> {
         let (f, y, w, _) = self.design(i, ord, runs);
         let pred = model.predict(&f)?;
         let mut e = Vec::with_capacity(y.len());
@@ -277,10 +370,21 @@ impl Prepared<'_> {
 /// Runs the whole workflow on a record set with a checked split.
 pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Identification> {
     settings.validate()?;
-    let outputs: Vec<usize> = settings.outputs.iter().map(|o| rs.channel_index(o)).collect::<Result<_>>()?;
-    let inputs: Vec<usize> = settings.inputs.iter().map(|u| rs.channel_index(u)).collect::<Result<_>>()?;
+    let outputs: Vec<usize> = settings
+        .outputs
+        .iter()
+        .map(|o| rs.channel_index(o))
+        .collect::<Result<_>>()?;
+    let inputs: Vec<usize> = settings
+        .inputs
+        .iter()
+        .map(|u| rs.channel_index(u))
+        .collect::<Result<_>>()?;
     let max_order = settings.max_order();
-    rs.require_min_len(crate::derivatives::min_samples(max_order), &format!("derivatives up to order {max_order}"))?;
+    rs.require_min_len(
+        crate::derivatives::min_samples(max_order),
+        &format!("derivatives up to order {max_order}"),
+    )?;
     let say = |msg: String| {
         if settings.progress {
             eprintln!("{msg}");
@@ -291,8 +395,18 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let mut derivs = Vec::new();
     for (o, &c) in outputs.iter().enumerate() {
         let runs: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[c].as_slice()).collect();
-        derivs.push(differentiate_runs(&runs, rs.tau, max_order, &DerivativeOptions::default())?);
-        say(format!("derivatives of '{}' up to order {max_order} on {} runs ({:.2} s)", settings.outputs[o], runs.len(), t.elapsed().as_secs_f64()));
+        derivs.push(differentiate_runs(
+            &runs,
+            rs.tau,
+            max_order,
+            &DerivativeOptions::default(),
+        )?);
+        say(format!(
+            "derivatives of '{}' up to order {max_order} on {} runs ({:.2} s)",
+            settings.outputs[o],
+            runs.len(),
+            t.elapsed().as_secs_f64()
+        ));
     }
     // Reference label sigma per output, at its largest candidate order, over training samples.
     let sigma_ref: Vec<f64> = (0..outputs.len())
@@ -301,11 +415,21 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
                 Orders::Fixed(c) => c[o],
                 Orders::Search(c) => *c.iter().max().unwrap(),
             };
-            let all: Vec<f64> = split.train.iter().flat_map(|&r| derivs[o][r].sigma[k].iter().copied()).collect();
+            let all: Vec<f64> = split
+                .train
+                .iter()
+                .flat_map(|&r| derivs[o][r].sigma[k].iter().copied())
+                .collect();
             crate::derivatives::score::percentile(&all, 50.0)
         })
         .collect();
-    let prep = Prepared { rs, settings, derivs, inputs, sigma_ref };
+    let prep = Prepared {
+        rs,
+        settings,
+        derivs,
+        inputs,
+        sigma_ref,
+    };
 
     // Order selection.
     let ny = outputs.len();
@@ -331,7 +455,12 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
                         list.push(c);
                     }
                     let profiles: Vec<Profile> = list.iter().map(|c| c.validation).collect();
-                    let pick = eta_rule(&profiles, settings.eta).ok_or_else(|| Error::Numerical(format!("no candidate order of '{}' could be scored", settings.outputs[i])))?;
+                    let pick = eta_rule(&profiles, settings.eta).ok_or_else(|| {
+                        Error::Numerical(format!(
+                            "no candidate order of '{}' could be scored",
+                            settings.outputs[i]
+                        ))
+                    })?;
                     if list[pick].order != ord[i] {
                         changed = true;
                         ord[i] = list[pick].order;
@@ -362,7 +491,8 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
             .terms
             .iter()
             .map(|t| {
-                let ex: Vec<(&str, u32)> = t.exponents.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+                let ex: Vec<(&str, u32)> =
+                    t.exponents.iter().map(|(k, v)| (k.as_str(), *v)).collect();
                 ModelTerm::new(&ex, t.coefficient)
             })
             .collect();
@@ -383,26 +513,52 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     model.degree = settings.degree;
     model.validate()?;
 
-    let simulations = simulate_runs(&model, rs, &prep.derivs, &outputs, &prep.inputs, &split.test)?;
+    let simulations = simulate_runs(
+        &model,
+        rs,
+        &prep.derivs,
+        &outputs,
+        &prep.inputs,
+        &split.test,
+    )?;
     say(format!("identified in {:.2} s", t.elapsed().as_secs_f64()));
     let weighting = if settings.weighting {
         "samples weighted by 1/(1+(sigma_label/median sigma)^2); labels with sigma above 5x the median left out".into()
     } else {
         "all samples weighted equally".into()
     };
-    Ok(Identification { model, outputs: reports, simulations, derivatives: prep.derivs, weighting })
+    Ok(Identification {
+        model,
+        outputs: reports,
+        simulations,
+        derivatives: prep.derivs,
+        weighting,
+    })
 }
 
 fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<Candidate> {
     let validation = prep.validate(i, ord, split)?;
     let m = prep.fit(i, ord, &split.train)?;
     let (e, l) = prep.residuals(&m, i, ord, &split.train)?;
-    Ok(Candidate { order: ord[i], validation, train: Profile::new(&e, &l), equation: m.equation(), n_terms: m.terms.len() })
+    Ok(Candidate {
+        order: ord[i],
+        validation,
+        train: Profile::new(&e, &l),
+        equation: m.equation(),
+        n_terms: m.terms.len(),
+    })
 }
 
 /// Free-run simulation of a model on some runs, starting from the smoothed derivatives at the
 /// first sample; a diverging run is reported, not fatal.
-pub fn simulate_runs(model: &ModelFile, rs: &RecordSet, derivs: &[Vec<Derivatives>], outputs: &[usize], inputs: &[usize], runs: &[usize]) -> Result<Vec<RunSimulation>> {
+pub fn simulate_runs(
+    model: &ModelFile,
+    rs: &RecordSet,
+    derivs: &[Vec<Derivatives>],
+    outputs: &[usize],
+    inputs: &[usize],
+    runs: &[usize],
+) -> Result<Vec<RunSimulation>> {
     let compiled = model.compile()?;
     let mut out = Vec::new();
     for &r in runs {
@@ -416,14 +572,25 @@ pub fn simulate_runs(model: &ModelFile, rs: &RecordSet, derivs: &[Vec<Derivative
             }
         }
         let us: Vec<Vec<f64>> = inputs.iter().map(|&u| run.channels[u].clone()).collect();
-        let opts = SimOptions { run: run.id.clone(), rtol: 1e-6, atol: 1e-9, ..Default::default() };
+        let opts = SimOptions {
+            run: run.id.clone(),
+            rtol: 1e-6,
+            atol: 1e-9,
+            ..Default::default()
+        };
         // The smoothed derivatives at the first sample are the least certain of the run; let the
         // model's own dynamics refine them on the first samples (Gauss-Newton on the outputs).
         let ys: Vec<Vec<f64>> = outputs.iter().map(|&c| run.channels[c].clone()).collect();
         let x0 = fit_initial_state(&compiled, &times, &ys, &us, &x0, INIT_WINDOW, &opts);
         match simulate_model(&compiled, &x0, &times, &us, &opts) {
             Ok(traj) => {
-                let mut sim = RunSimulation { run: run.id.clone(), rms: Vec::new(), nrmse: Vec::new(), simulated: Vec::new(), error: None };
+                let mut sim = RunSimulation {
+                    run: run.id.clone(),
+                    rms: Vec::new(),
+                    nrmse: Vec::new(),
+                    simulated: Vec::new(),
+                    error: None,
+                };
                 for (o, &c) in outputs.iter().enumerate() {
                     let ys = traj.series(compiled.offset(o));
                     let (rms, nrmse) = rms_nrmse(&ys, &run.channels[c]);
@@ -433,7 +600,13 @@ pub fn simulate_runs(model: &ModelFile, rs: &RecordSet, derivs: &[Vec<Derivative
                 }
                 out.push(sim);
             }
-            Err(e) => out.push(RunSimulation { run: run.id.clone(), rms: vec![f64::NAN; outputs.len()], nrmse: vec![f64::NAN; outputs.len()], simulated: Vec::new(), error: Some(e.to_string()) }),
+            Err(e) => out.push(RunSimulation {
+                run: run.id.clone(),
+                rms: vec![f64::NAN; outputs.len()],
+                nrmse: vec![f64::NAN; outputs.len()],
+                simulated: Vec::new(),
+                error: Some(e.to_string()),
+            }),
         }
     }
     Ok(out)

@@ -40,13 +40,21 @@ impl Profile {
 
     /// `0.01/0.03/...` with 3 significant digits.
     pub fn compact(&self) -> String {
-        self.0.iter().map(|v| format!("{:.3}", v)).collect::<Vec<_>>().join("/")
+        self.0
+            .iter()
+            .map(|v| format!("{:.3}", v))
+            .collect::<Vec<_>>()
+            .join("/")
     }
 }
 
 /// The eta-rule: index of the chosen candidate among `profiles` (None if empty or all NaN).
 pub fn eta_rule(profiles: &[Profile], eta: f64) -> Option<usize> {
-    let best100 = profiles.iter().map(|p| p.p100()).filter(|v| v.is_finite()).fold(f64::INFINITY, f64::min);
+    let best100 = profiles
+        .iter()
+        .map(|p| p.p100())
+        .filter(|v| v.is_finite())
+        .fold(f64::INFINITY, f64::min);
     if !best100.is_finite() {
         return None;
     }
@@ -66,9 +74,15 @@ mod tests {
     fn eta_rule_trades_tail_for_bulk() {
         let p = |p95: f64, p100: f64| Profile([0.0, 0.0, 0.0, p95, 0.0, 0.0, p100]);
         // Candidate 1 has the best p100; candidate 2 is within 1.2x of it and has a smaller p95.
-        assert_eq!(eta_rule(&[p(0.5, 3.0), p(0.3, 1.0), p(0.2, 1.15)], 1.2), Some(2));
+        assert_eq!(
+            eta_rule(&[p(0.5, 3.0), p(0.3, 1.0), p(0.2, 1.15)], 1.2),
+            Some(2)
+        );
         // Outside the eta band the smaller p95 does not count.
-        assert_eq!(eta_rule(&[p(0.5, 3.0), p(0.3, 1.0), p(0.2, 1.3)], 1.2), Some(1));
+        assert_eq!(
+            eta_rule(&[p(0.5, 3.0), p(0.3, 1.0), p(0.2, 1.3)], 1.2),
+            Some(1)
+        );
         assert_eq!(eta_rule(&[], 1.2), None);
     }
 

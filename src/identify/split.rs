@@ -9,9 +9,15 @@ pub fn parse_runs(text: &str) -> Result<Vec<String>> {
     for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         match part.split_once('-') {
             Some((a, b)) if a.trim().parse::<i64>().is_ok() && b.trim().parse::<i64>().is_ok() => {
-                let (a, b) = (a.trim().parse::<i64>().unwrap(), b.trim().parse::<i64>().unwrap());
+                let (a, b) = (
+                    a.trim().parse::<i64>().unwrap(),
+                    b.trim().parse::<i64>().unwrap(),
+                );
                 if b < a {
-                    return Err(Error::param("runs", format!("range '{part}' runs backwards; write {b}-{a}")));
+                    return Err(Error::param(
+                        "runs",
+                        format!("range '{part}' runs backwards; write {b}-{a}"),
+                    ));
                 }
                 if b - a > 10_000_000 {
                     return Err(Error::param("runs", format!("range '{part}' is too long")));
@@ -32,10 +38,26 @@ pub fn resolve(names: &[String], ids: &[String], what: &str) -> Result<Vec<usize
     names
         .iter()
         .map(|n| {
-            ids.iter().position(|id| id == n || id.parse::<f64>().ok().zip(n.parse::<f64>().ok()).is_some_and(|(a, b)| a == b)).ok_or_else(|| {
-                let shown: Vec<&str> = ids.iter().take(8).map(String::as_str).collect();
-                Error::param(what, format!("run '{n}' does not exist (runs are: {}{})", shown.join(", "), if ids.len() > 8 { ", ..." } else { "" }))
-            })
+            ids.iter()
+                .position(|id| {
+                    id == n
+                        || id
+                            .parse::<f64>()
+                            .ok()
+                            .zip(n.parse::<f64>().ok())
+                            .is_some_and(|(a, b)| a == b)
+                })
+                .ok_or_else(|| {
+                    let shown: Vec<&str> = ids.iter().take(8).map(String::as_str).collect();
+                    Error::param(
+                        what,
+                        format!(
+                            "run '{n}' does not exist (runs are: {}{})",
+                            shown.join(", "),
+                            if ids.len() > 8 { ", ..." } else { "" }
+                        ),
+                    )
+                })
         })
         .collect()
 }
@@ -50,23 +72,45 @@ pub struct Split {
 
 impl Split {
     /// Validates that the lists are non-empty where required and do not overlap.
-    pub fn new(train: Vec<usize>, validation: Option<Vec<usize>>, test: Vec<usize>, ids: &[String]) -> Result<Split> {
+    pub fn new(
+        train: Vec<usize>,
+        validation: Option<Vec<usize>>,
+        test: Vec<usize>,
+        ids: &[String],
+    ) -> Result<Split> {
         if train.is_empty() {
             return Err(Error::param("train", "no training runs"));
         }
-        let groups: [(&str, &[usize]); 3] = [("train", &train), ("validation", validation.as_deref().unwrap_or(&[])), ("test", &test)];
+        let groups: [(&str, &[usize]); 3] = [
+            ("train", &train),
+            ("validation", validation.as_deref().unwrap_or(&[])),
+            ("test", &test),
+        ];
         for (a, (na, la)) in groups.iter().enumerate() {
             for (nb, lb) in groups.iter().skip(a + 1) {
                 if let Some(r) = la.iter().find(|r| lb.contains(r)) {
-                    return Err(Error::param("split", format!("run '{}' is in both {na} and {nb}; splits must not overlap", ids[*r])));
+                    return Err(Error::param(
+                        "split",
+                        format!(
+                            "run '{}' is in both {na} and {nb}; splits must not overlap",
+                            ids[*r]
+                        ),
+                    ));
                 }
             }
             let mut seen = std::collections::HashSet::new();
             if let Some(r) = la.iter().find(|r| !seen.insert(**r)) {
-                return Err(Error::param(*na, format!("run '{}' is listed twice", ids[*r])));
+                return Err(Error::param(
+                    *na,
+                    format!("run '{}' is listed twice", ids[*r]),
+                ));
             }
         }
-        Ok(Split { train, validation, test })
+        Ok(Split {
+            train,
+            validation,
+            test,
+        })
     }
 
     /// Deterministic k folds over the training runs (run i goes to fold i mod k).
@@ -74,8 +118,16 @@ impl Split {
         let k = k.clamp(2, self.train.len().max(2));
         (0..k)
             .map(|f| {
-                let (val, fit): (Vec<(usize, usize)>, Vec<(usize, usize)>) = self.train.iter().copied().enumerate().partition(|(i, _)| i % k == f);
-                (fit.into_iter().map(|x| x.1).collect(), val.into_iter().map(|x| x.1).collect())
+                let (val, fit): (Vec<(usize, usize)>, Vec<(usize, usize)>) = self
+                    .train
+                    .iter()
+                    .copied()
+                    .enumerate()
+                    .partition(|(i, _)| i % k == f);
+                (
+                    fit.into_iter().map(|x| x.1).collect::<Vec<usize>>(),
+                    val.into_iter().map(|x| x.1).collect::<Vec<usize>>(),
+                )
             })
             .filter(|(fit, val)| !fit.is_empty() && !val.is_empty())
             .collect()
@@ -101,9 +153,13 @@ mod tests {
     #[test]
     fn split_errors_name_the_run() {
         let id = ids(10);
-        let e = resolve(&parse_runs("3,12").unwrap(), &id, "test").unwrap_err().to_string();
+        let e = resolve(&parse_runs("3,12").unwrap(), &id, "test")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("'12' does not exist"), "{e}");
-        let e = Split::new(vec![0, 1, 2], None, vec![2, 3], &id).unwrap_err().to_string();
+        let e = Split::new(vec![0, 1, 2], None, vec![2, 3], &id)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("run '2' is in both train and test"), "{e}");
         let s = Split::new(vec![0, 1, 2, 3, 4, 5], None, vec![7], &id).unwrap();
         let folds = s.folds(5);

@@ -47,7 +47,11 @@ pub struct Term {
 impl Term {
     pub fn new(exponents: &[(&str, u32)], coefficient: f64) -> Term {
         Term {
-            exponents: exponents.iter().filter(|(_, e)| *e > 0).map(|(n, e)| (n.to_string(), *e)).collect(),
+            exponents: exponents
+                .iter()
+                .filter(|(_, e)| *e > 0)
+                .map(|(n, e)| (n.to_string(), *e))
+                .collect(),
             coefficient,
             extra: Map::new(),
         }
@@ -57,7 +61,12 @@ impl Term {
     pub fn from_code(code: Code, names: &[String], coefficient: f64) -> Term {
         let exps = code.exponents(names.len());
         Term {
-            exponents: exps.iter().enumerate().filter(|(_, &e)| e > 0).map(|(v, &e)| (names[v].clone(), e)).collect(),
+            exponents: exps
+                .iter()
+                .enumerate()
+                .filter(|(_, &e)| e > 0)
+                .map(|(v, &e)| (names[v].clone(), e))
+                .collect(),
             coefficient,
             extra: Map::new(),
         }
@@ -75,7 +84,13 @@ impl Term {
         }
         self.exponents
             .iter()
-            .map(|(n, &e)| if e == 1 { n.clone() } else { format!("{n}^{e}") })
+            .map(|(n, &e)| {
+                if e == 1 {
+                    n.clone()
+                } else {
+                    format!("{n}^{e}")
+                }
+            })
             .collect::<Vec<_>>()
             .join("*")
     }
@@ -93,21 +108,50 @@ pub struct OutputEquation {
 
 impl OutputEquation {
     pub fn new(name: &str, order: usize, terms: Vec<Term>) -> OutputEquation {
-        OutputEquation { name: name.into(), order, terms, extra: Map::new() }
+        OutputEquation {
+            name: name.into(),
+            order,
+            terms,
+            extra: Map::new(),
+        }
     }
 
     /// The equation from basis codes and coefficients over the feature names `names`; zero
     /// coefficients are dropped.
-    pub fn from_codes(name: &str, order: usize, terms: &[(Code, f64)], names: &[String]) -> OutputEquation {
-        let terms = terms.iter().filter(|(_, c)| *c != 0.0).map(|&(code, c)| Term::from_code(code, names, c)).collect();
+    pub fn from_codes(
+        name: &str,
+        order: usize,
+        terms: &[(Code, f64)],
+        names: &[String],
+    ) -> OutputEquation {
+        let terms = terms
+            .iter()
+            .filter(|(_, c)| *c != 0.0)
+            .map(|&(code, c)| Term::from_code(code, names, c))
+            .collect();
         OutputEquation::new(name, order, terms)
     }
 
     /// `y''' = 2*y + -0.5*u` style text.
     pub fn to_text(&self) -> String {
-        let lhs = if self.order == 0 { self.name.clone() } else { derivative_name(&self.name, self.order) };
-        let rhs: Vec<String> = self.terms.iter().map(|t| format!("{:+e}*{}", t.coefficient, t.monomial())).collect();
-        format!("{lhs} = {}", if rhs.is_empty() { "0".into() } else { rhs.join(" ") })
+        let lhs = if self.order == 0 {
+            self.name.clone()
+        } else {
+            derivative_name(&self.name, self.order)
+        };
+        let rhs: Vec<String> = self
+            .terms
+            .iter()
+            .map(|t| format!("{:+e}*{}", t.coefficient, t.monomial()))
+            .collect();
+        format!(
+            "{lhs} = {}",
+            if rhs.is_empty() {
+                "0".into()
+            } else {
+                rhs.join(" ")
+            }
+        )
     }
 }
 
@@ -126,7 +170,11 @@ pub struct Model {
 
 /// Name of the k-th derivative of output `y`: `y` for k = 0, else `y_dk`.
 pub fn derivative_name(output: &str, k: usize) -> String {
-    if k == 0 { output.to_string() } else { format!("{output}_d{k}") }
+    if k == 0 {
+        output.to_string()
+    } else {
+        format!("{output}_d{k}")
+    }
 }
 
 /// Where a variable lives: in the state vector or the input vector.
@@ -173,7 +221,11 @@ struct RawTerm {
 impl Model {
     /// A model with the given outputs; `degree` is the largest term degree.
     pub fn new(inputs: &[&str], outputs: Vec<OutputEquation>, tau: Option<f64>) -> Model {
-        let degree = outputs.iter().flat_map(|o| o.terms.iter().map(|t| t.degree() as usize)).max().unwrap_or(0);
+        let degree = outputs
+            .iter()
+            .flat_map(|o| o.terms.iter().map(|t| t.degree() as usize))
+            .max()
+            .unwrap_or(0);
         Model {
             format: FORMAT.into(),
             tau,
@@ -186,15 +238,25 @@ impl Model {
 
     /// Parses and validates a model from JSON text; `path` only labels the error messages.
     pub fn from_json_str(text: &str, path: &str) -> Result<Model> {
-        let err = |message: String| Error::Model { path: path.into(), message };
-        let raw: RawModel = serde_json::from_str(text).map_err(|e| err(format!("not a valid model file: {e}")))?;
+        let err = |message: String| Error::Model {
+            path: path.into(),
+            message,
+        };
+        let raw: RawModel =
+            serde_json::from_str(text).map_err(|e| err(format!("not a valid model file: {e}")))?;
         let format = match raw.format {
             Some(Value::String(s)) => s,
             Some(v) => return Err(err(format!("unknown format {v}; expected \"{FORMAT}\""))),
-            None => return Err(err(format!("no \"format\" field; expected \"format\": \"{FORMAT}\""))),
+            None => {
+                return Err(err(format!(
+                    "no \"format\" field; expected \"format\": \"{FORMAT}\""
+                )))
+            }
         };
         if format != FORMAT {
-            return Err(err(format!("unknown format \"{format}\"; this version reads \"{FORMAT}\"")));
+            return Err(err(format!(
+                "unknown format \"{format}\"; this version reads \"{FORMAT}\""
+            )));
         }
         let mut outputs = Vec::with_capacity(raw.outputs.len());
         for o in raw.outputs {
@@ -213,34 +275,63 @@ impl Model {
                         exponents.insert(name, e as u32);
                     }
                 }
-                terms.push(Term { exponents, coefficient: t.coefficient, extra: t.extra });
+                terms.push(Term {
+                    exponents,
+                    coefficient: t.coefficient,
+                    extra: t.extra,
+                });
             }
-            outputs.push(OutputEquation { name: o.name, order: o.order, terms, extra: o.extra });
+            outputs.push(OutputEquation {
+                name: o.name,
+                order: o.order,
+                terms,
+                extra: o.extra,
+            });
         }
-        let degree = raw
-            .degree
-            .unwrap_or_else(|| outputs.iter().flat_map(|o| o.terms.iter().map(|t| t.degree() as usize)).max().unwrap_or(0));
-        let model = Model { format, tau: raw.tau, degree, inputs: raw.inputs, outputs, extra: raw.extra };
+        let degree = raw.degree.unwrap_or_else(|| {
+            outputs
+                .iter()
+                .flat_map(|o| o.terms.iter().map(|t| t.degree() as usize))
+                .max()
+                .unwrap_or(0)
+        });
+        let model = Model {
+            format,
+            tau: raw.tau,
+            degree,
+            inputs: raw.inputs,
+            outputs,
+            extra: raw.extra,
+        };
         model.validate_at(path)?;
         Ok(model)
     }
 
     /// Reads and validates a model file.
     pub fn read(path: &str) -> Result<Model> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Io { path: path.into(), message: e.to_string() })?;
+        let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+            path: path.into(),
+            message: e.to_string(),
+        })?;
         Model::from_json_str(&text, path)
     }
 
     /// Pretty JSON text (validated first: a model that could not be read back is not written).
     pub fn to_json_string(&self) -> Result<String> {
         self.validate()?;
-        serde_json::to_string_pretty(self).map_err(|e| Error::Model { path: "<memory>".into(), message: e.to_string() })
+        serde_json::to_string_pretty(self).map_err(|e| Error::Model {
+            path: "<memory>".into(),
+            message: e.to_string(),
+        })
     }
 
     /// Writes the model file.
     pub fn write(&self, path: &str) -> Result<()> {
         let text = self.to_json_string()?;
-        std::fs::write(path, text + "\n").map_err(|e| Error::Io { path: path.into(), message: e.to_string() })
+        std::fs::write(path, text + "\n").map_err(|e| Error::Io {
+            path: path.into(),
+            message: e.to_string(),
+        })
     }
 
     /// Checks names, orders, exponents and coefficients; the error names the term at fault.
@@ -249,13 +340,21 @@ impl Model {
     }
 
     fn validate_at(&self, path: &str) -> Result<()> {
-        let err = |message: String| Error::Model { path: path.into(), message };
+        let err = |message: String| Error::Model {
+            path: path.into(),
+            message,
+        };
         if self.format != FORMAT {
-            return Err(err(format!("unknown format \"{}\"; this version reads \"{FORMAT}\"", self.format)));
+            return Err(err(format!(
+                "unknown format \"{}\"; this version reads \"{FORMAT}\"",
+                self.format
+            )));
         }
         if let Some(tau) = self.tau {
             if !(tau.is_finite() && tau > 0.0) {
-                return Err(err(format!("tau must be a positive number of seconds, got {tau}")));
+                return Err(err(format!(
+                    "tau must be a positive number of seconds, got {tau}"
+                )));
             }
         }
         if self.outputs.is_empty() {
@@ -263,7 +362,10 @@ impl Model {
         }
         for o in &self.outputs {
             if o.order == 0 {
-                return Err(err(format!("output '{}' has order 0; orders start at 1", o.name)));
+                return Err(err(format!(
+                    "output '{}' has order 0; orders start at 1",
+                    o.name
+                )));
             }
         }
         let table = self.variable_table().map_err(err)?;
@@ -271,7 +373,10 @@ impl Model {
             for (k, t) in o.terms.iter().enumerate() {
                 let at = format!("output '{}', term {}", o.name, k + 1);
                 if !t.coefficient.is_finite() {
-                    return Err(err(format!("{at}: coefficient {} is not finite", t.coefficient)));
+                    return Err(err(format!(
+                        "{at}: coefficient {} is not finite",
+                        t.coefficient
+                    )));
                 }
                 for name in t.exponents.keys() {
                     if !table.contains_key(name) {
@@ -279,7 +384,11 @@ impl Model {
                     }
                 }
                 if t.degree() as usize > self.degree {
-                    return Err(err(format!("{at}: degree {} is above the model's degree {}", t.degree(), self.degree)));
+                    return Err(err(format!(
+                        "{at}: degree {} is above the model's degree {}",
+                        t.degree(),
+                        self.degree
+                    )));
                 }
             }
         }
@@ -318,7 +427,10 @@ impl Model {
 
     fn explain_unknown(&self, name: &str) -> String {
         if let Some((base, k)) = name.rsplit_once("_d") {
-            if let (Some(o), Ok(k)) = (self.outputs.iter().find(|o| o.name == base), k.parse::<usize>()) {
+            if let (Some(o), Ok(k)) = (
+                self.outputs.iter().find(|o| o.name == base),
+                k.parse::<usize>(),
+            ) {
                 return format!(
                     "'{name}' is derivative {k} of output '{base}' of order {}; right-hand sides may use {base}..{}",
                     o.order,
@@ -326,13 +438,19 @@ impl Model {
                 );
             }
         }
-        format!("unknown variable '{name}' (known: {})", self.variable_names().join(", "))
+        format!(
+            "unknown variable '{name}' (known: {})",
+            self.variable_names().join(", ")
+        )
     }
 
     /// Names of the state variables in layout order, then the inputs: the feature names `z`.
     pub fn variable_names(&self) -> Vec<String> {
-        let mut v: Vec<String> =
-            self.outputs.iter().flat_map(|o| (0..o.order).map(move |k| derivative_name(&o.name, k))).collect();
+        let mut v: Vec<String> = self
+            .outputs
+            .iter()
+            .flat_map(|o| (0..o.order).map(move |k| derivative_name(&o.name, k)))
+            .collect();
         v.extend(self.inputs.iter().cloned());
         v
     }
@@ -377,7 +495,10 @@ pub struct CompiledModel {
 
 impl CompiledModel {
     fn new(m: &Model) -> Result<CompiledModel> {
-        let table = m.variable_table().map_err(|message| Error::Model { path: "<memory>".into(), message })?;
+        let table = m.variable_table().map_err(|message| Error::Model {
+            path: "<memory>".into(),
+            message,
+        })?;
         let n_state = m.state_dim();
         let slot = |v: Var| match v {
             Var::State(i) => i,
@@ -389,7 +510,14 @@ impl CompiledModel {
             .map(|o| {
                 o.terms
                     .iter()
-                    .map(|t| CTerm { coef: t.coefficient, factors: t.exponents.iter().map(|(n, &e)| (slot(table[n]), e)).collect() })
+                    .map(|t| CTerm {
+                        coef: t.coefficient,
+                        factors: t
+                            .exponents
+                            .iter()
+                            .map(|(n, &e)| (slot(table[n]), e))
+                            .collect(),
+                    })
                     .collect()
             })
             .collect();
@@ -426,7 +554,10 @@ impl CompiledModel {
 
     /// All coefficients, output by output in term order (the order of the model file).
     pub fn coefficients(&self) -> Vec<f64> {
-        self.terms.iter().flat_map(|ts| ts.iter().map(|t| t.coef)).collect()
+        self.terms
+            .iter()
+            .flat_map(|ts| ts.iter().map(|t| t.coef))
+            .collect()
     }
 
     /// Replaces the coefficients (same order as [`CompiledModel::coefficients`]) without
@@ -434,7 +565,10 @@ impl CompiledModel {
     pub fn set_coefficients(&mut self, c: &[f64]) -> Result<()> {
         let n: usize = self.terms.iter().map(|ts| ts.len()).sum();
         if c.len() != n {
-            return Err(Error::param("coefficients", format!("got {} values for {n} terms", c.len())));
+            return Err(Error::param(
+                "coefficients",
+                format!("got {} values for {n} terms", c.len()),
+            ));
         }
         for (t, &v) in self.terms.iter_mut().flat_map(|ts| ts.iter_mut()).zip(c) {
             t.coef = v;
@@ -444,7 +578,15 @@ impl CompiledModel {
 
     /// `P_i(z)`: the highest derivative of output `i` at `z = [state, inputs]`.
     pub fn eval_output(&self, i: usize, z: &[f64]) -> f64 {
-        self.terms[i].iter().map(|t| t.coef * t.factors.iter().fold(1.0, |a, &(v, e)| a * z[v].powi(e as i32))).sum()
+        self.terms[i]
+            .iter()
+            .map(|t| {
+                t.coef
+                    * t.factors
+                        .iter()
+                        .fold(1.0, |a, &(v, e)| a * z[v].powi(e as i32))
+            })
+            .sum()
     }
 
     /// `dP_i/dz` at `z`, written into `grad` (length n_state + n_inputs).

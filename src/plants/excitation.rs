@@ -34,7 +34,14 @@ pub struct ExcitationConfig {
 impl ExcitationConfig {
     /// The paper's values: u_bar = 5, mu = 4, w_max = 10, n_B = 20.
     pub fn paper() -> ExcitationConfig {
-        ExcitationConfig { u_bar: 5.0, mu: 4.0, w_max: 10.0, n_b: 20, gain: 1.0, offset: 0.0 }
+        ExcitationConfig {
+            u_bar: 5.0,
+            mu: 4.0,
+            w_max: 10.0,
+            n_b: 20,
+            gain: 1.0,
+            offset: 0.0,
+        }
     }
 
     /// Draws one signal from `rng`.
@@ -47,7 +54,12 @@ impl ExcitationConfig {
             w.push(rng.uniform_in(0.0, self.w_max));
             psi.push(rng.uniform_in(0.0, 2.0 * std::f64::consts::PI));
         }
-        Excitation { cfg: *self, a, w, psi }
+        Excitation {
+            cfg: *self,
+            a,
+            w,
+            psi,
+        }
     }
 }
 

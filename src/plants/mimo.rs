@@ -99,7 +99,8 @@ impl MimoPlant {
                 let mut d: Vec<f64> = x[o..o + ord].to_vec();
                 d.push(dx[o + ord - 1]);
                 c.grad_output(i, &z, &mut g);
-                let rate: f64 = (0..n).map(|k| g[k] * dx[k]).sum::<f64>() + (0..u.len()).map(|k| g[n + k] * du[k]).sum::<f64>();
+                let rate: f64 = (0..n).map(|k| g[k] * dx[k]).sum::<f64>()
+                    + (0..u.len()).map(|k| g[n + k] * du[k]).sum::<f64>();
                 d.push(rate);
                 d
             })

@@ -81,7 +81,11 @@ impl Plant {
                 ex.gain = k / (2.0 * ex.u_bar);
                 ex.offset = -k / 2.0;
                 ex.gain = -ex.gain;
-                Plant { name: "throttle-physical".into(), dynamics: Dynamics::Throttle(th), excitation: ex }
+                Plant {
+                    name: "throttle-physical".into(),
+                    dynamics: Dynamics::Throttle(th),
+                    excitation: ex,
+                }
             }
         }
     }
@@ -90,7 +94,11 @@ impl Plant {
     pub fn mimo() -> Plant {
         let mut ex = ExcitationConfig::paper();
         ex.u_bar = MIMO_U_BAR;
-        Plant { name: "mimo".into(), dynamics: Dynamics::Mimo(MimoPlant::new()), excitation: ex }
+        Plant {
+            name: "mimo".into(),
+            dynamics: Dynamics::Mimo(MimoPlant::new()),
+            excitation: ex,
+        }
     }
 
     pub fn output_names(&self) -> Vec<String> {
@@ -154,7 +162,10 @@ impl Plant {
     /// The excitation of run `run` under `seed` (one independent draw per input channel).
     pub fn excitation_for(&self, seed: u64, run: usize) -> ExcitationInput {
         let channels = (0..self.input_names().len())
-            .map(|c| self.excitation.draw(&mut Rng::new(stream_seed(seed, run as u64, 1 + c as u64))))
+            .map(|c| {
+                self.excitation
+                    .draw(&mut Rng::new(stream_seed(seed, run as u64, 1 + c as u64)))
+            })
             .collect();
         ExcitationInput { channels }
     }
@@ -179,12 +190,24 @@ pub struct Run {
 
 /// Integration tolerances for the ground truth: well below any error identification can reach.
 pub fn truth_options(run: usize) -> SimOptions {
-    SimOptions { rtol: 1e-10, atol: 1e-10, run: run.to_string(), ..Default::default() }
+    SimOptions {
+        rtol: 1e-10,
+        atol: 1e-10,
+        run: run.to_string(),
+        ..Default::default()
+    }
 }
 
 /// Generates `n_runs` runs of `n_samples` samples at `tau` from rest, with noise level `noise`
 /// (the paper's eta, e.g. 0.03 for 3 %), deterministically from `seed`.
-pub fn dataset(plant: &Plant, n_runs: usize, n_samples: usize, tau: f64, noise: f64, seed: u64) -> Result<Vec<Run>> {
+pub fn dataset(
+    plant: &Plant,
+    n_runs: usize,
+    n_samples: usize,
+    tau: f64,
+    noise: f64,
+    seed: u64,
+) -> Result<Vec<Run>> {
     if !(tau.is_finite() && tau > 0.0) {
         return Err(Error::InvalidTau(tau));
     }
@@ -192,7 +215,10 @@ pub fn dataset(plant: &Plant, n_runs: usize, n_samples: usize, tau: f64, noise: 
         return Err(Error::param("n_samples", "need at least 2 samples per run"));
     }
     if !(noise.is_finite() && noise >= 0.0) {
-        return Err(Error::param("noise", format!("must be a non-negative number, got {noise}")));
+        return Err(Error::param(
+            "noise",
+            format!("must be a non-negative number, got {noise}"),
+        ));
     }
     let t: Vec<f64> = (0..n_samples).map(|k| k as f64 * tau).collect();
     let n_in = plant.input_names().len();
@@ -205,7 +231,10 @@ pub fn dataset(plant: &Plant, n_runs: usize, n_samples: usize, tau: f64, noise: 
             let traj = simulate(plant.system(), &ex, &x0, &t, &truth_options(r))?;
             let mut u = vec![vec![0.0; n_samples]; n_in];
             let orders = plant.orders();
-            let mut derivs: Vec<Vec<Vec<f64>>> = orders.iter().map(|&n| vec![vec![0.0; n_samples]; n + 2]).collect();
+            let mut derivs: Vec<Vec<Vec<f64>>> = orders
+                .iter()
+                .map(|&n| vec![vec![0.0; n_samples]; n + 2])
+                .collect();
             let (mut uk, mut duk) = (vec![0.0; n_in], vec![0.0; n_in]);
             for (k, &tk) in t.iter().enumerate() {
                 ex.eval(tk, &mut uk);
@@ -222,9 +251,23 @@ pub fn dataset(plant: &Plant, n_runs: usize, n_samples: usize, tau: f64, noise: 
             }
             let y_true: Vec<Vec<f64>> = derivs.iter().map(|d| d[0].clone()).collect();
             let y = (0..n_out)
-                .map(|i| noise::add_noise(&y_true[i], noise, &mut Rng::new(stream_seed(seed, r as u64, 1000 + i as u64))))
+                .map(|i| {
+                    noise::add_noise(
+                        &y_true[i],
+                        noise,
+                        &mut Rng::new(stream_seed(seed, r as u64, 1000 + i as u64)),
+                    )
+                })
                 .collect();
-            Ok(Run { id: r, t: t.clone(), u, y, y_true, derivatives: derivs, excitation: ex })
+            Ok(Run {
+                id: r,
+                t: t.clone(),
+                u,
+                y,
+                y_true,
+                derivatives: derivs,
+                excitation: ex,
+            })
         })
         .collect()
 }
@@ -232,7 +275,10 @@ pub fn dataset(plant: &Plant, n_runs: usize, n_samples: usize, tau: f64, noise: 
 /// Writes runs as CSV: `run, t, <inputs>, <outputs>` and, with `truth`, `<output>_true` and the
 /// exact derivatives `<output>_dk_true` for k = 1..=order+1.
 pub fn write_csv(plant: &Plant, runs: &[Run], path: &str, truth: bool) -> Result<()> {
-    let io = |e: &dyn std::fmt::Display| Error::Io { path: path.into(), message: e.to_string() };
+    let io = |e: &dyn std::fmt::Display| Error::Io {
+        path: path.into(),
+        message: e.to_string(),
+    };
     let mut w = csv::Writer::from_path(path).map_err(|e| io(&e))?;
     let outs = plant.output_names();
     let mut header = vec!["run".to_string(), "t".to_string()];

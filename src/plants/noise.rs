@@ -43,10 +43,13 @@ mod tests {
 
     #[test]
     fn noise_level_follows_the_signal() {
-        let y: Vec<f64> = (0..20000).map(|k| 2.0 * ((k as f64) * 0.01).sin()).collect();
+        let y: Vec<f64> = (0..20000)
+            .map(|k| 2.0 * ((k as f64) * 0.01).sin())
+            .collect();
         let mut r = Rng::new(1);
         let m = add_noise(&y, 0.03, &mut r);
-        let sd = (m.iter().zip(&y).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
+        let sd =
+            (m.iter().zip(&y).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / y.len() as f64).sqrt();
         let expect = 0.03 * percentile(&y.iter().map(|v| v.abs()).collect::<Vec<_>>(), 99.0);
         assert!((sd / expect - 1.0).abs() < 0.03, "{sd} vs {expect}");
     }

@@ -77,7 +77,19 @@ impl ThrottleParams {
         let v = LIN_U * l * j / kt;
         let y0 = LIN_CONST / a0;
         let ka = 10.0 * j / PATM_STD;
-        ThrottleParams { j, ks, y0, b, r, l, kt, ke: kt, v, ka, patm }
+        ThrottleParams {
+            j,
+            ks,
+            y0,
+            b,
+            r,
+            l,
+            kt,
+            ke: kt,
+            v,
+            ka,
+            patm,
+        }
     }
 
     /// `A(y)`, `A'(y)`, `A''(y)` of the aerodynamic torque.
@@ -89,7 +101,11 @@ impl ThrottleParams {
         let pi = std::f64::consts::PI;
         let c = y.cos();
         let (s2, c2) = (2.0 * y).sin_cos();
-        (k * (pi - y) * c * c, k * (-c * c - (pi - y) * s2), k * (2.0 * s2 - 2.0 * (pi - y) * c2))
+        (
+            k * (pi - y) * c * c,
+            k * (-c * c - (pi - y) * s2),
+            k * (2.0 * s2 - 2.0 * (pi - y) * c2),
+        )
     }
 }
 
@@ -158,7 +174,11 @@ impl Throttle {
             Term::new(&[("y_d2", 1)], cy2),
             Term::new(&[("u", 1)], cu),
         ];
-        Some(Model::new(&["u"], vec![OutputEquation::new("y", 3, terms)], tau))
+        Some(Model::new(
+            &["u"],
+            vec![OutputEquation::new("y", 3, terms)],
+            tau,
+        ))
     }
 }
 
@@ -182,6 +202,16 @@ impl System for Throttle {
     fn jacobian(&self, x: &[f64], _u: &[f64], jac: &mut [f64]) {
         let p = &self.p;
         let (_, da, _) = p.aero(x[0]);
-        jac.copy_from_slice(&[0.0, 1.0, 0.0, (-p.ks - da) / p.j, -p.b / p.j, p.kt / p.j, 0.0, -p.ke / p.l, -p.r / p.l]);
+        jac.copy_from_slice(&[
+            0.0,
+            1.0,
+            0.0,
+            (-p.ks - da) / p.j,
+            -p.b / p.j,
+            p.kt / p.j,
+            0.0,
+            -p.ke / p.l,
+            -p.r / p.l,
+        ]);
     }
 }

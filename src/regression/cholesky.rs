@@ -103,7 +103,14 @@ mod tests {
     #[test]
     fn append_delete_matches_fresh_factor() {
         // G = A^T A for a fixed 6 x 4 A.
-        let a = [[1.0, 2.0, 0.5, -1.0], [0.3, -1.0, 2.0, 0.0], [2.0, 0.1, 0.2, 1.0], [0.0, 1.0, 1.0, 1.0], [1.5, -0.5, 0.0, 2.0], [0.2, 0.2, -2.0, 0.7]];
+        let a = [
+            [1.0, 2.0, 0.5, -1.0],
+            [0.3, -1.0, 2.0, 0.0],
+            [2.0, 0.1, 0.2, 1.0],
+            [0.0, 1.0, 1.0, 1.0],
+            [1.5, -0.5, 0.0, 2.0],
+            [0.2, 0.2, -2.0, 0.7],
+        ];
         let g = |i: usize, j: usize| (0..6).map(|r| a[r][i] * a[r][j]).sum::<f64>();
         let mut ch = Cholesky::default();
         for j in 0..4 {
@@ -113,7 +120,10 @@ mod tests {
         }
         ch.delete(1);
         let keep = [0, 2, 3];
-        let dense: Vec<f64> = keep.iter().flat_map(|&i| keep.iter().map(move |&j| g(i, j))).collect();
+        let dense: Vec<f64> = keep
+            .iter()
+            .flat_map(|&i| keep.iter().map(move |&j| g(i, j)))
+            .collect();
         let fresh = Cholesky::factor(&dense, 3, 1e-12).unwrap();
         for i in 0..3 {
             for j in 0..=i {

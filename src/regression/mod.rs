@@ -32,20 +32,14 @@ pub mod select;
 pub use path::{lars_path, Breakpoint, Event, Method, Path, PathOptions, StopReason};
 
 use crate::basis::{Basis, BasisLimits};
+use crate::engine::gpu::{GpuEngine, GpuOptions};
+use crate::engine::select::{choose, EngineKind};
 use crate::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-/// Which engine runs the sweeps.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum EngineChoice {
-    Cpu,
-    Gpu,
-    #[default]
-    Auto,
-}
+pub use crate::engine::select::EngineChoice;
 
 /// Unchecked settings; [`RegressionBuilder::build`] validates them into a [`Regression`].
 #[derive(Debug, Clone)]
@@ -144,7 +138,14 @@ impl RegressionBuilder {
     /// Checks every setting; the error names the first bad one.
     pub fn build(self) -> Result<Regression> {
         if self.degree > crate::basis::MAX_DEGREE {
-            return Err(Error::param("degree", format!("{} is above the maximum {}", self.degree, crate::basis::MAX_DEGREE)));
+            return Err(Error::param(
+                "degree",
+                format!(
+                    "{} is above the maximum {}",
+                    self.degree,
+                    crate::basis::MAX_DEGREE
+                ),
+            ));
         }
         if self.max_terms == 0 {
             return Err(Error::param("max_terms", "must be at least 1"));
@@ -156,23 +157,41 @@ impl RegressionBuilder {
             if v.is_finite() && v >= 0.0 {
                 Ok(())
             } else {
-                Err(Error::param(name, format!("{v} must be a finite number >= 0")))
+                Err(Error::param(
+                    name,
+                    format!("{v} must be a finite number >= 0"),
+                ))
             }
         };
         finite_nonneg("alpha_min", self.alpha_min)?;
         finite_nonneg("epsilon", self.epsilon)?;
         finite_nonneg("rss_floor", self.rss_floor)?;
         if !(0.0..=1.0).contains(&self.ebic_gamma) {
-            return Err(Error::param("ebic_gamma", format!("{} is outside [0, 1]", self.ebic_gamma)));
+            return Err(Error::param(
+                "ebic_gamma",
+                format!("{} is outside [0, 1]", self.ebic_gamma),
+            ));
         }
         if !(self.epsilon < 1.0) {
-            return Err(Error::param("epsilon", format!("{} would stop before the first term (use a value below 1)", self.epsilon)));
+            return Err(Error::param(
+                "epsilon",
+                format!(
+                    "{} would stop before the first term (use a value below 1)",
+                    self.epsilon
+                ),
+            ));
         }
         if !(self.collinearity_tol > 0.0 && self.collinearity_tol < 1.0) {
-            return Err(Error::param("collinearity_tol", format!("{} is outside (0, 1)", self.collinearity_tol)));
+            return Err(Error::param(
+                "collinearity_tol",
+                format!("{} is outside (0, 1)", self.collinearity_tol),
+            ));
         }
         if !(self.refresh_tol > 0.0 && self.refresh_tol.is_finite()) {
-            return Err(Error::param("refresh_tol", format!("{} must be positive", self.refresh_tol)));
+            return Err(Error::param(
+                "refresh_tol",
+                format!("{} must be positive", self.refresh_tol),
+            ));
         }
         if self.max_candidates == 0 {
             return Err(Error::param("max_candidates", "must be at least 1"));
@@ -302,7 +321,12 @@ pub fn format_coefficient(x: f64) -> String {
 impl Model {
     /// `label = c1*m1 + c2*m2 - ...`, the constant last.
     pub fn equation(&self) -> String {
-        let mut parts: Vec<(String, f64)> = self.terms.iter().filter(|t| !t.exponents.is_empty()).map(|t| (t.name.clone(), t.coefficient)).collect();
+        let mut parts: Vec<(String, f64)> = self
+            .terms
+            .iter()
+            .filter(|t| !t.exponents.is_empty())
+            .map(|t| (t.name.clone(), t.coefficient))
+            .collect();
         if let Some(c) = self.terms.iter().find(|t| t.exponents.is_empty()) {
             parts.push((String::new(), c.coefficient));
         }
@@ -312,8 +336,18 @@ impl Model {
         let mut s = format!("{} =", self.label);
         for (i, (name, c)) in parts.iter().enumerate() {
             let mag = format_coefficient(c.abs());
-            let sign = if *c < 0.0 { "-" } else if i == 0 { "" } else { "+" };
-            let body = if name.is_empty() { mag } else { format!("{mag}*{name}") };
+            let sign = if *c < 0.0 {
+                "-"
+            } else if i == 0 {
+                ""
+            } else {
+                "+"
+            };
+            let body = if name.is_empty() {
+                mag
+            } else {
+                format!("{mag}*{name}")
+            };
             if i == 0 {
                 s.push_str(&format!(" {sign}{body}"));
             } else {
@@ -329,8 +363,18 @@ impl Model {
         for t in &self.terms {
             let mut col = vec![t.coefficient; features.n_samples];
             for (name, e) in &t.exponents {
-                let k = features.names.iter().position(|n| n == name).ok_or_else(|| Error::InvalidData(format!("the model uses '{name}', which the data does not have")))?;
-                col.iter_mut().zip(features.column(k)).for_each(|(c, z)| *c *= z.powi(*e as i32));
+                let k = features
+                    .names
+                    .iter()
+                    .position(|n| n == name)
+                    .ok_or_else(|| {
+                        Error::InvalidData(format!(
+                            "the model uses '{name}', which the data does not have"
+                        ))
+                    })?;
+                col.iter_mut()
+                    .zip(features.column(k))
+                    .for_each(|(c, z)| *c *= z.powi(*e as i32));
             }
             out.iter_mut().zip(&col).for_each(|(o, c)| *o += c);
         }
@@ -352,25 +396,72 @@ impl Regression {
     }
 
     /// Builds the basis and the engine chosen by the settings, then fits.
-    pub fn fit(&self, features: &Features, label: &[f64], label_name: &str, weights: Option<&[f64]>) -> Result<Model> {
-        let basis = Basis::new(&features.names, self.degree, BasisLimits { max_candidates: self.max_candidates })?;
+    pub fn fit(
+        &self,
+        features: &Features,
+        label: &[f64],
+        label_name: &str,
+        weights: Option<&[f64]>,
+    ) -> Result<Model> {
+        let basis = Basis::new(
+            &features.names,
+            self.degree,
+            BasisLimits {
+                max_candidates: self.max_candidates,
+            },
+        )?;
         let mut notes = Vec::new();
-        match self.engine {
-            EngineChoice::Gpu => return Err(Error::Gpu("GPU engine not available in this build".into())),
-            EngineChoice::Auto => notes.push("engine auto: chose the CPU engine (no GPU engine in this build)".to_string()),
-            EngineChoice::Cpu => {}
+        let decision = choose(self.engine, features.n_samples, basis.len())?;
+        notes.push(decision.reason.clone());
+        if decision.kind == EngineKind::Gpu {
+            let attempt = GpuEngine::new(features, &basis, GpuOptions::default())
+                .and_then(|mut g| self.fit_with_engine(&basis, &mut g, label, label_name, weights));
+            match attempt {
+                Ok(mut model) => {
+                    model.diagnostics.notes.splice(0..0, notes);
+                    return Ok(model);
+                }
+                // An explicit request for the GPU fails loudly when there is no adapter at all.
+                Err(e @ Error::NoGpu(_)) if self.engine == EngineChoice::Gpu => return Err(e),
+                Err(e) => {
+                    let line = format!("GPU engine failed ({e}); falling back to the CPU engine");
+                    eprintln!("{line}");
+                    notes.push(line);
+                }
+            }
         }
         let precision = self.precision.unwrap_or(Precision::F32);
-        let mut engine = CpuEngine::new(&basis, features, CpuOptions { precision, ..CpuOptions::default() })?;
+        let mut engine = CpuEngine::new(
+            &basis,
+            features,
+            CpuOptions {
+                precision,
+                ..CpuOptions::default()
+            },
+        )?;
         let mut model = self.fit_with_engine(&basis, &mut engine, label, label_name, weights)?;
         model.diagnostics.notes.splice(0..0, notes);
         Ok(model)
     }
 
     /// Fits with a given engine over `basis` (the engine's candidates must be that basis, in order).
-    pub fn fit_with_engine(&self, basis: &Basis, engine: &mut dyn SweepEngine, label: &[f64], label_name: &str, weights: Option<&[f64]>) -> Result<Model> {
+    pub fn fit_with_engine(
+        &self,
+        basis: &Basis,
+        engine: &mut dyn SweepEngine,
+        label: &[f64],
+        label_name: &str,
+        weights: Option<&[f64]>,
+    ) -> Result<Model> {
         if engine.n_candidates() != basis.len() {
-            return Err(Error::param("engine", format!("the engine has {} candidates but the basis {}", engine.n_candidates(), basis.len())));
+            return Err(Error::param(
+                "engine",
+                format!(
+                    "the engine has {} candidates but the basis {}",
+                    engine.n_candidates(),
+                    basis.len()
+                ),
+            ));
         }
         let path = lars_path(engine, label, weights, &self.path)?;
         let n = engine.n_samples();
@@ -380,7 +471,10 @@ impl Regression {
             .iter()
             .enumerate()
             .filter_map(|(i, e)| e.map(|(v, _)| (i, v)))
-            .fold((0, f64::INFINITY), |best, cur| if cur.1 < best.1 { cur } else { best });
+            .fold(
+                (0, f64::INFINITY),
+                |best, cur| if cur.1 < best.1 { cur } else { best },
+            );
 
         // Final refit in original units on the chosen support (+ the constant).
         let mut support: Vec<usize> = path.breakpoints[chosen].active.clone();
@@ -391,14 +485,33 @@ impl Regression {
         let y_w: Vec<f64> = label.iter().zip(sw).map(|(y, s)| y * s).collect();
         let floor = (self.rss_floor * path.y_norm).powi(2);
         let mut pruned = Vec::new();
-        let mut cols: Vec<Vec<f64>> = engine.columns(&support)?.into_iter().map(|c| c.iter().zip(sw).map(|(x, s)| x * s).collect()).collect();
+        let mut cols: Vec<Vec<f64>> = engine
+            .columns(&support)?
+            .into_iter()
+            .map(|c| c.iter().zip(sw).map(|(x, s)| x * s).collect())
+            .collect();
         let mut ls = select::least_squares(&cols, &y_w)?;
         let mut score = select::ebic(n, ls.rss, support.len(), p, self.ebic_gamma, floor);
         while self.prune && !support.is_empty() {
             let k = support.len();
             let best = (0..k)
-                .map(|t| (t, select::ebic(n, ls.rss + ls.removal_cost[t], k - 1, p, self.ebic_gamma, floor)))
-                .fold((usize::MAX, f64::INFINITY), |b, c| if c.1 < b.1 { c } else { b });
+                .map(|t| {
+                    (
+                        t,
+                        select::ebic(
+                            n,
+                            ls.rss + ls.removal_cost[t],
+                            k - 1,
+                            p,
+                            self.ebic_gamma,
+                            floor,
+                        ),
+                    )
+                })
+                .fold(
+                    (usize::MAX, f64::INFINITY),
+                    |b, c| if c.1 < b.1 { c } else { b },
+                );
             if best.0 == usize::MAX || best.1 >= score {
                 break;
             }
@@ -413,13 +526,22 @@ impl Regression {
         let term = |id: usize, c: f64| {
             let e = basis.code(id).exponents(names.len());
             Term {
-                exponents: e.iter().enumerate().filter(|(_, k)| **k > 0).map(|(v, k)| (names[v].clone(), *k)).collect(),
+                exponents: e
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, k)| **k > 0)
+                    .map(|(v, k)| (names[v].clone(), *k))
+                    .collect(),
                 coefficient: c,
                 index: Some(id),
                 name: basis.name(id),
             }
         };
-        let mut terms: Vec<Term> = support.iter().zip(&ls.coef).map(|(&id, &c)| term(id, c)).collect();
+        let mut terms: Vec<Term> = support
+            .iter()
+            .zip(&ls.coef)
+            .map(|(&id, &c)| term(id, c))
+            .collect();
         terms.sort_by_key(|t| t.index);
 
         let st = &path.store;
@@ -466,7 +588,13 @@ impl Regression {
             skipped_collinear: path
                 .events
                 .iter()
-                .filter_map(|e| if let Event::SkippedCollinear { candidate, .. } = e { Some(basis.name(*candidate)) } else { None })
+                .filter_map(|e| {
+                    if let Event::SkippedCollinear { candidate, .. } = e {
+                        Some(basis.name(*candidate))
+                    } else {
+                        None
+                    }
+                })
                 .collect(),
             chosen_breakpoint: chosen,
             ebic_path_choice: ebic_choice,
@@ -476,6 +604,13 @@ impl Regression {
             r2: if yy > 0.0 { 1.0 - ls.rss / yy } else { 1.0 },
             notes: Vec::new(),
         };
-        Ok(Model { label: label_name.to_string(), features: names.to_vec(), degree: basis.degree(), terms, diagnostics, path: path_points })
+        Ok(Model {
+            label: label_name.to_string(),
+            features: names.to_vec(),
+            degree: basis.degree(),
+            terms,
+            diagnostics,
+            path: path_points,
+        })
     }
 }

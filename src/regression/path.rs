@@ -102,12 +102,25 @@ pub struct Breakpoint {
 #[derive(Debug, Clone, Serialize, Deserialize)]
 #[serde(tag = "event", rename_all = "snake_case")]
 pub enum Event {
-    Added { step: usize, candidate: usize },
-    Dropped { step: usize, candidate: usize },
+    Added {
+        step: usize,
+        candidate: usize,
+    },
+    Dropped {
+        step: usize,
+        candidate: usize,
+    },
     /// Entry refused: the candidate is (numerically) a combination of the active ones.
-    SkippedCollinear { step: usize, candidate: usize, pivot: f64 },
+    SkippedCollinear {
+        step: usize,
+        candidate: usize,
+        pivot: f64,
+    },
     /// The incremental correlations drifted; an exact sweep replaced them.
-    Refreshed { step: usize, drift: f64 },
+    Refreshed {
+        step: usize,
+        drift: f64,
+    },
 }
 
 /// Exact data of every candidate that was ever active (for refits and selection).
@@ -196,28 +209,46 @@ impl Standardiser<'_> {
         self.engine.sweep(&self.scaled, &mut self.raw)?;
         self.sweeps += 1;
         for j in 0..out.len() {
-            out[j] = if self.usable[j] { (self.raw[j] - self.mean[j] * total) / self.norm[j] } else { 0.0 };
+            out[j] = if self.usable[j] {
+                (self.raw[j] - self.mean[j] * total) / self.norm[j]
+            } else {
+                0.0
+            };
         }
         Ok(())
     }
 }
 
 /// Computes the path of `y` over every candidate of `engine` (see the module docs).
-pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]>, opts: &PathOptions) -> Result<Path> {
+pub fn lars_path(
+    engine: &mut dyn SweepEngine,
+    y: &[f64],
+    weights: Option<&[f64]>,
+    opts: &PathOptions,
+) -> Result<Path> {
     let n = engine.n_samples();
     let nc = engine.n_candidates();
     if y.len() != n {
-        return Err(Error::param("label", format!("{} values for {n} samples", y.len())));
+        return Err(Error::param(
+            "label",
+            format!("{} values for {n} samples", y.len()),
+        ));
     }
     if let Some(i) = y.iter().position(|v| !v.is_finite()) {
-        return Err(Error::InvalidData(format!("the label is not finite at sample {i}")));
+        return Err(Error::InvalidData(format!(
+            "the label is not finite at sample {i}"
+        )));
     }
     let stats = engine.column_stats(weights)?;
     let w: Vec<f64> = weights.map(<[f64]>::to_vec).unwrap_or_else(|| vec![1.0; n]);
     let sw: f64 = w.iter().sum();
     let sqrt_w: Vec<f64> = w.iter().map(|x| x.sqrt()).collect();
     let y_mean = w.iter().zip(y).map(|(a, b)| a * b).sum::<f64>() / sw;
-    let y_tilde: Vec<f64> = y.iter().zip(&sqrt_w).map(|(v, s)| s * (v - y_mean)).collect();
+    let y_tilde: Vec<f64> = y
+        .iter()
+        .zip(&sqrt_w)
+        .map(|(v, s)| s * (v - y_mean))
+        .collect();
     let y_norm = dot(&y_tilde, &y_tilde).sqrt();
 
     let mut usable = vec![false; nc];
@@ -231,7 +262,16 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
         }
     }
     let n_usable = usable.iter().filter(|u| **u).count();
-    let mut sd = Standardiser { engine, mean: stats.mean, norm: stats.norm, usable, sqrt_w: sqrt_w.clone(), raw: vec![0.0; nc], scaled: vec![0.0; n], sweeps: 0 };
+    let mut sd = Standardiser {
+        engine,
+        mean: stats.mean,
+        norm: stats.norm,
+        usable,
+        sqrt_w: sqrt_w.clone(),
+        raw: vec![0.0; nc],
+        scaled: vec![0.0; n],
+        sweeps: 0,
+    };
 
     let mut path = Path {
         method: opts.method,
@@ -249,7 +289,12 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
         n_usable,
     };
     if !(y_norm > 0.0) {
-        path.breakpoints.push(Breakpoint { alpha: 0.0, active: vec![], coefs: vec![], rel_residual: 0.0 });
+        path.breakpoints.push(Breakpoint {
+            alpha: 0.0,
+            active: vec![],
+            coefs: vec![],
+            rel_residual: 0.0,
+        });
         path.stop = StopReason::ConstantLabel;
         return Ok(path);
     }
@@ -289,7 +334,12 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
         let alpha = c / n as f64;
         let rel_res = dot(&r, &r).sqrt() / y_norm;
         // Breakpoint n_iter: coefficients from the end of the last step, alpha from now.
-        let bp = Breakpoint { alpha, active: pending.0.clone(), coefs: pending.1.clone(), rel_residual: rel_res };
+        let bp = Breakpoint {
+            alpha,
+            active: pending.0.clone(),
+            coefs: pending.1.clone(),
+            rel_residual: rel_res,
+        };
         if path.breakpoints.len() == n_iter + 1 {
             path.breakpoints[n_iter] = bp;
         } else {
@@ -306,7 +356,11 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
                 let ss = (prev.alpha - opts.alpha_min) / (prev.alpha - alpha);
                 let cur = &mut path.breakpoints[n_iter];
                 for (k, id) in cur.active.clone().iter().enumerate() {
-                    let p = prev.active.iter().position(|x| x == id).map_or(0.0, |q| prev.coefs[q]);
+                    let p = prev
+                        .active
+                        .iter()
+                        .position(|x| x == id)
+                        .map_or(0.0, |q| prev.coefs[q]);
                     cur.coefs[k] = p + ss * (cur.coefs[k] - p);
                 }
             }
@@ -334,20 +388,36 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
         if !drop {
             let col = sd.engine.columns(&[c_idx])?.pop().expect("one column");
             let m = w.iter().zip(&col).map(|(a, b)| a * b).sum::<f64>() / sw;
-            let s = w.iter().zip(&col).map(|(a, b)| a * (b - m) * (b - m)).sum::<f64>().sqrt();
+            let s = w
+                .iter()
+                .zip(&col)
+                .map(|(a, b)| a * (b - m) * (b - m))
+                .sum::<f64>()
+                .sqrt();
             if !(s > 0.0) || !s.is_finite() {
                 skipped[c_idx] = true;
-                path.events.push(Event::SkippedCollinear { step: n_iter, candidate: c_idx, pivot: 0.0 });
+                path.events.push(Event::SkippedCollinear {
+                    step: n_iter,
+                    candidate: c_idx,
+                    pivot: 0.0,
+                });
                 continue;
             }
-            let xt: Vec<f64> = col.iter().zip(&path.sqrt_w).map(|(x, q)| q * (x - m) / s).collect();
+            let xt: Vec<f64> = col
+                .iter()
+                .zip(&path.sqrt_w)
+                .map(|(x, q)| q * (x - m) / s)
+                .collect();
             // Drift check: the exact correlation of the entering candidate against the incremental one.
             let exact = dot(&xt, &r);
             let drift = (exact - cov[c_idx]).abs() / cov[c_idx].abs().max(f64::MIN_POSITIVE);
             if drift > opts.refresh_tol && !refreshed_this_iter {
                 sd.corr(&r, &mut cov)?;
                 path.refreshes += 1;
-                path.events.push(Event::Refreshed { step: n_iter, drift });
+                path.events.push(Event::Refreshed {
+                    step: n_iter,
+                    drift,
+                });
                 refreshed_this_iter = true;
                 continue;
             }
@@ -356,7 +426,11 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
             let pivot = pivot.max(f64::EPSILON);
             if pivot < opts.collinearity_tol {
                 skipped[c_idx] = true;
-                path.events.push(Event::SkippedCollinear { step: n_iter, candidate: c_idx, pivot });
+                path.events.push(Event::SkippedCollinear {
+                    step: n_iter,
+                    candidate: c_idx,
+                    pivot,
+                });
                 continue;
             }
             chol.append(wv, pivot);
@@ -370,9 +444,18 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
             xa.push(xt);
             active.push(c_idx);
             in_active[c_idx] = true;
-            sign.push(if cov[c_idx] > 0.0 { 1.0 } else if cov[c_idx] < 0.0 { -1.0 } else { 0.0 });
+            sign.push(if cov[c_idx] > 0.0 {
+                1.0
+            } else if cov[c_idx] < 0.0 {
+                -1.0
+            } else {
+                0.0
+            });
             coef.push(0.0);
-            path.events.push(Event::Added { step: n_iter, candidate: c_idx });
+            path.events.push(Event::Added {
+                step: n_iter,
+                candidate: c_idx,
+            });
             added = true;
         }
         refreshed_this_iter = false;
@@ -402,16 +485,30 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
             let off = c * 4096;
             for (col, l) in xa.iter().zip(&ls) {
                 let len = uc.len();
-                uc.iter_mut().zip(&col[off..off + len]).for_each(|(ui, xi)| *ui += l * xi);
+                uc.iter_mut()
+                    .zip(&col[off..off + len])
+                    .for_each(|(ui, xi)| *ui += l * xi);
             }
         });
         sd.corr(&u, &mut a)?;
 
         let inactive = |j: usize| sd.usable[j] && !in_active[j] && !skipped[j];
-        let g1 = min_pos((0..nc).filter(|&j| inactive(j)).map(|j| (c - cov[j]) / (aa - a[j] + TINY32)));
-        let g2 = min_pos((0..nc).filter(|&j| inactive(j)).map(|j| (c + cov[j]) / (aa + a[j] + TINY32)));
+        let g1 = min_pos(
+            (0..nc)
+                .filter(|&j| inactive(j))
+                .map(|j| (c - cov[j]) / (aa - a[j] + TINY32)),
+        );
+        let g2 = min_pos(
+            (0..nc)
+                .filter(|&j| inactive(j))
+                .map(|j| (c + cov[j]) / (aa + a[j] + TINY32)),
+        );
         let mut gamma = g1.min(g2).min(c / aa);
-        let z: Vec<f64> = coef.iter().zip(&ls).map(|(cf, l)| -cf / (l + TINY32)).collect();
+        let z: Vec<f64> = coef
+            .iter()
+            .zip(&ls)
+            .map(|(cf, l)| -cf / (l + TINY32))
+            .collect();
         let z_pos = min_pos(z.iter().copied());
         drop = false;
         let mut idx: Vec<usize> = Vec::new();
@@ -426,8 +523,12 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
             drop = true;
         }
         n_iter += 1;
-        coef.iter_mut().zip(&ls).for_each(|(cf, l)| *cf += gamma * l);
-        cov.iter_mut().zip(&a).for_each(|(cv, av)| *cv -= gamma * av);
+        coef.iter_mut()
+            .zip(&ls)
+            .for_each(|(cf, l)| *cf += gamma * l);
+        cov.iter_mut()
+            .zip(&a)
+            .for_each(|(cv, av)| *cv -= gamma * av);
         r.iter_mut().zip(&u).for_each(|(ri, ui)| *ri -= gamma * ui);
         if drop && lasso {
             for &q in &idx {
@@ -438,7 +539,10 @@ pub fn lars_path(engine: &mut dyn SweepEngine, y: &[f64], weights: Option<&[f64]
                 sign.remove(q);
                 in_active[id] = false;
                 cov[id] = dot(&col, &r);
-                path.events.push(Event::Dropped { step: n_iter, candidate: id });
+                path.events.push(Event::Dropped {
+                    step: n_iter,
+                    candidate: id,
+                });
             }
         }
         pending = (active.clone(), coef.clone());

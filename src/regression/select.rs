@@ -32,7 +32,9 @@ pub fn ln_binom(p: usize, k: usize) -> f64 {
         return f64::INFINITY;
     }
     let k = k.min(p - k);
-    (0..k).map(|i| ((p - i) as f64).ln() - ((i + 1) as f64).ln()).sum()
+    (0..k)
+        .map(|i| ((p - i) as f64).ln() - ((i + 1) as f64).ln())
+        .sum()
 }
 
 /// Extended BIC (see the module docs).
@@ -68,18 +70,28 @@ pub fn path_ebic(path: &Path, p: usize, gamma: f64, rss_floor: f64) -> Vec<Optio
             out.push(*v);
             continue;
         }
-        let pos: Vec<usize> = key.iter().map(|id| st.position(*id).expect("active columns are stored")).collect();
+        let pos: Vec<usize> = key
+            .iter()
+            .map(|id| st.position(*id).expect("active columns are stored"))
+            .collect();
         let k = pos.len();
         let val = if k == 0 {
             Some((ebic(n, yy, 1, p, gamma, floor), yy))
         } else {
-            let g: Vec<f64> = pos.iter().flat_map(|&a| pos.iter().map(move |&b| (a, b))).map(|(a, b)| gram[a * m + b]).collect();
+            let g: Vec<f64> = pos
+                .iter()
+                .flat_map(|&a| pos.iter().map(move |&b| (a, b)))
+                .map(|(a, b)| gram[a * m + b])
+                .collect();
             Cholesky::factor(&g, k, 1e-10).map(|ch| {
                 let mut b: Vec<f64> = pos.iter().map(|&q| st.xty[q]).collect();
                 ch.solve(&mut b);
                 resid.copy_from_slice(&path.y_tilde);
                 for (&q, bq) in pos.iter().zip(&b) {
-                    resid.iter_mut().zip(&st.cols[q]).for_each(|(r, x)| *r -= bq * x);
+                    resid
+                        .iter_mut()
+                        .zip(&st.cols[q])
+                        .for_each(|(r, x)| *r -= bq * x);
                 }
                 let rss: f64 = resid.iter().map(|r| r * r).sum();
                 (ebic(n, rss, k + 1, p, gamma, floor), rss)
@@ -105,22 +117,37 @@ pub fn least_squares(cols: &[Vec<f64>], y: &[f64]) -> Result<LeastSquares> {
     let k = cols.len();
     let n = y.len();
     if k == 0 {
-        return Ok(LeastSquares { coef: vec![], rss: y.iter().map(|v| v * v).sum(), removal_cost: vec![] });
+        return Ok(LeastSquares {
+            coef: vec![],
+            rss: y.iter().map(|v| v * v).sum(),
+            removal_cost: vec![],
+        });
     }
     if k > n {
         return Err(Error::Numerical(format!("{k} terms but only {n} samples")));
     }
-    let scale: Vec<f64> = cols.iter().map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt()).collect();
+    let scale: Vec<f64> = cols
+        .iter()
+        .map(|c| c.iter().map(|x| x * x).sum::<f64>().sqrt())
+        .collect();
     if scale.iter().any(|s| !(*s > 0.0)) {
-        return Err(Error::Numerical("a chosen term is zero on every weighted sample".into()));
+        return Err(Error::Numerical(
+            "a chosen term is zero on every weighted sample".into(),
+        ));
     }
-    let mut a: Vec<Vec<f64>> = cols.iter().zip(&scale).map(|(c, s)| c.iter().map(|x| x / s).collect()).collect();
+    let mut a: Vec<Vec<f64>> = cols
+        .iter()
+        .zip(&scale)
+        .map(|(c, s)| c.iter().map(|x| x / s).collect())
+        .collect();
     let mut qy = y.to_vec();
     let mut rdiag = vec![0.0; k];
     for j in 0..k {
         let norm = a[j][j..].iter().map(|x| x * x).sum::<f64>().sqrt();
         if !(norm > 1e-12) {
-            return Err(Error::Numerical("the chosen terms are linearly dependent".into()));
+            return Err(Error::Numerical(
+                "the chosen terms are linearly dependent".into(),
+            ));
         }
         let alpha = if a[j][j] > 0.0 { -norm } else { norm };
         let mut v = a[j][j..].to_vec();
@@ -154,9 +181,15 @@ pub fn least_squares(cols: &[Vec<f64>], y: &[f64]) -> Result<LeastSquares> {
             rinv[i * k + j] = -s / r(i, i);
         }
     }
-    let removal_cost = (0..k).map(|t| b[t] * b[t] / (t..k).map(|j| rinv[t * k + j].powi(2)).sum::<f64>()).collect();
+    let removal_cost = (0..k)
+        .map(|t| b[t] * b[t] / (t..k).map(|j| rinv[t * k + j].powi(2)).sum::<f64>())
+        .collect();
     let coef = b.iter().zip(&scale).map(|(c, s)| c / s).collect();
-    Ok(LeastSquares { coef, rss, removal_cost })
+    Ok(LeastSquares {
+        coef,
+        rss,
+        removal_cost,
+    })
 }
 
 #[cfg(test)]
@@ -168,10 +201,14 @@ mod tests {
         let x0: Vec<f64> = (0..20).map(|i| 1.0 + i as f64 * 0.1).collect();
         let x1: Vec<f64> = (0..20).map(|i| ((i * 7 % 11) as f64).sin()).collect();
         let x2: Vec<f64> = (0..20).map(|i| (i as f64 * 0.3).cos()).collect();
-        let y: Vec<f64> = (0..20).map(|i| 2.0 * x0[i] - 0.5 * x1[i] + 0.01 * ((i * 13 % 5) as f64 - 2.0)).collect();
+        let y: Vec<f64> = (0..20)
+            .map(|i| 2.0 * x0[i] - 0.5 * x1[i] + 0.01 * ((i * 13 % 5) as f64 - 2.0))
+            .collect();
         let full = least_squares(&[x0.clone(), x1.clone(), x2.clone()], &y).unwrap();
         let without = least_squares(&[x0.clone(), x1.clone()], &y).unwrap();
-        assert!((full.rss + full.removal_cost[2] - without.rss).abs() < 1e-10 * (1.0 + without.rss));
+        assert!(
+            (full.rss + full.removal_cost[2] - without.rss).abs() < 1e-10 * (1.0 + without.rss)
+        );
         let without1 = least_squares(&[x0, x2], &y).unwrap();
         assert!((full.rss + full.removal_cost[1] - without1.rss).abs() < 1e-9 * without1.rss);
         assert!((without.coef[0] - 2.0).abs() < 0.05);
@@ -181,6 +218,9 @@ mod tests {
     fn ebic_penalises_search() {
         assert!((ln_binom(10, 3) - 120f64.ln()).abs() < 1e-12);
         assert!(ebic(100, 1.0, 3, 1000, 1.0, 0.0) > ebic(100, 1.0, 3, 10, 1.0, 0.0));
-        assert_eq!(ebic(100, 1e-30, 2, 10, 1.0, 1e-20), ebic(100, 1e-25, 2, 10, 1.0, 1e-20));
+        assert_eq!(
+            ebic(100, 1e-30, 2, 10, 1.0, 1e-20),
+            ebic(100, 1e-25, 2, 10, 1.0, 1e-20)
+        );
     }
 }

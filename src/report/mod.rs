@@ -7,9 +7,15 @@ use std::path::Path;
 
 /// Writes a text file, creating the folder, with an error naming the path.
 pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::Io { path: dir.display().to_string(), message: e.to_string() })?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::Io {
+        path: dir.display().to_string(),
+        message: e.to_string(),
+    })?;
     let p = dir.join(name);
-    std::fs::write(&p, text).map_err(|e| Error::Io { path: p.display().to_string(), message: e.to_string() })
+    std::fs::write(&p, text).map_err(|e| Error::Io {
+        path: p.display().to_string(),
+        message: e.to_string(),
+    })
 }
 
 /// A table rendered as Markdown and as CSV from the same rows.
@@ -20,7 +26,10 @@ pub struct Table {
 
 impl Table {
     pub fn new(header: &[&str]) -> Table {
-        Table { header: header.iter().map(|s| s.to_string()).collect(), rows: Vec::new() }
+        Table {
+            header: header.iter().map(|s| s.to_string()).collect(),
+            rows: Vec::new(),
+        }
     }
 
     pub fn row(&mut self, cells: Vec<String>) {
@@ -28,7 +37,11 @@ impl Table {
     }
 
     pub fn markdown(&self) -> String {
-        let mut s = format!("| {} |\n|{}|\n", self.header.join(" | "), vec!["---"; self.header.len()].join("|"));
+        let mut s = format!(
+            "| {} |\n|{}|\n",
+            self.header.join(" | "),
+            vec!["---"; self.header.len()].join("|")
+        );
         for r in &self.rows {
             s += &format!("| {} |\n", r.join(" | "));
         }
@@ -36,7 +49,13 @@ impl Table {
     }
 
     pub fn csv(&self) -> String {
-        let q = |c: &String| if c.contains(',') || c.contains('"') { format!("\"{}\"", c.replace('"', "\"\"")) } else { c.clone() };
+        let q = |c: &String| {
+            if c.contains(',') || c.contains('"') {
+                format!("\"{}\"", c.replace('"', "\"\""))
+            } else {
+                c.clone()
+            }
+        };
         let mut s = self.header.iter().map(q).collect::<Vec<_>>().join(",") + "\n";
         for r in &self.rows {
             s += &(r.iter().map(q).collect::<Vec<_>>().join(",") + "\n");

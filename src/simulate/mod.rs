@@ -101,10 +101,14 @@ impl SampledInput {
     /// `t` strictly increasing; one vector of samples per channel, each as long as `t`.
     pub fn new(t: Vec<f64>, values: Vec<Vec<f64>>) -> Result<SampledInput> {
         if !t.windows(2).all(|w| w[1] > w[0]) {
-            return Err(Error::InvalidData("input sample times must increase strictly".into()));
+            return Err(Error::InvalidData(
+                "input sample times must increase strictly".into(),
+            ));
         }
         if values.iter().any(|v| v.len() != t.len()) {
-            return Err(Error::InvalidData("every input channel needs one value per sample time".into()));
+            return Err(Error::InvalidData(
+                "every input channel needs one value per sample time".into(),
+            ));
         }
         Ok(SampledInput { t, values })
     }
@@ -186,7 +190,15 @@ pub struct SimOptions {
 
 impl Default for SimOptions {
     fn default() -> Self {
-        SimOptions { rtol: 1e-8, atol: 1e-10, h_max: None, h_min_rel: 1e-12, bound: 1e12, max_steps_per_interval: 100_000, run: "0".into() }
+        SimOptions {
+            rtol: 1e-8,
+            atol: 1e-10,
+            h_max: None,
+            h_min_rel: 1e-12,
+            bound: 1e12,
+            max_steps_per_interval: 100_000,
+            run: "0".into(),
+        }
     }
 }
 
@@ -209,7 +221,9 @@ impl Trajectory {
     }
     /// The time series of state `j`.
     pub fn series(&self, j: usize) -> Vec<f64> {
-        (0..self.t.len()).map(|k| self.x[k * self.dim + j]).collect()
+        (0..self.t.len())
+            .map(|k| self.x[k * self.dim + j])
+            .collect()
     }
 }
 
@@ -266,7 +280,11 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
     }
 
     /// LU factors of the simplified-Newton matrix `I - h (A x J)` for step `h`.
-    fn newton_matrix(&self, h: f64, jac: &[f64]) -> nalgebra::linalg::LU<f64, nalgebra::Dyn, nalgebra::Dyn> {
+    fn newton_matrix(
+        &self,
+        h: f64,
+        jac: &[f64],
+    ) -> nalgebra::linalg::LU<f64, nalgebra::Dyn, nalgebra::Dyn> {
         let n = self.n;
         let m = 3 * n;
         let a = self.rk.a;
@@ -286,7 +304,13 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
 
     /// One Radau IIA step from (t, x0) with step h, given the factors of [`Self::newton_matrix`]
     /// for that h (from a Jacobian at or near x0: simplified Newton tolerates a slightly old one).
-    fn radau_step(&mut self, t: f64, x0: &[f64], h: f64, lu: &nalgebra::linalg::LU<f64, nalgebra::Dyn, nalgebra::Dyn>) -> StepOutcome {
+    fn radau_step(
+        &mut self,
+        t: f64,
+        x0: &[f64],
+        h: f64,
+        lu: &nalgebra::linalg::LU<f64, nalgebra::Dyn, nalgebra::Dyn>,
+    ) -> StepOutcome {
         let n = self.n;
         let m = 3 * n;
         let a = self.rk.a;
@@ -362,7 +386,15 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
     }
 
     /// Integrates from `a` to `b` (input smooth inside), updating `x` and the step-size guess `h`.
-    fn segment(&mut self, a: f64, b: f64, x: &mut Vec<f64>, h: &mut f64, stats: &mut (usize, usize), interval: f64) -> Result<()> {
+    fn segment(
+        &mut self,
+        a: f64,
+        b: f64,
+        x: &mut Vec<f64>,
+        h: &mut f64,
+        stats: &mut (usize, usize),
+        interval: f64,
+    ) -> Result<()> {
         let n = self.n;
         let mut t = a;
         let mut jac = vec![0.0; n * n];
@@ -374,7 +406,10 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 return Err(Error::Diverged {
                     run: self.opts.run.clone(),
                     time: t,
-                    state: format!("all (more than {} steps in one output interval)", self.opts.max_steps_per_interval),
+                    state: format!(
+                        "all (more than {} steps in one output interval)",
+                        self.opts.max_steps_per_interval
+                    ),
                 });
             }
             let mut hh = (*h).min(b - t);
@@ -423,7 +458,11 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                     let err = (err / n as f64).sqrt();
                     let err = if err.is_finite() { err } else { f64::INFINITY };
                     // Standard controller for an order-5 estimate, with a safety factor.
-                    let fac = if err == 0.0 { 4.0 } else { (0.9 * err.powf(-1.0 / 6.0)).clamp(0.2, 4.0) };
+                    let fac = if err == 0.0 {
+                        4.0
+                    } else {
+                        (0.9 * err.powf(-1.0 / 6.0)).clamp(0.2, 4.0)
+                    };
                     if err <= 1.0 {
                         stats.0 += 1;
                         t = if last { b } else { t + hh };
@@ -452,7 +491,11 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 return Err(Error::Diverged {
                     run: self.opts.run.clone(),
                     time: t,
-                    state: format!("{} (step size collapsed to {:e} s)", self.worst_state(x), *h),
+                    state: format!(
+                        "{} (step size collapsed to {:e} s)",
+                        self.worst_state(x),
+                        *h
+                    ),
                 });
             }
         }
@@ -463,7 +506,11 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         let (k, v) = x
             .iter()
             .enumerate()
-            .max_by(|a, b| a.1.abs().partial_cmp(&b.1.abs()).unwrap_or(std::cmp::Ordering::Greater))
+            .max_by(|a, b| {
+                a.1.abs()
+                    .partial_cmp(&b.1.abs())
+                    .unwrap_or(std::cmp::Ordering::Greater)
+            })
             .map(|(k, v)| (k, *v))
             .unwrap_or((0, 0.0));
         format!("{} = {v:e}", self.sys.state_name(k))
@@ -481,21 +528,41 @@ pub fn simulate<S: System + ?Sized, I: Input + ?Sized>(
 ) -> Result<Trajectory> {
     let n = sys.dim();
     if x0.len() != n {
-        return Err(Error::param("initial state", format!("has {} values, the system has {n} states", x0.len())));
+        return Err(Error::param(
+            "initial state",
+            format!("has {} values, the system has {n} states", x0.len()),
+        ));
     }
     if input.n_inputs() != sys.n_inputs() {
-        return Err(Error::param("input", format!("has {} channels, the system needs {}", input.n_inputs(), sys.n_inputs())));
+        return Err(Error::param(
+            "input",
+            format!(
+                "has {} channels, the system needs {}",
+                input.n_inputs(),
+                sys.n_inputs()
+            ),
+        ));
     }
     if times.is_empty() {
         return Err(Error::param("times", "no output times"));
     }
     if times.iter().any(|t| !t.is_finite()) || !times.windows(2).all(|w| w[1] > w[0]) {
-        return Err(Error::param("times", "output times must be finite and strictly increasing"));
+        return Err(Error::param(
+            "times",
+            "output times must be finite and strictly increasing",
+        ));
     }
     if !(opts.rtol > 0.0 && opts.atol > 0.0) {
         return Err(Error::param("tolerances", "rtol and atol must be positive"));
     }
-    let mut it = Integrator { sys, input, rk: Radau::new(), opts, n, u: vec![0.0; sys.n_inputs()] };
+    let mut it = Integrator {
+        sys,
+        input,
+        rk: Radau::new(),
+        opts,
+        n,
+        u: vec![0.0; sys.n_inputs()],
+    };
     let mut x = x0.to_vec();
     if let Some(e) = it.diverged(times[0], &x) {
         return Err(e);
@@ -520,7 +587,13 @@ pub fn simulate<S: System + ?Sized, I: Input + ?Sized>(
         }
         out.extend_from_slice(&x);
     }
-    Ok(Trajectory { t: times.to_vec(), x: out, dim: n, steps: stats.0, rejected: stats.1 })
+    Ok(Trajectory {
+        t: times.to_vec(),
+        x: out,
+        dim: n,
+        steps: stats.0,
+        rejected: stats.1,
+    })
 }
 
 /// Simulates a compiled model with inputs sampled at `times` (linear interpolation between them).
@@ -549,15 +622,28 @@ pub fn initial_window(order: usize) -> usize {
 /// at `t[0]`. This is a plain local fit, not the derivative smoother of the identification
 /// workflow: with noisy data the highest derivatives at the very start of a run are uncertain,
 /// and a stable model forgets that error at the rate of its slowest mode.
-pub fn estimate_initial_derivatives(t: &[f64], y: &[f64], order: usize, run: &str, what: &str) -> Result<Vec<f64>> {
+pub fn estimate_initial_derivatives(
+    t: &[f64],
+    y: &[f64],
+    order: usize,
+    run: &str,
+    what: &str,
+) -> Result<Vec<f64>> {
     let m = initial_window(order);
     if t.len() < m || y.len() < m {
-        return Err(Error::RunTooShort { run: run.into(), len: t.len().min(y.len()), min: m, what: what.into() });
+        return Err(Error::RunTooShort {
+            run: run.into(),
+            len: t.len().min(y.len()),
+            min: m,
+            what: what.into(),
+        });
     }
     let deg = order + 1;
     let span = t[m - 1] - t[0];
     if !(span.is_finite() && span > 0.0) {
-        return Err(Error::InvalidData(format!("run '{run}': the first {m} sample times do not increase")));
+        return Err(Error::InvalidData(format!(
+            "run '{run}': the first {m} sample times do not increase"
+        )));
     }
     let a = DMatrix::from_fn(m, deg + 1, |r, c| ((t[r] - t[0]) / span).powi(c as i32));
     let b = DVector::from_fn(m, |r, _| y[r]);
@@ -614,7 +700,12 @@ pub fn fit_initial_state(
         let mut r = Vec::with_capacity(w * n_out);
         for (i, (y, s)) in ys.iter().zip(&scale).enumerate() {
             let o = model.offset(i);
-            r.extend(y[..w].iter().enumerate().map(|(k, v)| (tr.state(k)[o] - v) / s));
+            r.extend(
+                y[..w]
+                    .iter()
+                    .enumerate()
+                    .map(|(k, v)| (tr.state(k)[o] - v) / s),
+            );
         }
         Some(r)
     };
@@ -660,7 +751,9 @@ pub fn fit_initial_state(
             for j in 0..n {
                 a[(j, j)] += lambda * jtj[(j, j)].max(1e-300);
             }
-            let Some(step) = a.lu().solve(&(-&jtr)) else { break };
+            let Some(step) = a.lu().solve(&(-&jtr)) else {
+                break;
+            };
             let xn: Vec<f64> = x.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
             if let Some(rn) = residuals(&xn) {
                 if cost(&rn) < c0 {
@@ -687,10 +780,22 @@ pub fn rms_nrmse(sim: &[f64], meas: &[f64]) -> (f64, f64) {
     if n == 0 {
         return (0.0, 0.0);
     }
-    let rms = (sim.iter().zip(meas).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / n as f64).sqrt();
+    let rms = (sim
+        .iter()
+        .zip(meas)
+        .map(|(a, b)| (a - b).powi(2))
+        .sum::<f64>()
+        / n as f64)
+        .sqrt();
     let mean = meas[..n].iter().sum::<f64>() / n as f64;
     let sd = (meas[..n].iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
-    let nrmse = if sd > 0.0 { rms / sd } else if rms == 0.0 { 0.0 } else { f64::INFINITY };
+    let nrmse = if sd > 0.0 {
+        rms / sd
+    } else if rms == 0.0 {
+        0.0
+    } else {
+        f64::INFINITY
+    };
     (rms, nrmse)
 }
 
@@ -715,10 +820,22 @@ mod tests {
     fn initial_derivatives_of_a_polynomial_are_exact() {
         let t: Vec<f64> = (0..30).map(|k| 1.0 + 0.01 * k as f64).collect();
         // y = 2 + 3 (t-1) - 4 (t-1)^2 + 0.5 (t-1)^3 + (t-1)^4: degree order+1 = 4 for order 3
-        let y: Vec<f64> = t.iter().map(|&t| { let s = t - 1.0; 2.0 + 3.0 * s - 4.0 * s * s + 0.5 * s.powi(3) + s.powi(4) }).collect();
+        let y: Vec<f64> = t
+            .iter()
+            .map(|&t| {
+                let s = t - 1.0;
+                2.0 + 3.0 * s - 4.0 * s * s + 0.5 * s.powi(3) + s.powi(4)
+            })
+            .collect();
         let d = estimate_initial_derivatives(&t, &y, 3, "r", "x").unwrap();
-        assert!((d[0] - 2.0).abs() < 1e-10 && (d[1] - 3.0).abs() < 1e-8 && (d[2] + 8.0).abs() < 1e-6, "{d:?}");
-        assert!(matches!(estimate_initial_derivatives(&t[..10], &y[..10], 3, "r", "x"), Err(Error::RunTooShort { .. })));
+        assert!(
+            (d[0] - 2.0).abs() < 1e-10 && (d[1] - 3.0).abs() < 1e-8 && (d[2] + 8.0).abs() < 1e-6,
+            "{d:?}"
+        );
+        assert!(matches!(
+            estimate_initial_derivatives(&t[..10], &y[..10], 3, "r", "x"),
+            Err(Error::RunTooShort { .. })
+        ));
         let (rms, nr) = rms_nrmse(&[1.0, 3.0], &[0.0, 2.0]);
         assert_eq!((rms, nr), (1.0, 1.0));
     }

@@ -16,16 +16,26 @@ pub struct DenseEngine {
 impl DenseEngine {
     pub fn from_column_major(n_samples: usize, n_candidates: usize, data: Vec<f64>) -> DenseEngine {
         assert_eq!(data.len(), n_samples * n_candidates, "matrix size");
-        DenseEngine { n_samples, n_candidates, data }
+        DenseEngine {
+            n_samples,
+            n_candidates,
+            data,
+        }
     }
 
     /// Builds from columns of equal length.
     pub fn from_columns(columns: &[Vec<f64>]) -> Result<DenseEngine> {
         let n = columns.first().map_or(0, Vec::len);
         if columns.iter().any(|c| c.len() != n) {
-            return Err(Error::InvalidData("design columns have different lengths".into()));
+            return Err(Error::InvalidData(
+                "design columns have different lengths".into(),
+            ));
         }
-        Ok(DenseEngine::from_column_major(n, columns.len(), columns.concat()))
+        Ok(DenseEngine::from_column_major(
+            n,
+            columns.len(),
+            columns.concat(),
+        ))
     }
 
     fn col(&self, j: usize) -> &[f64] {
@@ -35,7 +45,10 @@ impl DenseEngine {
 
 impl SweepEngine for DenseEngine {
     fn describe(&self) -> String {
-        format!("cpu (materialised f64, {} x {})", self.n_samples, self.n_candidates)
+        format!(
+            "cpu (materialised f64, {} x {})",
+            self.n_samples, self.n_candidates
+        )
     }
 
     fn n_samples(&self) -> usize {
@@ -56,7 +69,11 @@ impl SweepEngine for DenseEngine {
             .map(|j| {
                 let c = self.col(j);
                 let m = c.iter().enumerate().map(|(i, x)| w(i) * x).sum::<f64>() / sw;
-                let s = c.iter().enumerate().map(|(i, x)| w(i) * (x - m) * (x - m)).sum::<f64>();
+                let s = c
+                    .iter()
+                    .enumerate()
+                    .map(|(i, x)| w(i) * (x - m) * (x - m))
+                    .sum::<f64>();
                 (m, s.sqrt())
             })
             .unzip();
@@ -65,7 +82,10 @@ impl SweepEngine for DenseEngine {
 
     fn sweep(&mut self, v: &[f64], out: &mut [f64]) -> Result<()> {
         if v.len() != self.n_samples || out.len() != self.n_candidates {
-            return Err(Error::param("sweep", "vector lengths do not match the design"));
+            return Err(Error::param(
+                "sweep",
+                "vector lengths do not match the design",
+            ));
         }
         out.par_iter_mut().enumerate().for_each(|(j, o)| {
             *o = self.col(j).iter().zip(v).map(|(x, y)| x * y).sum();
@@ -79,7 +99,13 @@ impl SweepEngine for DenseEngine {
                 if j < self.n_candidates {
                     Ok(self.col(j).to_vec())
                 } else {
-                    Err(Error::param("columns", format!("candidate {j} is out of range ({} candidates)", self.n_candidates)))
+                    Err(Error::param(
+                        "columns",
+                        format!(
+                            "candidate {j} is out of range ({} candidates)",
+                            self.n_candidates
+                        ),
+                    ))
                 }
             })
             .collect()

@@ -8,7 +8,16 @@ use crate::engine::Features;
 use std::ops::{Add, Mul, Sub};
 
 /// The working precision of monomial products (f32 or f64).
-pub trait Elem: Copy + Send + Sync + Default + Add<Output = Self> + Mul<Output = Self> + Sub<Output = Self> + 'static {
+pub trait Elem:
+    Copy
+    + Send
+    + Sync
+    + Default
+    + Add<Output = Self>
+    + Mul<Output = Self>
+    + Sub<Output = Self>
+    + 'static
+{
     const ZERO: Self;
     const ONE: Self;
     fn from_f64(x: f64) -> Self;
@@ -69,7 +78,9 @@ impl Plan {
         let nc = basis.len();
         let mut first_child = vec![u32::MAX; nc];
         for j in 1..nc {
-            let p = basis.parent(j).expect("non-constant monomials have parents");
+            let p = basis
+                .parent(j)
+                .expect("non-constant monomials have parents");
             if first_child[p] == u32::MAX {
                 first_child[p] = j as u32;
             }
@@ -101,7 +112,12 @@ impl Plan {
             }
         }
         debug_assert_eq!(order.len(), nc);
-        Plan { families, order, degree, n_vars }
+        Plan {
+            families,
+            order,
+            degree,
+            n_vars,
+        }
     }
 
     pub fn degree(&self) -> usize {
@@ -148,7 +164,11 @@ impl<T: Elem> Scratch<T> {
     pub fn new(degree: usize, n_vars: usize, bsz: usize) -> Self {
         let mut vals = vec![T::ZERO; degree.max(1) * bsz];
         vals[..bsz].fill(T::ONE);
-        Scratch { vals, vb: vec![T::ZERO; bsz], vz: vec![T::ZERO; n_vars * bsz] }
+        Scratch {
+            vals,
+            vb: vec![T::ZERO; bsz],
+            vz: vec![T::ZERO; n_vars * bsz],
+        }
     }
 
     /// Loads one block of v (shorter than the block at the end: the rest is zero).
@@ -166,7 +186,13 @@ impl<T: Elem> Scratch<T> {
 /// Per block, `vz_k = v * z_k` is formed once for every variable; the correlation of child
 /// `p * z_k` is then `sum_i x_p,i vz_k,i`, one multiply-add per pair, with the parent values
 /// `x_p` (themselves `x_parent(p) * z_var`) computed in the same pass.
-pub fn sweep_block<T: Elem>(plan: &Plan, zb: &[T], bsz: usize, s: &mut Scratch<T>, acc: &mut [f64]) {
+pub fn sweep_block<T: Elem>(
+    plan: &Plan,
+    zb: &[T],
+    bsz: usize,
+    s: &mut Scratch<T>,
+    acc: &mut [f64],
+) {
     let nv = plan.n_vars;
     // vz_k and the constant / degree-1 candidates.
     acc[0] += s.vb.iter().map(|x| x.to_f64()).sum::<f64>();
@@ -194,7 +220,10 @@ pub fn sweep_block<T: Elem>(plan: &Plan, zb: &[T], bsz: usize, s: &mut Scratch<T
                     ($e:ty, $m:ident) => {{
                         let zb = std::slice::from_raw_parts(zb.as_ptr() as *const $e, zb.len());
                         let vz = std::slice::from_raw_parts(s.vz.as_ptr() as *const $e, s.vz.len());
-                        let vals = std::slice::from_raw_parts_mut(s.vals.as_mut_ptr() as *mut $e, s.vals.len());
+                        let vals = std::slice::from_raw_parts_mut(
+                            s.vals.as_mut_ptr() as *mut $e,
+                            s.vals.len(),
+                        );
                         simd::$m::families(plan, zb, vz, vals, acc);
                         return;
                     }};
@@ -212,7 +241,13 @@ pub fn sweep_block<T: Elem>(plan: &Plan, zb: &[T], bsz: usize, s: &mut Scratch<T
     families_generic(plan, zb, bsz, s, acc);
 }
 
-fn families_generic<T: Elem>(plan: &Plan, zb: &[T], bsz: usize, s: &mut Scratch<T>, acc: &mut [f64]) {
+fn families_generic<T: Elem>(
+    plan: &Plan,
+    zb: &[T],
+    bsz: usize,
+    s: &mut Scratch<T>,
+    acc: &mut [f64],
+) {
     let nv = plan.n_vars;
     for f in plan.families.iter().skip(1) {
         let lvl = f.level as usize;
@@ -377,13 +412,36 @@ mod simd {
         }
     }
 
-    simd_families!(avx2_f32, "avx2,fma", f32, __m256, 8, _mm256_loadu_ps, _mm256_storeu_ps, _mm256_mul_ps, _mm256_add_ps, _mm256_fmadd_ps, _mm256_setzero_ps,
+    simd_families!(
+        avx2_f32,
+        "avx2,fma",
+        f32,
+        __m256,
+        8,
+        _mm256_loadu_ps,
+        _mm256_storeu_ps,
+        _mm256_mul_ps,
+        _mm256_add_ps,
+        _mm256_fmadd_ps,
+        _mm256_setzero_ps,
         #[inline]
         #[target_feature(enable = "avx2,fma")]
         unsafe fn reduce<const NT: usize>(a: &[__m256; NT], out: &mut [f64]) {
             super::reduce8_f32::<NT>(a, out)
-        });
-    simd_families!(avx2_f64, "avx2,fma", f64, __m256d, 4, _mm256_loadu_pd, _mm256_storeu_pd, _mm256_mul_pd, _mm256_add_pd, _mm256_fmadd_pd, _mm256_setzero_pd,
+        }
+    );
+    simd_families!(
+        avx2_f64,
+        "avx2,fma",
+        f64,
+        __m256d,
+        4,
+        _mm256_loadu_pd,
+        _mm256_storeu_pd,
+        _mm256_mul_pd,
+        _mm256_add_pd,
+        _mm256_fmadd_pd,
+        _mm256_setzero_pd,
         #[inline]
         #[target_feature(enable = "avx2,fma")]
         unsafe fn reduce<const NT: usize>(a: &[__m256d; NT], out: &mut [f64]) {
@@ -391,7 +449,8 @@ mod simd {
                 let h = _mm_add_pd(_mm256_castpd256_pd128(a[t]), _mm256_extractf128_pd(a[t], 1));
                 out[t] += _mm_cvtsd_f64(_mm_add_sd(h, _mm_unpackhi_pd(h, h)));
             }
-        });
+        }
+    );
 }
 
 /// The instruction set the sweeps use on this CPU (for reports): AVX2 + FMA when present,
@@ -404,7 +463,8 @@ pub fn simd_level() -> &'static str {
         let want = std::env::var("CTSID_SIMD").unwrap_or_default();
         #[cfg(target_arch = "x86_64")]
         {
-            let avx2 = std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma");
+            let avx2 = std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma");
             if avx2 && want != "none" {
                 return "avx2";
             }
@@ -415,7 +475,14 @@ pub fn simd_level() -> &'static str {
 }
 
 /// Adds one block's `sum_i w_i (x_ij - mean_j)^2` to `acc[j]` (f64; for column statistics).
-pub fn centred_block(plan: &Plan, zb: &[f64], bsz: usize, s: &mut Scratch<f64>, mean: &[f64], acc: &mut [f64]) {
+pub fn centred_block(
+    plan: &Plan,
+    zb: &[f64],
+    bsz: usize,
+    s: &mut Scratch<f64>,
+    mean: &[f64],
+    acc: &mut [f64],
+) {
     let nv = plan.n_vars;
     let w = &s.vb;
     acc[0] += w.iter().map(|wi| wi * (1.0 - mean[0]).powi(2)).sum::<f64>();

@@ -1,0 +1,230 @@
+//! `ctsid identify`: the main job on measured data.
+
+use clap::Args;
+use ctsid::identify::split::{parse_runs, resolve};
+use ctsid::identify::{identify, Orders, Settings, Split};
+use ctsid::records::{CsvSpec, RecordSet};
+use ctsid::regression::EngineChoice;
+use ctsid::report::{svg, write_file, Table};
+use ctsid::{Error, Result};
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct IdentifyArgs {
+    /// CSV file with a header row.
+    pub data: PathBuf,
+    /// Output channel(s), comma separated.
+    #[arg(long, value_delimiter = ',', required = true)]
+    pub output: Vec<String>,
+    /// Input channel(s), comma separated.
+    #[arg(long, value_delimiter = ',')]
+    pub input: Vec<String>,
+    /// Run (experiment) id column.
+    #[arg(long)]
+    pub run_column: Option<String>,
+    #[arg(long)]
+    pub tau: Option<f64>,
+    #[arg(long)]
+    pub time_column: Option<String>,
+    /// Training runs, like `0-24,30` (default: every run not in validation or test).
+    #[arg(long)]
+    pub train: Option<String>,
+    /// Validation runs (default: 5-fold over the training runs).
+    #[arg(long)]
+    pub validation: Option<String>,
+    /// Test runs (scored and simulated, never fitted).
+    #[arg(long)]
+    pub test: Option<String>,
+    /// Candidate orders searched with the eta-rule, like `1..4` or `1,2,3`.
+    #[arg(long, default_value = "1..4", conflicts_with = "order")]
+    pub orders: String,
+    /// Fixed order per output, comma separated.
+    #[arg(long, value_delimiter = ',')]
+    pub order: Option<Vec<usize>>,
+    /// Largest monomial degree.
+    #[arg(long)]
+    pub degree: usize,
+    /// eta of the eta-rule.
+    #[arg(long, default_value_t = 1.2)]
+    pub eta: f64,
+    /// Sweep engine: auto, cpu or gpu.
+    #[arg(long, default_value = "auto")]
+    pub engine: EngineChoice,
+    /// Write the model file here.
+    #[arg(short = 'o', long)]
+    pub output_model: Option<PathBuf>,
+    /// Write tables and plots into this folder.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+    /// No progress lines.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+fn parse_orders(text: &str) -> Result<Vec<usize>> {
+    let t = text.replace("..", "-");
+    parse_runs(&t)?
+        .iter()
+        .map(|s| {
+            s.parse::<usize>().map_err(|_| {
+                Error::param(
+                    "orders",
+                    format!("'{text}' is not a list of orders like 1..4"),
+                )
+            })
+        })
+        .collect()
+}
+
+pub fn run(a: IdentifyArgs) -> Result<()> {
+    let mut columns = a.output.clone();
+    columns.extend(a.input.iter().cloned());
+    let spec = CsvSpec {
+        columns,
+        run_column: a.run_column.clone(),
+        time_column: a.time_column.clone(),
+        tau: a.tau,
+    };
+    let rs = RecordSet::from_csv(&a.data, &spec)?;
+    let ids: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
+    let pick = |t: &Option<String>, what: &str| -> Result<Option<Vec<usize>>> {
+        t.as_deref()
+            .map(|t| resolve(&parse_runs(t)?, &ids, what))
+            .transpose()
+    };
+    let validation = pick(&a.validation, "validation")?;
+    let test = pick(&a.test, "test")?.unwrap_or_default();
+    let train = match pick(&a.train, "train")? {
+        Some(t) => t,
+        None => (0..ids.len())
+            .filter(|r| !test.contains(r) && !validation.as_ref().is_some_and(|v| v.contains(r)))
+            .collect(),
+    };
+    let split = Split::new(train, validation, test, &ids)?;
+    let mut s = Settings::new(a.output.clone(), a.input.clone(), a.degree);
+    s.orders = match &a.order {
+        Some(o) => Orders::Fixed(o.clone()),
+        None => Orders::Search(parse_orders(&a.orders)?),
+    };
+    s.eta = a.eta;
+    s.engine = a.engine;
+    s.progress = !a.quiet;
+    let id = identify(&rs, &split, &s)?;
+
+    let mut text = String::new();
+    for rep in &id.outputs {
+        let mut t = Table::new(&[
+            "order",
+            "terms",
+            "validation p50",
+            "p80",
+            "p90",
+            "p95",
+            "p98",
+            "p99",
+            "p100",
+            "selected",
+        ]);
+        for c in &rep.candidates {
+            let mut row = vec![c.order.to_string(), c.n_terms.to_string()];
+            row.extend(c.validation.0.iter().map(|v| format!("{v:.4}")));
+            row.push(if c.order == rep.order {
+                "<-".into()
+            } else {
+                String::new()
+            });
+            t.row(row);
+        }
+        text += &format!("## Output '{}': order {} ({} samples, {} left out for uncertain labels; engine {})\n\n{}\n    {}\n\n", rep.name, rep.order, rep.samples_used, rep.samples_excluded, rep.engine, t.markdown(), rep.equation);
+        if let Some(p) = &rep.test {
+            text += &format!(
+                "Test runs, against our labels: p50/80/90/95/98/99/100 = {}\n\n",
+                p.compact()
+            );
+        }
+    }
+    if !id.simulations.is_empty() {
+        let mut t = Table::new(&["test run", "output", "RMS", "NRMSE"]);
+        for sim in &id.simulations {
+            match &sim.error {
+                Some(e) => t.row(vec![
+                    sim.run.clone(),
+                    "-".into(),
+                    "-".into(),
+                    format!("diverged: {e}"),
+                ]),
+                None => {
+                    for (o, name) in a.output.iter().enumerate() {
+                        t.row(vec![
+                            sim.run.clone(),
+                            name.clone(),
+                            format!("{:.4e}", sim.rms[o]),
+                            format!("{:.2} %", 100.0 * sim.nrmse[o]),
+                        ]);
+                    }
+                }
+            }
+        }
+        let overall: Vec<String> = id
+            .test_nrmse()
+            .iter()
+            .map(|v| format!("{:.2} %", 100.0 * v))
+            .collect();
+        text += &format!(
+            "## Free-run simulation on test runs (overall NRMSE {})\n\n{}\n",
+            overall.join(", "),
+            t.markdown()
+        );
+    }
+    text += &format!("Weighting: {}.\n", id.weighting);
+    print!("{text}");
+
+    if let Some(path) = &a.output_model {
+        let mut model = id.model.clone();
+        model.extra.insert("training".into(), serde_json::json!({
+            "outputs": id.outputs,
+            "test_nrmse": id.test_nrmse(),
+            "weighting": id.weighting,
+            "settings": {"degree": a.degree, "eta": a.eta, "engine": a.engine.to_string(), "train": split.train.iter().map(|&r| ids[r].clone()).collect::<Vec<_>>()},
+        }));
+        model.write(&path.display().to_string())?;
+        eprintln!("model written to {}", path.display());
+    }
+    if let Some(dir) = &a.report {
+        write_file(dir, "report.md", &text)?;
+        if let Some(sim) = id.simulations.iter().find(|s| s.error.is_none()) {
+            let r = ids.iter().position(|i| *i == sim.run).unwrap();
+            let run = &rs.runs[r];
+            let t: Vec<f64> = (0..run.len()).map(|k| run.t0 + k as f64 * rs.tau).collect();
+            for (o, name) in a.output.iter().enumerate() {
+                let c = rs.channel_index(name)?;
+                let plot = svg::line_plot(
+                    &format!("{name}: free-run simulation, run {}", sim.run),
+                    "t (s)",
+                    name,
+                    &[
+                        svg::Series {
+                            label: "measured",
+                            x: &t,
+                            y: &run.channels[c],
+                            color: "gray",
+                            band: None,
+                            dashed: false,
+                        },
+                        svg::Series {
+                            label: "simulated",
+                            x: &t,
+                            y: &sim.simulated[o],
+                            color: "red",
+                            band: None,
+                            dashed: true,
+                        },
+                    ],
+                );
+                write_file(dir, &format!("simulation_{name}.svg"), &plot)?;
+            }
+        }
+        eprintln!("report written to {}", dir.display());
+    }
+    Ok(())
+}
