@@ -12,8 +12,10 @@
 //! # Weighting
 //! Samples whose label is uncertain must not steer the fit: each sample gets the weight
 //! 1 / (1 + (sigma_label / sigma_ref)^2), with sigma_ref the median label sigma over the training
-//! samples, and samples with sigma_label > 5 sigma_ref (the ends of runs, transients shorter than
-//! the sampling period) are left out. The report says how many.
+//! samples; samples with sigma_label > 3 sigma_ref (transients shorter than the sampling period)
+//! and the first and last m samples of every run (m = states of the smoother: the ends, where a
+//! jump of the input at t = 0 leaves labels no smoother can recover) are left out, of the fits and
+//! of the error profiles alike. The report says how many.
 //!
 //! # MIMO
 //! Output i's features are the derivatives 0..n_j-1 of every output j and all inputs, so the
@@ -31,6 +33,9 @@ use crate::model::{derivative_name, Model as ModelFile, OutputEquation, Term as 
 use crate::records::RecordSet;
 use crate::regression::{EngineChoice, Method, Regression};
 use crate::simulate::{fit_initial_state, rms_nrmse, simulate_model, SimOptions};
+
+/// Labels whose sigma exceeds this multiple of the median label sigma are left out.
+pub const EXCLUDE_SIGMA: f64 = 3.0;
 
 /// Reweighting passes of the robust fit.
 pub const ROBUST_ITERATIONS: usize = 3;
@@ -61,6 +66,9 @@ pub struct Settings {
     pub max_terms: usize,
     /// Weight samples by the confidence of their label (see the module docs).
     pub weighting: bool,
+    /// Pass every signal of an output's equation (its label, the other outputs' derivatives and
+    /// the inputs) through one and the same linear smoother (see [`equation_data`]).
+    pub same_filter: bool,
     /// Print progress lines to standard error.
     pub progress: bool,
 }
@@ -77,6 +85,7 @@ impl Settings {
             engine: EngineChoice::Auto,
             max_terms: 40,
             weighting: true,
+            same_filter: true,
             progress: false,
         }
     }
@@ -219,7 +228,16 @@ struct Prepared<'a> {
     settings: &'a Settings,
     derivs: Vec<Vec<Derivatives>>,
     inputs: Vec<usize>,
-    sigma_ref: Vec<f64>,
+    /// What equation i sees: every signal through the same filter (see [`equation_data`]).
+    eqs: Vec<EqData>,
+    /// Median label sigma over the training samples, per output equation and order.
+    sigma_ref: Vec<Vec<f64>>,
+}
+
+/// The signals of one output equation: outs[j][run] (derivatives of output j), ins[c][run].
+struct EqData {
+    outs: Vec<Vec<Derivatives>>,
+    ins: Vec<Vec<Vec<f64>>>,
 }
 
 impl Prepared<'_> {
@@ -249,23 +267,26 @@ impl Prepared<'_> {
         for &r in runs {
             let n = self.rs.runs[r].len();
             let mut c = 0;
+            let eq = &self.eqs[i];
             for (j, _) in self.settings.outputs.iter().enumerate() {
                 for k in 0..ord[j] {
-                    cols[c].extend_from_slice(&self.derivs[j][r].values[k]);
+                    cols[c].extend_from_slice(&eq.outs[j][r].values[k]);
                     c += 1;
                 }
             }
-            for &u in &self.inputs {
-                cols[c].extend_from_slice(&self.rs.runs[r].channels[u]);
+            for u in &eq.ins {
+                cols[c].extend_from_slice(&u[r]);
                 c += 1;
             }
-            let d = &self.derivs[i][r];
+            let d = &eq.outs[i][r];
             label.extend_from_slice(&d.values[ord[i]]);
+            let margin = d.states.min(n / 4);
             for s in 0..n {
-                let ratio = d.sigma[ord[i]][s] / self.sigma_ref[i].max(1e-300);
+                let ratio = d.sigma[ord[i]][s] / self.sigma_ref[i][ord[i]].max(1e-300);
+                let at_end = s < margin || s + margin >= n;
                 let w = if !self.settings.weighting {
                     1.0
-                } else if ratio > 5.0 {
+                } else if ratio > EXCLUDE_SIGMA || at_end {
                     excluded += 1;
                     0.0
                 } else {
@@ -277,8 +298,17 @@ impl Prepared<'_> {
         (Features::new(names, cols), label, weights, excluded)
     }
 
-    fn regression(&self) -> Result<Regression> {
+    /// The sparse regression for equation i on `used` samples (those with a positive weight).
+    ///
+    /// eBIC counts independent samples: residuals of smoothed signals are correlated over about
+    /// pi / h samples (h the equation's scaled smoothing step), so `used * min(1, h / pi)` of them.
+    fn regression(&self, i: usize, used: usize) -> Result<Regression> {
+        let h = self.eqs[i].outs[i].first().map_or(1.0, |d| d.h);
         Regression::builder()
+            .effective_samples(used as f64 * (h / std::f64::consts::PI).min(1.0))
+            // Derivative labels are never better than ~1e-7 relative: below that, eBIC should
+            // treat a fit as exact rather than reward terms that fit rounding.
+            .rss_floor(1e-7)
             .degree(self.settings.degree)
             .method(Method::LassoLars)
             .max_terms(self.settings.max_terms)
@@ -295,7 +325,7 @@ impl Prepared<'_> {
     fn fit(&self, i: usize, ord: &[usize], fit_runs: &[usize]) -> Result<crate::regression::Model> {
         let (f, y, w0, _) = self.design(i, ord, fit_runs);
         let label = derivative_name(&self.settings.outputs[i], ord[i]);
-        let reg = self.regression()?;
+        let reg = self.regression(i, w0.iter().filter(|w| **w > 0.0).count())?;
         let mut w = w0.clone();
         let mut model = reg.fit(&f, &y, &label, Some(&w))?;
         for _ in 0..ROBUST_ITERATIONS {
@@ -307,8 +337,15 @@ impl Prepared<'_> {
                 .filter(|(_, w)| **w > 0.0)
                 .map(|(r, w)| (r * w.sqrt()).abs())
                 .collect();
-            let scale = 1.4826 * crate::derivatives::score::percentile(&abs, 50.0);
-            if !(scale > 0.0) {
+            // The scale never drops below 1e-6 of the label's spread: on noise-free data the MAD
+            // is rounding, and bisquare weights on rounding would discard good samples.
+            let label_rms = (y.iter().zip(&w0).map(|(v, w)| w * v * v).sum::<f64>()
+                / w0.iter().sum::<f64>().max(1e-300))
+            .sqrt();
+            let scale =
+                (1.4826 * crate::derivatives::score::percentile(&abs, 50.0)).max(1e-6 * label_rms);
+            let worst = abs.iter().cloned().fold(0.0, f64::max);
+            if !(scale > 0.0) || worst < 4.685 * scale {
                 break;
             }
             for s in 0..y.len() {
@@ -408,19 +445,34 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
             t.elapsed().as_secs_f64()
         ));
     }
-    // Reference label sigma per output, at its largest candidate order, over training samples.
-    let sigma_ref: Vec<f64> = (0..outputs.len())
-        .map(|o| {
-            let k = match &settings.orders {
-                Orders::Fixed(c) => c[o],
-                Orders::Search(c) => *c.iter().max().unwrap(),
-            };
-            let all: Vec<f64> = split
-                .train
-                .iter()
-                .flat_map(|&r| derivs[o][r].sigma[k].iter().copied())
-                .collect();
-            crate::derivatives::score::percentile(&all, 50.0)
+    let eqs: Vec<EqData> = (0..outputs.len())
+        .map(|i| {
+            equation_data(
+                rs,
+                &outputs,
+                &inputs,
+                &derivs,
+                i,
+                max_order,
+                settings.same_filter,
+            )
+        })
+        .collect::<Result<_>>()?;
+    // Reference label sigma per equation and order, over training samples.
+    let sigma_ref: Vec<Vec<f64>> = eqs
+        .iter()
+        .enumerate()
+        .map(|(i, eq)| {
+            (0..=max_order)
+                .map(|k| {
+                    let all: Vec<f64> = split
+                        .train
+                        .iter()
+                        .flat_map(|&r| eq.outs[i][r].sigma[k].iter().copied())
+                        .collect();
+                    crate::derivatives::score::percentile(&all, 50.0)
+                })
+                .collect()
         })
         .collect();
     let prep = Prepared {
@@ -428,6 +480,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         settings,
         derivs,
         inputs,
+        eqs,
         sigma_ref,
     };
 
@@ -523,7 +576,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     )?;
     say(format!("identified in {:.2} s", t.elapsed().as_secs_f64()));
     let weighting = if settings.weighting {
-        "samples weighted by 1/(1+(sigma_label/median sigma)^2); labels with sigma above 5x the median left out".into()
+        "samples weighted by 1/(1+(sigma_label/median sigma)^2); labels with sigma above 3x the median, and the first and last m samples of each run (m = smoother states), left out".into()
     } else {
         "all samples weighted equally".into()
     };
@@ -610,4 +663,62 @@ pub fn simulate_runs(
         }
     }
     Ok(out)
+}
+
+/// The signals output equation i is fitted on.
+///
+/// The self-tuning derivatives are the best estimate of each signal on its own, but they are
+/// nonlinear in the data (locally adaptive) and each signal gets its own smoothing. An equation
+/// y^(n) = P(y, ..., u) only holds between signals that went through the *same* filter: a
+/// smoother that cuts at 10 rad/s attenuates y^(n) near its cut-off, and if u is not attenuated
+/// alike the fit absorbs the mismatch into every coefficient. So equation i sees every output's
+/// derivatives and every input through one linear smoother: the integrator-chain RTS smoother at
+/// output i's tuned level, with neither local adaptivity nor end blending. Its sigmas still
+/// weight the samples.
+fn equation_data(
+    rs: &RecordSet,
+    outputs: &[usize],
+    inputs: &[usize],
+    derivs: &[Vec<Derivatives>],
+    i: usize,
+    max_order: usize,
+    same_filter: bool,
+) -> Result<EqData> {
+    if !same_filter {
+        let ins = inputs
+            .iter()
+            .map(|&c| rs.runs.iter().map(|r| r.channels[c].clone()).collect())
+            .collect();
+        return Ok(EqData {
+            outs: derivs.to_vec(),
+            ins,
+        });
+    }
+    let d0 = &derivs[i][0];
+    let opts = DerivativeOptions {
+        states: Some(d0.states),
+        h: Some(d0.h),
+        adaptive: false,
+        end_blend: false,
+        ..Default::default()
+    };
+    let smooth = |c: usize, order: usize| -> Result<Vec<Derivatives>> {
+        let runs: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[c].as_slice()).collect();
+        differentiate_runs(&runs, rs.tau, order, &opts)
+    };
+    let outs = outputs
+        .iter()
+        .map(|&c| smooth(c, max_order))
+        .collect::<Result<Vec<_>>>()?;
+    let ins = inputs
+        .iter()
+        .map(|&c| {
+            smooth(c, 0).map(|v| {
+                v.into_iter()
+                    .map(|d| d.values.into_iter().next().unwrap())
+                    .collect()
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(EqData { outs, ins })
 }

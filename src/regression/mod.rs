@@ -51,6 +51,7 @@ pub struct RegressionBuilder {
     alpha_min: f64,
     epsilon: f64,
     ebic_gamma: f64,
+    effective_samples: Option<f64>,
     prune: bool,
     fit_intercept: bool,
     collinearity_tol: f64,
@@ -72,6 +73,7 @@ impl Default for RegressionBuilder {
             alpha_min: p.alpha_min,
             epsilon: p.epsilon,
             ebic_gamma: 1.0,
+            effective_samples: None,
             prune: true,
             fit_intercept: true,
             collinearity_tol: p.collinearity_tol,
@@ -105,6 +107,13 @@ impl RegressionBuilder {
         alpha_min: f64);
     setter!(/// Relevance threshold: the path stops when a new monomial lowers ||r|| / ||y~|| by less (default 0: off).
         epsilon: f64);
+    /// Number of independent samples eBIC counts (default: all samples). Residuals of smoothed
+    /// signals are correlated over the smoother's window, so they carry fewer independent
+    /// samples than rows; counting every row rewards terms that fit the smoother's own error.
+    pub fn effective_samples(mut self, n: f64) -> Self {
+        self.effective_samples = Some(n);
+        self
+    }
     setter!(/// eBIC's gamma in [0, 1] (default 1).
         ebic_gamma: f64);
     setter!(/// Backward pruning after the eBIC choice (default on).
@@ -209,6 +218,7 @@ impl RegressionBuilder {
             degree: self.degree,
             path,
             ebic_gamma: self.ebic_gamma,
+            effective_samples: self.effective_samples,
             prune: self.prune,
             fit_intercept: self.fit_intercept,
             rss_floor: self.rss_floor,
@@ -225,6 +235,7 @@ pub struct Regression {
     degree: usize,
     path: PathOptions,
     ebic_gamma: f64,
+    effective_samples: Option<f64>,
     prune: bool,
     fit_intercept: bool,
     rss_floor: f64,
@@ -464,9 +475,13 @@ impl Regression {
             ));
         }
         let path = lars_path(engine, label, weights, &self.path)?;
-        let n = engine.n_samples();
+        let n_rows = engine.n_samples();
+        // eBIC's n: the effective number of independent samples, never more than the rows.
+        let n = self
+            .effective_samples
+            .map_or(n_rows, |e| (e.round() as usize).clamp(2, n_rows.max(2)));
         let p = basis.len();
-        let ebics = select::path_ebic(&path, p, self.ebic_gamma, self.rss_floor);
+        let ebics = select::path_ebic(&path, n, p, self.ebic_gamma, self.rss_floor);
         let (chosen, ebic_choice) = ebics
             .iter()
             .enumerate()

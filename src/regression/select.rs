@@ -44,8 +44,14 @@ pub fn ebic(n: usize, rss: f64, k: usize, p: usize, gamma: f64, floor: f64) -> f
 }
 
 /// eBIC of every breakpoint's support (None where the refit is singular), in path order.
-pub fn path_ebic(path: &Path, p: usize, gamma: f64, rss_floor: f64) -> Vec<Option<(f64, f64)>> {
-    let n = path.y_tilde.len();
+/// `n` is eBIC's sample count (the rows, or fewer effective samples).
+pub fn path_ebic(
+    path: &Path,
+    n: usize,
+    p: usize,
+    gamma: f64,
+    rss_floor: f64,
+) -> Vec<Option<(f64, f64)>> {
     let floor = (rss_floor * path.y_norm).powi(2);
     let st = &path.store;
     let m = st.ids.len();
@@ -62,7 +68,7 @@ pub fn path_ebic(path: &Path, p: usize, gamma: f64, rss_floor: f64) -> Vec<Optio
     type Scored = (Vec<usize>, Option<(f64, f64)>);
     let mut seen: Vec<Scored> = Vec::new();
     let mut out = Vec::with_capacity(path.breakpoints.len());
-    let mut resid = vec![0.0; n];
+    let mut resid = vec![0.0; path.y_tilde.len()];
     for bp in &path.breakpoints {
         let mut key: Vec<usize> = bp.active.clone();
         key.sort_unstable();
