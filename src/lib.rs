@@ -22,6 +22,7 @@
 
 pub mod basis;
 pub mod demo;
+pub mod discover;
 pub mod derivatives;
 pub mod engine;
 pub mod error;

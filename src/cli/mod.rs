@@ -2,6 +2,7 @@
 
 mod demo;
 mod derive;
+mod discover;
 mod identify;
 mod score;
 mod simulate;
@@ -36,6 +37,8 @@ pub enum Command {
     ScoreDerivatives(score::ScoreArgs),
     /// Sparse polynomial regression of a label column on feature columns (LARS / LassoLars + eBIC).
     Regress(regress::RegressArgs),
+    /// Find missing physics: compare a nominal model with runs, name, gate and add effects.
+    Discover(discover::DiscoverArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -46,5 +49,6 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Simulate(args) => simulate::run(args),
         Command::ScoreDerivatives(a) => score::run(a),
         Command::Regress(a) => regress::run(a),
+        Command::Discover(a) => discover::run(a),
     }
 }

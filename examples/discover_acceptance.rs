@@ -1,0 +1,72 @@
+//! The acceptance matrix of `ctsid discover` on the generated cases: every case for seeds
+//! 0..N (default 10) at 3 % noise, printing each verdict and the pass counts.
+//!
+//! `cargo run --release --example discover_acceptance -- [SEEDS] [ETA] [CASE ...]`
+
+use ctsid::discover::cases::{generate, judge, split, CASES};
+use ctsid::discover::{discover, Options};
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let seeds: u64 = args.first().and_then(|s| s.parse().ok()).unwrap_or(10);
+    let eta: f64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(0.03);
+    let chosen: Vec<String> = if args.len() > 2 {
+        args[2..].to_vec()
+    } else {
+        CASES.iter().map(|s| s.to_string()).collect()
+    };
+    let mut summary = Vec::new();
+    for name in &chosen {
+        let mut pass = 0;
+        let mut ratios = Vec::new();
+        for seed in 0..seeds {
+            let t = std::time::Instant::now();
+            let case = match generate(name, seed, eta) {
+                Ok(c) => c,
+                Err(e) => {
+                    println!("{name} seed {seed}: generation failed: {e}");
+                    continue;
+                }
+            };
+            let (tr, va, te) = split();
+            let mut o = Options::new(tr, va, te);
+            o.seed = seed;
+            if let Ok(m) = std::env::var("HW") {
+                o.half_width = m.parse().ok();
+            }
+            match discover(&case.records, &case.nominal, &o) {
+                Ok(d) => {
+                    let (ok, why) = judge(&case, &d);
+                    if std::env::var("SHOW").is_ok() {
+                        println!("{}", d.text());
+                    }
+                    pass += ok as usize;
+                    ratios.push(d.nrmse_before / d.nrmse_after.max(1e-300));
+                    let extra = d
+                        .closest
+                        .clone()
+                        .or_else(|| d.effects.first().map(|e| format!("aliases {:?}", e.aliases)))
+                        .unwrap_or_default();
+                    println!(
+                        "{name} seed {seed}: {} {} m={} [{:.1} s] {why} | {extra}",
+                        if ok { "PASS" } else { "FAIL" },
+                        d.verdict,
+                        d.half_width,
+                        t.elapsed().as_secs_f64()
+                    );
+                }
+                Err(e) => println!("{name} seed {seed}: FAIL error {e}"),
+            }
+        }
+        ratios.sort_by(|a, b| a.total_cmp(b));
+        let med = ratios.get(ratios.len() / 2).copied().unwrap_or(0.0);
+        let min = ratios.first().copied().unwrap_or(0.0);
+        summary.push(format!(
+            "{name}: {pass}/{seeds} pass; test NRMSE before/after median {med:.2}x, min {min:.2}x"
+        ));
+    }
+    println!("\n== acceptance at eta = {eta} ==");
+    for s in summary {
+        println!("{s}");
+    }
+}

@@ -1,0 +1,123 @@
+//! `ctsid discover`: the missing-physics workflow on measured runs (see `ctsid::discover`).
+
+use clap::Args;
+use ctsid::discover::{discover, Options};
+use ctsid::identify::split::{parse_runs, resolve};
+use ctsid::model::Model;
+use ctsid::records::{CsvSpec, RecordSet};
+use ctsid::report::write_file;
+use ctsid::{Error, Result};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct DiscoverArgs {
+    /// CSV file with a header row.
+    pub data: PathBuf,
+    /// The nominal model file (ctsid-model/1, one output).
+    #[arg(long)]
+    pub nominal: PathBuf,
+    /// Run (experiment) id column.
+    #[arg(long)]
+    pub run_column: String,
+    #[arg(long)]
+    pub tau: Option<f64>,
+    #[arg(long)]
+    pub time_column: Option<String>,
+    /// Training runs, like `0-3` (default: the first half of the runs).
+    #[arg(long)]
+    pub train: Option<String>,
+    /// Validation runs (default: the next quarter).
+    #[arg(long)]
+    pub validation: Option<String>,
+    /// Test runs (default: the rest).
+    #[arg(long)]
+    pub test: Option<String>,
+    /// Prior half-width of a nominal term, `TERM=PCT` (`y_d1=10`, `u=fixed`, `1=approximate`).
+    #[arg(long)]
+    pub confidence: Vec<String>,
+    /// Extra dictionary entries, `NAME=EXPRESSION` (`backlash=relu(abs(y)-0.1)*sign(y)`).
+    #[arg(long)]
+    pub effect: Vec<String>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Write the augmented model file here.
+    #[arg(short = 'o', long)]
+    pub output_model: Option<PathBuf>,
+    /// Write the evidence (discovery.json, summary.md) into this folder.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
+}
+
+pub fn run(a: DiscoverArgs) -> Result<()> {
+    let nominal = Model::read(&a.nominal.to_string_lossy())?;
+    let mut columns: Vec<String> = nominal.outputs.iter().map(|o| o.name.clone()).collect();
+    columns.extend(nominal.inputs.iter().cloned());
+    let spec = CsvSpec {
+        columns,
+        run_column: Some(a.run_column.clone()),
+        time_column: a.time_column.clone(),
+        tau: a.tau,
+    };
+    let rs = RecordSet::from_csv(&a.data, &spec)?;
+    let names: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
+    let n = names.len();
+    let pick = |arg: &Option<String>, what: &str, default: Vec<usize>| -> Result<Vec<usize>> {
+        match arg {
+            Some(t) => resolve(&names, &parse_runs(t)?, what),
+            None => Ok(default),
+        }
+    };
+    if n < 3 && (a.train.is_none() || a.validation.is_none() || a.test.is_none()) {
+        return Err(Error::param(
+            "split",
+            format!("{n} runs; give --train, --validation and --test explicitly (one run each at least)"),
+        ));
+    }
+    let h = (n / 2).max(1);
+    let q = ((n - h) / 2).max(1);
+    let train = pick(&a.train, "--train", (0..h).collect())?;
+    let validation = pick(&a.validation, "--validation", (h..h + q).collect())?;
+    let test = pick(&a.test, "--test", (h + q..n).collect())?;
+    let mut o = Options::new(train, validation, test);
+    o.seed = a.seed;
+    let mut conf = BTreeMap::new();
+    for c in &a.confidence {
+        let (t, p) = c
+            .split_once('=')
+            .ok_or_else(|| Error::param("confidence", format!("'{c}': use TERM=PCT")))?;
+        let v = match p.trim() {
+            "fixed" => 0.0,
+            "approximate" => 1.0,
+            s => {
+                let v: f64 = s.trim_end_matches('%').parse().map_err(|_| {
+                    Error::param("confidence", format!("'{c}': '{s}' is not a percentage, 'fixed' or 'approximate'"))
+                })?;
+                if !(v >= 0.0 && v.is_finite()) {
+                    return Err(Error::param("confidence", format!("'{c}': must be >= 0")));
+                }
+                v / 100.0
+            }
+        };
+        conf.insert(t.trim().to_string(), v);
+    }
+    o.confidence = conf;
+    for e in &a.effect {
+        let (name, ex) = e
+            .split_once('=')
+            .ok_or_else(|| Error::param("effect", format!("'{e}': use NAME=EXPRESSION")))?;
+        o.user_effects.push((name.trim().to_string(), ex.trim().to_string()));
+    }
+    let d = discover(&rs, &nominal, &o)?;
+    print!("{}", d.text());
+    if let Some(p) = &a.output_model {
+        d.augmented_model(&nominal)?.write(&p.to_string_lossy())?;
+    }
+    if let Some(dir) = &a.report {
+        let json = serde_json::to_string_pretty(&d)
+            .map_err(|e| Error::Numerical(format!("discovery JSON: {e}")))?;
+        write_file(dir, "discovery.json", &json)?;
+        write_file(dir, "summary.md", &d.text())?;
+    }
+    Ok(())
+}

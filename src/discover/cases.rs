@@ -1,0 +1,335 @@
+//! Seeded acceptance cases for `discover`: a true system (simulated with [`crate::simulate`]
+//! through the [`System`] trait), a nominal model file that omits or mistunes something, and what
+//! a correct answer is.
+//!
+//! Every case: 8 runs of 10 s at tau = 0.01 s (train 0-3, validation 4-5, test 6-7), driven by a
+//! seeded multisine (5 sines, 0.05-1.2 Hz, random phases) unless the case says otherwise; only `y`
+//! and `u` recorded; 3 % noise with the paper's definition ([`crate::plants::noise::add_noise`]).
+//! Coulomb friction in the truth is `Fc tanh(v / 1e-3)` (a relay the integrator can step across;
+//! at velocities of order 1 it is a sign function).
+
+use crate::error::Result;
+use crate::model::{Model, OutputEquation, Term};
+use crate::plants::noise::add_noise;
+use crate::plants::rng::{stream_seed, Rng};
+use crate::records::{RecordSet, Run};
+use crate::simulate::{simulate, Input, SimOptions, System};
+
+/// What a correct answer is.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Expect {
+    /// The family must be named (alone or first), coefficient within 10 % of `coef`.
+    Added { family: &'static str, coef: f64 },
+    /// Nothing may be added.
+    Nothing,
+    /// Verdict retune, the term's coefficient within 10 % of `value`.
+    Retune { term: &'static str, value: f64 },
+    /// `wrong` must never be named alone; `family` expected as in `Added`.
+    Distractor {
+        family: &'static str,
+        coef: f64,
+        wrong: &'static str,
+    },
+}
+
+/// One case.
+pub struct Case {
+    pub name: &'static str,
+    pub records: RecordSet,
+    pub nominal: Model,
+    pub expect: Expect,
+}
+
+/// The names of all cases.
+pub const CASES: [&str; 11] = [
+    "coulomb",
+    "duffing",
+    "quadratic_drag",
+    "tank",
+    "negative_none",
+    "negative_drift",
+    "negative_small",
+    "mistuned",
+    "distractor_relay",
+    "distractor_sin",
+    "distractor_v3",
+];
+
+struct Truth {
+    order: usize,
+    f: fn(&[f64], f64) -> f64,
+}
+
+impl System for Truth {
+    fn dim(&self) -> usize {
+        self.order
+    }
+    fn n_inputs(&self) -> usize {
+        1
+    }
+    fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        let n = self.order;
+        dx[..(n - 1)].copy_from_slice(&x[1..n]);
+        dx[n - 1] = (self.f)(x, u[0]);
+    }
+}
+
+struct Multisine {
+    a: Vec<f64>,
+    w: Vec<f64>,
+    phi: Vec<f64>,
+    offset: f64,
+}
+
+impl Input for Multisine {
+    fn n_inputs(&self) -> usize {
+        1
+    }
+    fn eval(&self, t: f64, u: &mut [f64]) {
+        u[0] = self.offset
+            + self
+                .a
+                .iter()
+                .zip(&self.w)
+                .zip(&self.phi)
+                .map(|((a, w), p)| a * (w * t + p).sin())
+                .sum::<f64>();
+    }
+    fn breakpoints(&self, _t0: f64, _t1: f64, _out: &mut Vec<f64>) {}
+}
+
+fn msd(c: f64, k: f64) -> Vec<Term> {
+    vec![
+        Term::new(&[("y", 1)], -k),
+        Term::new(&[("y_d1", 1)], -c),
+        Term::new(&[("u", 1)], 1.0),
+    ]
+}
+
+/// Generates case `name` for `seed` at noise level `eta` (0.03 in the acceptance).
+pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
+    let (order, f, nominal_terms, expect, amp, offset, single): (
+        usize,
+        fn(&[f64], f64) -> f64,
+        Vec<Term>,
+        Expect,
+        f64,
+        f64,
+        bool,
+    ) = match name {
+        "coulomb" => (
+            2,
+            |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.5 * (x[1] / 1e-3).tanh(),
+            msd(0.4, 4.0),
+            Expect::Added { family: "coulomb_friction", coef: -0.5 },
+            2.0,
+            0.0,
+            false,
+        ),
+        "duffing" => (
+            2,
+            |x, u| -0.8 * x[1] - 1.0 * x[0] - 2.0 * x[0].powi(3) + u,
+            msd(0.8, 1.0),
+            Expect::Added { family: "cubic_stiffness", coef: -2.0 },
+            1.5,
+            0.0,
+            false,
+        ),
+        "quadratic_drag" => (
+            2,
+            |x, u| -0.2 * x[1] - 1.0 * x[0] - 0.8 * x[1].abs() * x[1] + u,
+            msd(0.2, 1.0),
+            Expect::Added { family: "quadratic_drag", coef: -0.8 },
+            1.5,
+            0.0,
+            false,
+        ),
+        "tank" => (
+            1,
+            |x, u| -0.5 * x[0].max(0.0).sqrt() + 0.5 * u,
+            // Linearised at h0 = 1: sqrt(h) ~ 0.5 + 0.5 h.
+            vec![
+                Term::new(&[], -0.25),
+                Term::new(&[("y", 1)], -0.25),
+                Term::new(&[("u", 1)], 0.5),
+            ],
+            Expect::Added { family: "sqrt_outflow", coef: -0.5 },
+            0.25,
+            1.0,
+            false,
+        ),
+        "negative_none" | "negative_drift" => (
+            2,
+            |x, u| -0.4 * x[1] - 4.0 * x[0] + u,
+            msd(0.4, 4.0),
+            Expect::Nothing,
+            2.0,
+            0.0,
+            false,
+        ),
+        "negative_small" => (
+            2,
+            |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.005 * (x[1] / 1e-3).tanh(),
+            msd(0.4, 4.0),
+            Expect::Nothing,
+            2.0,
+            0.0,
+            false,
+        ),
+        "mistuned" => (
+            2,
+            |x, u| -0.4 * x[1] - 4.0 * x[0] + u,
+            msd(0.52, 4.0),
+            Expect::Retune { term: "y_d1", value: -0.4 },
+            2.0,
+            0.0,
+            false,
+        ),
+        "distractor_relay" => (
+            2,
+            |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.5 * (x[1] / 1e-3).tanh(),
+            msd(0.4, 4.0),
+            Expect::Distractor { family: "coulomb_friction", coef: -0.5, wrong: "input_relay" },
+            3.0,
+            0.0,
+            true,
+        ),
+        "distractor_sin" => (
+            2,
+            |x, u| -0.8 * x[1] - 1.0 * x[0] - 2.0 * x[0].powi(3) + u,
+            msd(0.8, 1.0),
+            Expect::Distractor { family: "cubic_stiffness", coef: -2.0, wrong: "trigonometric" },
+            1.0,
+            0.0,
+            false,
+        ),
+        "distractor_v3" => (
+            2,
+            |x, u| -0.2 * x[1] - 1.0 * x[0] - 0.8 * x[1].abs() * x[1] + u,
+            msd(0.2, 1.0),
+            Expect::Distractor { family: "quadratic_drag", coef: -0.8, wrong: "cubic_damping" },
+            1.5,
+            0.0,
+            false,
+        ),
+        other => {
+            return Err(crate::error::Error::param(
+                "case",
+                format!("unknown case '{other}' (known: {})", CASES.join(", ")),
+            ))
+        }
+    };
+    let case_id = CASES.iter().position(|c| *c == name).unwrap_or(0) as u64;
+    let tau = 0.01;
+    let n = 1000;
+    let times: Vec<f64> = (0..n).map(|i| i as f64 * tau).collect();
+    let truth = Truth { order, f };
+    let mut runs = Vec::new();
+    for r in 0..8u64 {
+        let mut rng = Rng::new(stream_seed(seed, case_id, r));
+        let input = if single {
+            Multisine {
+                a: vec![amp],
+                w: vec![2.0 * std::f64::consts::PI * rng.uniform_in(0.2, 0.4)],
+                phi: vec![rng.uniform_in(0.0, 6.283)],
+                offset,
+            }
+        } else {
+            let k = 5;
+            Multisine {
+                a: (0..k).map(|_| amp * rng.uniform_in(0.3, 1.0) / (k as f64).sqrt() * 1.4).collect(),
+                w: (0..k)
+                    .map(|_| 2.0 * std::f64::consts::PI * rng.uniform_in(0.05, 1.2))
+                    .collect(),
+                phi: (0..k).map(|_| rng.uniform_in(0.0, 6.283)).collect(),
+                offset,
+            }
+        };
+        let x0: Vec<f64> = if order == 1 {
+            vec![(0.5 * offset / 0.5).powi(2)]
+        } else {
+            vec![0.0; order]
+        };
+        let opts = SimOptions {
+            rtol: 1e-9,
+            atol: 1e-11,
+            run: format!("{r}"),
+            ..SimOptions::default()
+        };
+        let tr = simulate(&truth, &input, &x0, &times, &opts)?;
+        let mut y = tr.series(0);
+        if name == "negative_drift" {
+            let amp = y.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+            for (i, v) in y.iter_mut().enumerate() {
+                *v += 0.03 * amp * (i as f64 / n as f64);
+            }
+        }
+        let y = add_noise(&y, eta, &mut rng);
+        let mut u = vec![0.0];
+        let uv: Vec<f64> = times
+            .iter()
+            .map(|&t| {
+                input.eval(t, &mut u);
+                u[0]
+            })
+            .collect();
+        runs.push(Run {
+            id: format!("{r}"),
+            channels: vec![y, uv],
+            rows: (0..n).collect(),
+            t0: 0.0,
+        });
+    }
+    let records = RecordSet::new(tau, vec!["y".into(), "u".into()], runs)?;
+    let nominal = Model::new(&["u"], vec![OutputEquation::new("y", order, nominal_terms)], Some(tau));
+    Ok(Case {
+        name: CASES.iter().find(|c| **c == name).copied().unwrap_or("?"),
+        records,
+        nominal,
+        expect,
+    })
+}
+
+/// The standard split of the generated cases.
+pub fn split() -> (Vec<usize>, Vec<usize>, Vec<usize>) {
+    (vec![0, 1, 2, 3], vec![4, 5], vec![6, 7])
+}
+
+/// Judges a discovery against the case's expectation: (pass, reason).
+pub fn judge(case: &Case, d: &super::Discovery) -> (bool, String) {
+    let named: Vec<&str> = d.effects.iter().map(|e| e.family.as_str()).collect();
+    let ratio = d.nrmse_before / d.nrmse_after.max(1e-300);
+    let check_added = |family: &str, coef: f64| -> (bool, String) {
+        if d.verdict != "added" || named.len() != 1 || named[0] != family {
+            return (false, format!("verdict {} named {:?}", d.verdict, named));
+        }
+        let c = d.effects[0].coefficient;
+        if ((c - coef) / coef).abs() > 0.1 {
+            return (false, format!("coefficient {c} vs {coef}"));
+        }
+        (true, format!("coef {c:.4}, test NRMSE ratio {ratio:.1}"))
+    };
+    match &case.expect {
+        Expect::Added { family, coef } => check_added(family, *coef),
+        Expect::Nothing => (
+            d.effects.is_empty(),
+            format!("verdict {} named {:?}", d.verdict, named),
+        ),
+        Expect::Retune { term, value } => {
+            let ok = d.verdict == "retune" && d.effects.is_empty();
+            let v = d.retuned.iter().find(|r| r.term == *term).map(|r| r.value);
+            match v {
+                Some(v) if ok && ((v - value) / value).abs() <= 0.1 => {
+                    (true, format!("{term} = {v:.4}"))
+                }
+                _ => (false, format!("verdict {} retuned {:?} named {:?}", d.verdict, v, named)),
+            }
+        }
+        Expect::Distractor { family, coef, wrong } => {
+            if named == [*wrong] {
+                return (false, format!("named the distractor {wrong} alone"));
+            }
+            check_added(family, *coef)
+        }
+    }
+}

@@ -1,0 +1,167 @@
+//! The dictionary of named effects: each candidate is a family identifier (the JSON output uses
+//! them), a readable formula and its parsed [`Expr`].
+//!
+//! Scales inside formulas (the `eps` of `tanh(v/eps)`, a dead-zone width, a preload position) come
+//! from the training data so that the dictionary means the same thing in any units; they are
+//! written into the formula as numbers, so the formula is exactly what is evaluated.
+//! `v` is the highest derivative of the output below the model's order (`y_d1` for a second-order
+//! mechanical model, `y` itself for a first-order one).
+
+use super::expr::Expr;
+use crate::error::Result;
+
+/// One named candidate.
+#[derive(Debug, Clone)]
+pub struct Effect {
+    pub family: String,
+    pub formula: String,
+    pub expr: Expr,
+}
+
+/// Scales measured on the training runs, per variable of `z` (state names then inputs).
+#[derive(Debug, Clone)]
+pub struct Scales {
+    /// Standard deviation of each variable.
+    pub sd: Vec<f64>,
+    /// Median of each variable.
+    pub median: Vec<f64>,
+    /// 99th percentile of |x| for each variable.
+    pub p99: Vec<f64>,
+}
+
+/// Four significant digits, no trailing zeros.
+pub fn num(x: f64) -> String {
+    if x == 0.0 {
+        return "0".into();
+    }
+    let mag = x.abs().log10().floor() as i32;
+    if !(-3..=5).contains(&mag) {
+        return format!("{x:.3e}");
+    }
+    let dec = (3 - mag).max(0) as usize;
+    let s = format!("{x:.dec$}");
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s
+    }
+}
+
+/// Builds the dictionary for an output of order `order` over `vars` (the `order` state names
+/// first, then the inputs), leaving out monomials already in the nominal model
+/// (`nominal_monomials`, as exponent lists over `vars`).
+pub fn build(
+    vars: &[String],
+    order: usize,
+    scales: &Scales,
+    nominal_monomials: &[Vec<(usize, u32)>],
+    user: &[(String, String)],
+) -> Result<Vec<Effect>> {
+    let y = &vars[0];
+    let vi = order - 1;
+    let v = &vars[vi];
+    let inputs: Vec<usize> = (order..vars.len()).collect();
+    let mut list: Vec<(String, String)> = Vec::new();
+    let mut add = |f: &str, e: String| list.push((f.to_string(), e));
+    let eps_v = scales.sd[vi] * 0.05;
+    add("coulomb_friction", format!("sign({v})"));
+    add("coulomb_friction", format!("tanh({v}/{})", num(eps_v)));
+    add(
+        "stribeck",
+        format!("sign({v})*exp(-({v}/{})^2)", num(scales.sd[vi] * 0.3)),
+    );
+    add("quadratic_drag", format!("abs({v})*{v}"));
+    add("cubic_damping", format!("{v}^3"));
+    add("cubic_stiffness", format!("{y}^3"));
+    add("asymmetric_stiffness", format!("abs({y})*{y}"));
+    add("asymmetric_stiffness", format!("{y}^2"));
+    let y0 = scales.median[0];
+    add(
+        "preload",
+        if y0.abs() < 1e-12 {
+            format!("sign({y})")
+        } else {
+            format!("sign({y} - {})", num(y0))
+        },
+    );
+    add("trigonometric", format!("sin({y})"));
+    add("trigonometric", format!("cos({y})"));
+    add("trigonometric", format!("cos({y})^2"));
+    add("offset", "1".into());
+    add("sqrt_outflow", format!("sqrt(abs({y}))*sign({y})"));
+    for &c in &inputs {
+        let u = &vars[c];
+        let s = num(0.7 * scales.p99[c]);
+        add("input_saturation", format!("{s}*sat({u}/{s}) - {u}"));
+        let d = num(0.1 * scales.p99[c]);
+        add("input_dead_zone", format!("{d}*sat({u}/{d})"));
+        add("input_relay", format!("sign({u})"));
+    }
+    // Polynomial: the monomials of degree <= 3 over all variables not already present.
+    let nv = vars.len();
+    let mut monos: Vec<Vec<u32>> = Vec::new();
+    for deg in 1..=3u32 {
+        let mut e = vec![0u32; nv];
+        fn rec(k: usize, left: u32, e: &mut Vec<u32>, out: &mut Vec<Vec<u32>>) {
+            if k + 1 == e.len() {
+                e[k] = left;
+                out.push(e.clone());
+                return;
+            }
+            for a in (0..=left).rev() {
+                e[k] = a;
+                rec(k + 1, left - a, e, out);
+            }
+            e[k] = 0;
+        }
+        rec(0, deg, &mut e, &mut monos);
+    }
+    for m in monos {
+        let ex: Vec<(usize, u32)> = m
+            .iter()
+            .enumerate()
+            .filter(|(_, &e)| e > 0)
+            .map(|(i, &e)| (i, e))
+            .collect();
+        if nominal_monomials.contains(&ex) {
+            continue;
+        }
+        let txt = ex
+            .iter()
+            .map(|&(i, e)| {
+                if e == 1 {
+                    vars[i].clone()
+                } else {
+                    format!("{}^{e}", vars[i])
+                }
+            })
+            .collect::<Vec<_>>()
+            .join("*");
+        add("polynomial", txt);
+    }
+    for (name, e) in user {
+        add(name, e.clone());
+    }
+    let mut out: Vec<Effect> = Vec::new();
+    for (family, formula) in list {
+        let expr = Expr::parse(&formula, vars)?;
+        // Drop exact duplicates (a polynomial that a named family already covers keeps the name)
+        // and nominal monomials written as a family formula.
+        if let Some(m) = expr.monomial() {
+            if nominal_monomials.contains(&m)
+                || out.iter().any(|o: &Effect| o.expr.monomial().as_ref() == Some(&m))
+            {
+                continue;
+            }
+        }
+        if out.iter().any(|o| o.formula == formula) {
+            continue;
+        }
+        out.push(Effect {
+            family,
+            formula,
+            expr,
+        });
+    }
+    Ok(out)
+}

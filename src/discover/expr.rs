@@ -1,0 +1,378 @@
+//! A tiny expression language for named effects: `-sign(y_d1)`, `abs(y_d1)*y_d1`, `sqrt(abs(y))*sign(y)`.
+//!
+//! Grammar: numbers, variables (the model's state names `y`, `y_d1`, ... and input names),
+//! `+ - * /`, `^` with a numeric exponent, parentheses, and the functions `sign abs sqrt tanh sin
+//! cos exp sat relu` (`sat(x)` clips to [-1, 1], `relu(x) = max(x, 0)`). Variables are resolved to
+//! indices of the evaluation vector `z` when parsing, so an unknown name is a parse error that
+//! names it. The one discontinuity, `sign`, can be evaluated smoothed (`x / sqrt(x^2 + eps^2)`)
+//! for the integrator: Radau with step-size control cannot step across a relay that chatters in a
+//! stick phase.
+
+use crate::error::{Error, Result};
+
+#[derive(Debug, Clone, PartialEq)]
+enum Node {
+    Num(f64),
+    Var(usize),
+    Neg(Box<Node>),
+    Add(Box<Node>, Box<Node>),
+    Sub(Box<Node>, Box<Node>),
+    Mul(Box<Node>, Box<Node>),
+    Div(Box<Node>, Box<Node>),
+    Pow(Box<Node>, f64),
+    Fun(Fun, Box<Node>),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Fun {
+    Sign,
+    Abs,
+    Sqrt,
+    Tanh,
+    Sin,
+    Cos,
+    Exp,
+    Sat,
+    Relu,
+}
+
+/// A parsed expression over a fixed list of variable names.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Expr {
+    text: String,
+    root: Node,
+}
+
+impl Expr {
+    /// Parses `text` over `vars` (the names of the entries of `z` in [`Expr::eval`]).
+    pub fn parse(text: &str, vars: &[String]) -> Result<Expr> {
+        let toks = lex(text)?;
+        let mut p = Parser {
+            toks,
+            pos: 0,
+            vars,
+            text,
+        };
+        let root = p.expr()?;
+        if p.pos != p.toks.len() {
+            return Err(p.err("unexpected text after the end of the expression"));
+        }
+        Ok(Expr {
+            text: text.trim().to_string(),
+            root,
+        })
+    }
+
+    /// The expression as written.
+    pub fn text(&self) -> &str {
+        &self.text
+    }
+
+    /// Value at `z`; `sign` is exact.
+    pub fn eval(&self, z: &[f64]) -> f64 {
+        eval(&self.root, z, None)
+    }
+
+    /// Value at `z` with `sign(x)` replaced by `x / sqrt(x^2 + eps[i]^2)` where `i` is the
+    /// variable the argument depends on most directly (its first variable), for integration.
+    pub fn eval_smooth(&self, z: &[f64], eps: &[f64]) -> f64 {
+        eval(&self.root, z, Some(eps))
+    }
+
+    /// Whether the expression is a product of integer powers of single variables (a monomial of
+    /// the model file), with those exponents.
+    pub fn monomial(&self) -> Option<Vec<(usize, u32)>> {
+        fn walk(n: &Node, out: &mut Vec<(usize, u32)>) -> bool {
+            match n {
+                Node::Num(v) => *v == 1.0,
+                Node::Var(i) => {
+                    out.push((*i, 1));
+                    true
+                }
+                Node::Mul(a, b) => walk(a, out) && walk(b, out),
+                Node::Pow(a, e) if *e >= 1.0 && e.fract() == 0.0 => {
+                    if let Node::Var(i) = **a {
+                        out.push((i, *e as u32));
+                        true
+                    } else {
+                        false
+                    }
+                }
+                _ => false,
+            }
+        }
+        let mut v = Vec::new();
+        if !walk(&self.root, &mut v) {
+            return None;
+        }
+        let mut merged: Vec<(usize, u32)> = Vec::new();
+        for (i, e) in v {
+            match merged.iter_mut().find(|(j, _)| *j == i) {
+                Some(m) => m.1 += e,
+                None => merged.push((i, e)),
+            }
+        }
+        merged.sort();
+        Some(merged)
+    }
+}
+
+fn first_var(n: &Node) -> Option<usize> {
+    match n {
+        Node::Num(_) => None,
+        Node::Var(i) => Some(*i),
+        Node::Neg(a) | Node::Pow(a, _) | Node::Fun(_, a) => first_var(a),
+        Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
+            first_var(a).or_else(|| first_var(b))
+        }
+    }
+}
+
+fn eval(n: &Node, z: &[f64], eps: Option<&[f64]>) -> f64 {
+    match n {
+        Node::Num(v) => *v,
+        Node::Var(i) => z[*i],
+        Node::Neg(a) => -eval(a, z, eps),
+        Node::Add(a, b) => eval(a, z, eps) + eval(b, z, eps),
+        Node::Sub(a, b) => eval(a, z, eps) - eval(b, z, eps),
+        Node::Mul(a, b) => eval(a, z, eps) * eval(b, z, eps),
+        Node::Div(a, b) => eval(a, z, eps) / eval(b, z, eps),
+        Node::Pow(a, e) => {
+            let x = eval(a, z, eps);
+            if e.fract() == 0.0 {
+                x.powi(*e as i32)
+            } else {
+                x.powf(*e)
+            }
+        }
+        Node::Fun(f, a) => {
+            let x = eval(a, z, eps);
+            match f {
+                Fun::Sign => match eps.and_then(|e| first_var(a).map(|i| e[i])) {
+                    Some(e) if e > 0.0 => x / (x * x + e * e).sqrt(),
+                    _ => {
+                        if x > 0.0 {
+                            1.0
+                        } else if x < 0.0 {
+                            -1.0
+                        } else {
+                            0.0
+                        }
+                    }
+                },
+                Fun::Abs => x.abs(),
+                Fun::Sqrt => x.sqrt(),
+                Fun::Tanh => x.tanh(),
+                Fun::Sin => x.sin(),
+                Fun::Cos => x.cos(),
+                Fun::Exp => x.exp(),
+                Fun::Sat => x.clamp(-1.0, 1.0),
+                Fun::Relu => x.max(0.0),
+            }
+        }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+enum Tok {
+    Num(f64),
+    Id(String),
+    Op(char),
+}
+
+fn lex(text: &str) -> Result<Vec<Tok>> {
+    let c: Vec<char> = text.chars().collect();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < c.len() {
+        let ch = c[i];
+        if ch.is_whitespace() {
+            i += 1;
+        } else if ch.is_ascii_digit() || ch == '.' {
+            let s = i;
+            while i < c.len()
+                && (c[i].is_ascii_digit()
+                    || c[i] == '.'
+                    || ((c[i] == 'e' || c[i] == 'E') && i + 1 < c.len())
+                    || ((c[i] == '-' || c[i] == '+') && i > s && (c[i - 1] == 'e' || c[i - 1] == 'E')))
+            {
+                i += 1;
+            }
+            let t: String = c[s..i].iter().collect();
+            let v: f64 = t.parse().map_err(|_| {
+                Error::param("expression", format!("'{text}': '{t}' is not a number"))
+            })?;
+            out.push(Tok::Num(v));
+        } else if ch.is_alphabetic() || ch == '_' {
+            let s = i;
+            while i < c.len() && (c[i].is_alphanumeric() || c[i] == '_') {
+                i += 1;
+            }
+            out.push(Tok::Id(c[s..i].iter().collect()));
+        } else if "+-*/^()".contains(ch) {
+            out.push(Tok::Op(ch));
+            i += 1;
+        } else {
+            return Err(Error::param(
+                "expression",
+                format!("'{text}': unexpected character '{ch}'"),
+            ));
+        }
+    }
+    Ok(out)
+}
+
+struct Parser<'a> {
+    toks: Vec<Tok>,
+    pos: usize,
+    vars: &'a [String],
+    text: &'a str,
+}
+
+impl Parser<'_> {
+    fn err(&self, what: &str) -> Error {
+        Error::param(
+            "expression",
+            format!("'{}': {what} (at token {})", self.text, self.pos + 1),
+        )
+    }
+    fn peek_op(&self, ops: &str) -> Option<char> {
+        match self.toks.get(self.pos) {
+            Some(Tok::Op(c)) if ops.contains(*c) => Some(*c),
+            _ => None,
+        }
+    }
+    fn expr(&mut self) -> Result<Node> {
+        let mut a = self.term()?;
+        while let Some(op) = self.peek_op("+-") {
+            self.pos += 1;
+            let b = self.term()?;
+            a = if op == '+' {
+                Node::Add(Box::new(a), Box::new(b))
+            } else {
+                Node::Sub(Box::new(a), Box::new(b))
+            };
+        }
+        Ok(a)
+    }
+    fn term(&mut self) -> Result<Node> {
+        let mut a = self.unary()?;
+        while let Some(op) = self.peek_op("*/") {
+            self.pos += 1;
+            let b = self.unary()?;
+            a = if op == '*' {
+                Node::Mul(Box::new(a), Box::new(b))
+            } else {
+                Node::Div(Box::new(a), Box::new(b))
+            };
+        }
+        Ok(a)
+    }
+    fn unary(&mut self) -> Result<Node> {
+        if self.peek_op("-").is_some() {
+            self.pos += 1;
+            return Ok(Node::Neg(Box::new(self.unary()?)));
+        }
+        if self.peek_op("+").is_some() {
+            self.pos += 1;
+            return self.unary();
+        }
+        self.power()
+    }
+    fn power(&mut self) -> Result<Node> {
+        let a = self.atom()?;
+        if self.peek_op("^").is_some() {
+            self.pos += 1;
+            let neg = if self.peek_op("-").is_some() {
+                self.pos += 1;
+                true
+            } else {
+                false
+            };
+            match self.toks.get(self.pos) {
+                Some(Tok::Num(v)) => {
+                    self.pos += 1;
+                    return Ok(Node::Pow(Box::new(a), if neg { -v } else { *v }));
+                }
+                _ => return Err(self.err("'^' needs a number as exponent")),
+            }
+        }
+        Ok(a)
+    }
+    fn atom(&mut self) -> Result<Node> {
+        match self.toks.get(self.pos).cloned() {
+            Some(Tok::Num(v)) => {
+                self.pos += 1;
+                Ok(Node::Num(v))
+            }
+            Some(Tok::Op('(')) => {
+                self.pos += 1;
+                let e = self.expr()?;
+                if self.peek_op(")").is_none() {
+                    return Err(self.err("missing ')'"));
+                }
+                self.pos += 1;
+                Ok(e)
+            }
+            Some(Tok::Id(name)) => {
+                self.pos += 1;
+                if self.peek_op("(").is_some() {
+                    let f = match name.as_str() {
+                        "sign" => Fun::Sign,
+                        "abs" => Fun::Abs,
+                        "sqrt" => Fun::Sqrt,
+                        "tanh" => Fun::Tanh,
+                        "sin" => Fun::Sin,
+                        "cos" => Fun::Cos,
+                        "exp" => Fun::Exp,
+                        "sat" => Fun::Sat,
+                        "relu" => Fun::Relu,
+                        _ => {
+                            return Err(self.err(&format!(
+                                "unknown function '{name}' (known: sign abs sqrt tanh sin cos exp sat relu)"
+                            )))
+                        }
+                    };
+                    self.pos += 1;
+                    let e = self.expr()?;
+                    if self.peek_op(")").is_none() {
+                        return Err(self.err("missing ')'"));
+                    }
+                    self.pos += 1;
+                    return Ok(Node::Fun(f, Box::new(e)));
+                }
+                match self.vars.iter().position(|v| *v == name) {
+                    Some(i) => Ok(Node::Var(i)),
+                    None => Err(self.err(&format!(
+                        "unknown variable '{name}' (known: {})",
+                        self.vars.join(", ")
+                    ))),
+                }
+            }
+            _ => Err(self.err("expected a number, a variable, a function or '('")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_and_evaluates() {
+        let v: Vec<String> = ["y", "y_d1", "u"].iter().map(|s| s.to_string()).collect();
+        let e = Expr::parse("-0.5*sign(y_d1) + abs(y_d1)*y_d1 - y^3/2 + sqrt(abs(y))", &v).unwrap();
+        let z = [4.0, -2.0, 1.0];
+        assert!((e.eval(&z) - (0.5 - 4.0 - 32.0 + 2.0)).abs() < 1e-12);
+        assert_eq!(
+            Expr::parse("y^3*y_d1", &v).unwrap().monomial(),
+            Some(vec![(0, 3), (1, 1)])
+        );
+        assert_eq!(Expr::parse("sign(y)", &v).unwrap().monomial(), None);
+        assert!(Expr::parse("q+1", &v).is_err());
+        assert!(Expr::parse("foo(y)", &v).is_err());
+        assert!(Expr::parse("(y", &v).is_err());
+        let s = Expr::parse("sign(y_d1)", &v).unwrap();
+        assert!((s.eval_smooth(&[0.0, 1e-3, 0.0], &[1.0, 1e-3, 1.0]) - 0.5f64.sqrt()).abs() < 1e-12);
+    }
+}

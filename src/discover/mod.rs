@@ -1,0 +1,926 @@
+//! The missing-physics workflow (`ctsid discover`): compare a nominal model with measured runs,
+//! localise the disagreement, regress the residual on a dictionary of named effects with the
+//! nominal terms held under their prior, gate every candidate, and add, retune, or refuse.
+//!
+//! Steps (issue 6):
+//! - (a) compare: free-run NRMSE of the nominal per run (and the part above the noise floor that
+//!   the derivative smoother estimates), and the derivative-space residual
+//!   `r = y^(n) - P_nominal(z)` from the smoother's estimates;
+//! - (b) localise: time windows where the free-run error exceeds three noise levels, and the
+//!   share of `var(r)` explained by each coordinate (binned conditional means);
+//! - (c) regress in the weak form ([`weak`]) so label and regressors see the same filter, with a
+//!   Gaussian prior on each nominal coefficient (default +-20 %) ([`fit`]);
+//! - (d) gates: block-bootstrap inclusion >= 80 %, a 95 % bootstrap interval excluding zero,
+//!   >= 10 % less weak-form residual on validation runs and >= 20 % less free-run error on
+//!   validation runs than both the nominal and the re-tuned nominal;
+//! - (e) names, formulas and aliases (partial correlation > 0.95 after the nominal columns);
+//! - (f) the accepted structure is refined on simulation error ([`sim::refine`]) and scored on
+//!   the test runs.
+//!
+//! Assumptions: one output (the model file may have several; discover refuses them with an error),
+//! uniformly sampled runs, only `y` and the inputs measured; initial states of the free runs come
+//! from the derivative smoother at the first sample.
+
+pub mod cases;
+pub mod dictionary;
+pub mod expr;
+pub mod fit;
+pub mod sim;
+pub mod weak;
+
+use std::collections::BTreeMap;
+
+use serde::Serialize;
+
+use crate::derivatives::{differentiate_runs, DerivativeOptions};
+use crate::error::{Error, Result};
+use crate::model::{derivative_name, Model, OutputEquation, Term};
+use crate::plants::noise::percentile;
+use crate::plants::rng::Rng;
+use crate::records::RecordSet;
+use dictionary::{num, Effect, Scales};
+use expr::Expr;
+use fit::{Gram, Problem};
+use sim::{AugModel, SimRun};
+
+/// Settings of one discovery.
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub train: Vec<usize>,
+    pub validation: Vec<usize>,
+    pub test: Vec<usize>,
+    /// Prior half-width per nominal term (by its monomial text, `y_d1`, `1`, `y^2*u`), as a
+    /// fraction; 0 fixes the term. Terms not named get `default_confidence`.
+    pub confidence: BTreeMap<String, f64>,
+    pub default_confidence: f64,
+    pub seed: u64,
+    pub bootstrap: usize,
+    pub max_effects: usize,
+    /// User effects: (family name, expression).
+    pub user_effects: Vec<(String, String)>,
+    /// Weak-form window half-width in samples (default: chosen from the data).
+    pub half_width: Option<usize>,
+    /// Levenberg-Marquardt iterations of the simulation-error refit.
+    pub refine_iterations: usize,
+}
+
+impl Options {
+    pub fn new(train: Vec<usize>, validation: Vec<usize>, test: Vec<usize>) -> Options {
+        Options {
+            train,
+            validation,
+            test,
+            confidence: BTreeMap::new(),
+            default_confidence: 0.2,
+            seed: 0,
+            bootstrap: 100,
+            max_effects: 2,
+            user_effects: Vec::new(),
+            half_width: None,
+            refine_iterations: 8,
+        }
+    }
+}
+
+/// The gates of one candidate set.
+#[derive(Debug, Clone, Serialize)]
+pub struct Gates {
+    pub inclusion: Vec<f64>,
+    pub interval_excludes_zero: Vec<bool>,
+    /// Validation weak-form residual, relative to the better of nominal and re-tuned nominal.
+    pub residual_ratio: f64,
+    /// Validation free-run NRMSE relative to the better of nominal and re-tuned nominal.
+    pub simulation_ratio: f64,
+    /// The first gate that failed, in words; `None` when all pass.
+    pub failed: Option<String>,
+}
+
+/// One effect as reported.
+#[derive(Debug, Clone, Serialize)]
+pub struct FoundEffect {
+    pub family: String,
+    pub formula: String,
+    /// After the simulation-error refit (when the effect is added), else the weak-form estimate.
+    pub coefficient: f64,
+    /// Weak-form estimate and its 95 % block-bootstrap interval.
+    pub weak_coefficient: f64,
+    pub interval: [f64; 2],
+    pub inclusion: f64,
+    pub aliases: Vec<String>,
+    /// Whether the term is written into the model's polynomial right-hand side (monomials only;
+    /// other effects live in the `discovery` section).
+    pub in_model_terms: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reading: Option<String>,
+}
+
+/// A nominal parameter change.
+#[derive(Debug, Clone, Serialize)]
+pub struct Retuned {
+    pub term: String,
+    pub nominal: f64,
+    pub value: f64,
+    pub change_percent: f64,
+}
+
+/// Coordinate shares of the derivative-space residual.
+#[derive(Debug, Clone, Serialize)]
+pub struct Share {
+    pub coordinate: String,
+    pub share: f64,
+    /// (bin centre, conditional mean of r)
+    pub profile: Vec<(f64, f64)>,
+}
+
+/// Per-run free-run comparison.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunScore {
+    pub run: String,
+    pub role: String,
+    pub nrmse_nominal: f64,
+    pub above_noise: f64,
+    pub nrmse_final: Option<f64>,
+}
+
+/// The result.
+#[derive(Debug, Clone, Serialize)]
+pub struct Discovery {
+    pub verdict: String,
+    pub effects: Vec<FoundEffect>,
+    pub retuned: Vec<Retuned>,
+    /// Why nothing was added, with the closest candidate.
+    pub closest: Option<String>,
+    pub gates: Option<Gates>,
+    pub runs: Vec<RunScore>,
+    pub shares: Vec<Share>,
+    /// (run, start s, end s) where the nominal's free-run error exceeds three noise levels.
+    pub windows: Vec<(String, f64, f64)>,
+    pub nrmse_before: f64,
+    pub nrmse_after: f64,
+    pub half_width: usize,
+    /// The final model (nominal terms, re-tuned or refined, plus added effects).
+    #[serde(skip)]
+    pub final_model: Option<AugModel>,
+    #[serde(skip)]
+    pub nominal_model: Option<AugModel>,
+    #[serde(skip)]
+    pub test_runs: Vec<SimRun>,
+}
+
+struct Prepared {
+    vars: Vec<String>,
+    order: usize,
+    nom_exprs: Vec<Expr>,
+    nom_text: Vec<String>,
+    theta0: Vec<f64>,
+    free: Vec<usize>,
+    effects: Vec<Effect>,
+    /// Per run: label residual r and columns [free nominal..., effects...].
+    rows: Vec<(Vec<f64>, Vec<Vec<f64>>)>,
+    simruns: Vec<SimRun>,
+    zhat: Vec<Vec<Vec<f64>>>,
+    top: Vec<Vec<f64>>,
+    noise_sd: Vec<f64>,
+    eps: Vec<f64>,
+    half_width: usize,
+}
+
+fn monomial_exponents(t: &Term, vars: &[String]) -> Vec<(usize, u32)> {
+    let mut v: Vec<(usize, u32)> = t
+        .exponents
+        .iter()
+        .map(|(n, &e)| (vars.iter().position(|x| x == n).unwrap_or(usize::MAX), e))
+        .collect();
+    v.sort();
+    v
+}
+
+fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
+    nominal.validate()?;
+    if nominal.outputs.len() != 1 {
+        return Err(Error::param(
+            "nominal",
+            format!(
+                "has {} outputs; discover handles one output per model for now",
+                nominal.outputs.len()
+            ),
+        ));
+    }
+    let eq = &nominal.outputs[0];
+    let n = eq.order;
+    if n == 0 {
+        return Err(Error::param("nominal", "output order must be at least 1"));
+    }
+    if o.train.is_empty() || o.validation.is_empty() || o.test.is_empty() {
+        return Err(Error::param(
+            "split",
+            "discover needs at least one train, one validation and one test run",
+        ));
+    }
+    let mut vars: Vec<String> = (0..n).map(|k| derivative_name(&eq.name, k)).collect();
+    vars.extend(nominal.inputs.iter().cloned());
+    let yc = rs.channel_index(&eq.name)?;
+    let uc: Vec<usize> = nominal
+        .inputs
+        .iter()
+        .map(|u| rs.channel_index(u))
+        .collect::<Result<_>>()?;
+    for (name, _) in &o.confidence {
+        if !eq.terms.iter().any(|t| t.monomial() == *name) {
+            return Err(Error::param(
+                "confidence",
+                format!(
+                    "no nominal term '{name}' (terms are: {})",
+                    eq.terms.iter().map(|t| t.monomial()).collect::<Vec<_>>().join(", ")
+                ),
+            ));
+        }
+    }
+    let nom_exprs: Vec<Expr> = eq
+        .terms
+        .iter()
+        .map(|t| Expr::parse(&t.monomial(), &vars))
+        .collect::<Result<_>>()?;
+    let nom_text: Vec<String> = eq.terms.iter().map(|t| t.monomial()).collect();
+    let theta0: Vec<f64> = eq.terms.iter().map(|t| t.coefficient).collect();
+    let conf: Vec<f64> = nom_text
+        .iter()
+        .map(|t| *o.confidence.get(t).unwrap_or(&o.default_confidence))
+        .collect();
+    let free: Vec<usize> = (0..theta0.len())
+        .filter(|&j| conf[j] > 0.0 && theta0[j] != 0.0)
+        .collect();
+    let _ = conf;
+
+    let ys: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[yc].as_slice()).collect();
+    let der = differentiate_runs(&ys, rs.tau, n, &DerivativeOptions::default())?;
+    let nz = vars.len();
+    let zhat: Vec<Vec<Vec<f64>>> = rs
+        .runs
+        .iter()
+        .zip(&der)
+        .map(|(r, d)| {
+            let mut z: Vec<Vec<f64>> = (0..n).map(|k| d.values[k].clone()).collect();
+            z.extend(uc.iter().map(|&c| r.channels[c].clone()));
+            z
+        })
+        .collect();
+    let top: Vec<Vec<f64>> = der.iter().map(|d| d.values[n].clone()).collect();
+    // Scales on the training runs.
+    let mut sd = vec![0.0; nz];
+    let mut median = vec![0.0; nz];
+    let mut p99 = vec![0.0; nz];
+    for v in 0..nz {
+        let all: Vec<f64> = o.train.iter().flat_map(|&r| zhat[r][v].iter().copied()).collect();
+        let mean = all.iter().sum::<f64>() / all.len().max(1) as f64;
+        sd[v] = (all.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / all.len().max(1) as f64)
+            .sqrt()
+            .max(1e-12);
+        median[v] = percentile(&all, 50.0);
+        let abs: Vec<f64> = all.iter().map(|x| x.abs()).collect();
+        p99[v] = percentile(&abs, 99.0).max(1e-12);
+    }
+    let scales = Scales { sd: sd.clone(), median, p99 };
+    let nom_monos: Vec<Vec<(usize, u32)>> =
+        eq.terms.iter().map(|t| monomial_exponents(t, &vars)).collect();
+    let effects = dictionary::build(&vars, n, &scales, &nom_monos, &o.user_effects)?;
+    // Zero crossings of the smoothed output (the raw one crosses its mean at every noise sample).
+    let train_y: Vec<&[f64]> = o.train.iter().map(|&r| zhat[r][0].as_slice()).collect();
+    let m = o.half_width.unwrap_or_else(|| weak::choose_half_width(&train_y));
+    if m < 2 {
+        return Err(Error::param("half width", format!("{m} samples; use at least 2")));
+    }
+    let mut rows = Vec::with_capacity(rs.runs.len());
+    let mut simruns = Vec::new();
+    for (ri, run) in rs.runs.iter().enumerate() {
+        let len = run.len();
+        let w = weak::Windows::new(len, m, n, rs.tau);
+        if w.starts.is_empty() {
+            return Err(Error::RunTooShort {
+                run: run.id.clone(),
+                len,
+                min: 2 * m + 1,
+                what: "the weak form".into(),
+            });
+        }
+        let y = ys[ri];
+        let sgn = |k: usize| if k % 2 == 0 { 1.0 } else { -1.0 };
+        let label = w.integrate(n, y).into_iter().map(|v| sgn(n) * v).collect::<Vec<f64>>();
+        // A column: exact integration by parts for a single state variable, else psi * phi(z_hat).
+        let column = |e: &Expr| -> Vec<f64> {
+            if let Some(mono) = e.monomial() {
+                if mono.len() == 1 && mono[0].1 == 1 {
+                    let v = mono[0].0;
+                    if v < n {
+                        return w.integrate(v, y).into_iter().map(|x| sgn(v) * x).collect();
+                    }
+                    return w.integrate(0, &zhat[ri][v]);
+                }
+            }
+            let phi: Vec<f64> = (0..len)
+                .map(|i| {
+                    let z: Vec<f64> = (0..nz).map(|v| zhat[ri][v][i]).collect();
+                    e.eval(&z)
+                })
+                .collect();
+            w.integrate(0, &phi)
+        };
+        let nom_cols: Vec<Vec<f64>> = nom_exprs.iter().map(&column).collect();
+        let mut r = label;
+        for (c, th) in nom_cols.iter().zip(&theta0) {
+            for (ri_, v) in r.iter_mut().zip(c) {
+                *ri_ -= th * v;
+            }
+        }
+        let mut cols: Vec<Vec<f64>> = free.iter().map(|&j| nom_cols[j].clone()).collect();
+        cols.extend(effects.iter().map(|e| column(&e.expr)));
+        rows.push((r, cols));
+        let t: Vec<f64> = (0..len).map(|i| i as f64 * rs.tau).collect();
+        simruns.push(SimRun {
+            id: run.id.clone(),
+            t,
+            y: y.to_vec(),
+            u: uc.iter().map(|&c| run.channels[c].clone()).collect(),
+            x0: (0..n).map(|k| der[ri].values[k][0]).collect(),
+        });
+    }
+    let eps: Vec<f64> = sd.iter().map(|s| 1e-3 * s).collect();
+    Ok(Prepared {
+        vars,
+        order: n,
+        nom_exprs,
+        nom_text,
+        theta0,
+        free,
+        effects,
+        rows,
+        simruns,
+        zhat,
+        top,
+        noise_sd: der.iter().map(|d| d.noise_sd).collect(),
+        eps,
+        half_width: m,
+    })
+}
+
+const BLOCK: usize = 8;
+
+fn block_grams(p: &Prepared, runs: &[usize]) -> Vec<Gram> {
+    let ncol = p.free.len() + p.effects.len();
+    let mut out = Vec::new();
+    for &r in runs {
+        let (lab, cols) = &p.rows[r];
+        let mut a = 0;
+        while a < lab.len() {
+            let b = (a + BLOCK).min(lab.len());
+            let mut g = Gram::zeros(ncol);
+            g.add_rows(cols, lab, a..b);
+            out.push(g);
+            a = b;
+        }
+    }
+    out
+}
+
+fn sum_grams(gs: &[Gram], ncol: usize) -> Gram {
+    let mut g = Gram::zeros(ncol);
+    for b in gs {
+        g.add(b);
+    }
+    g
+}
+
+/// Residual sum of squares of coefficients `x` on columns `idx` of `g`.
+fn rss_at(g: &Gram, idx: &[usize], x: &[f64]) -> f64 {
+    let mut rss = g.rr;
+    for (a, &i) in idx.iter().enumerate() {
+        rss -= 2.0 * x[a] * g.b[i];
+        for (b, &j) in idx.iter().enumerate() {
+            rss += x[a] * g.g[(i, j)] * x[b];
+        }
+    }
+    rss.max(0.0)
+}
+
+impl Prepared {
+    fn model(&self, delta: &[f64], effects: &[(usize, f64)]) -> AugModel {
+        let mut terms: Vec<(Expr, f64)> = self
+            .nom_exprs
+            .iter()
+            .cloned()
+            .zip(self.theta0.iter().copied())
+            .collect();
+        for (k, &j) in self.free.iter().enumerate() {
+            terms[j].1 += delta.get(k).copied().unwrap_or(0.0);
+        }
+        for &(k, c) in effects {
+            terms.push((self.effects[k].expr.clone(), c));
+        }
+        AugModel {
+            order: self.order,
+            n_inputs: self.vars.len() - self.order,
+            names: self.vars.clone(),
+            terms,
+            eps: self.eps.clone(),
+        }
+    }
+    fn runs(&self, idx: &[usize]) -> Vec<SimRun> {
+        idx.iter().map(|&r| self.simruns[r].clone()).collect()
+    }
+}
+
+/// Runs the workflow.
+pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discovery> {
+    let p = prepare(rs, nominal, o)?;
+    let n_nom = p.free.len();
+    let n_eff = p.effects.len();
+    let ncol = n_nom + n_eff;
+    let pb = Problem {
+        n_nom,
+        prior_sd: p
+            .free
+            .iter()
+            .map(|&j| {
+                o.confidence
+                    .get(&p.nom_text[j])
+                    .copied()
+                    .unwrap_or(o.default_confidence)
+                    * p.theta0[j].abs()
+            })
+            .collect(),
+    };
+    let blocks = block_grams(&p, &o.train);
+    let train = sum_grams(&blocks, ncol);
+    let val = sum_grams(&block_grams(&p, &o.validation), ncol);
+    let numerr = || Error::Numerical("discover: the weak-form normal equations are singular".into());
+
+    // (a) compare and (b) localise.
+    let nominal_model = p.model(&[], &[]);
+    let mut runs = Vec::new();
+    let mut windows = Vec::new();
+    for (ri, sr) in p.simruns.iter().enumerate() {
+        let role = if o.train.contains(&ri) {
+            "train"
+        } else if o.validation.contains(&ri) {
+            "validation"
+        } else if o.test.contains(&ri) {
+            "test"
+        } else {
+            continue;
+        };
+        let sim = sim::free_run(&nominal_model, sr);
+        let (nr, above) = match &sim {
+            Some(s) => {
+                let (_, nr) = crate::simulate::rms_nrmse(s, &sr.y);
+                let mean = sr.y.iter().sum::<f64>() / sr.y.len() as f64;
+                let sdy = (sr.y.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
+                    / sr.y.len() as f64)
+                    .sqrt();
+                let floor = p.noise_sd[ri] / sdy.max(1e-300);
+                (nr, (nr * nr - floor * floor).max(0.0).sqrt())
+            }
+            None => (f64::INFINITY, f64::INFINITY),
+        };
+        if let Some(s) = &sim {
+            // Moving RMS of the error over a window, against three noise levels.
+            let m = p.half_width;
+            let e2: Vec<f64> = s.iter().zip(&sr.y).map(|(a, b)| (a - b).powi(2)).collect();
+            let mut inside = None;
+            for i in 0..e2.len() {
+                let a = i.saturating_sub(m);
+                let b = (i + m + 1).min(e2.len());
+                let rms = (e2[a..b].iter().sum::<f64>() / (b - a) as f64).sqrt();
+                let hot = rms > 3.0 * p.noise_sd[ri];
+                match (hot, inside) {
+                    (true, None) => inside = Some(i),
+                    (false, Some(st)) => {
+                        windows.push((sr.id.clone(), sr.t[st], sr.t[i]));
+                        inside = None;
+                    }
+                    _ => {}
+                }
+            }
+            if let Some(st) = inside {
+                windows.push((sr.id.clone(), sr.t[st], *sr.t.last().unwrap_or(&0.0)));
+            }
+        }
+        runs.push(RunScore {
+            run: sr.id.clone(),
+            role: role.into(),
+            nrmse_nominal: nr,
+            above_noise: above,
+            nrmse_final: None,
+        });
+    }
+    let shares = coordinate_shares(&p, &o.train);
+
+    // (c) regression.
+    let retune = pb.fit(&train, &[]).ok_or_else(numerr)?;
+    let set = pb.forward(&train, n_eff, o.max_effects);
+    // The closest single candidate, for the report when nothing passes.
+    let best_single = (0..n_eff)
+        .filter_map(|k| pb.fit(&train, &[k]).map(|s| (k, s.objective)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|x| x.0);
+
+    // Aliases on the training rows.
+    let alias_of = |k: usize| -> Vec<usize> {
+        (0..n_eff)
+            .filter(|&j| j != k)
+            .filter(|&j| fit::partial_correlation(&train, n_nom, n_nom + k, n_nom + j).abs() > 0.95)
+            .collect()
+    };
+
+    // (d) block bootstrap: inclusion (of the effect or an alias) and intervals.
+    let mut rng = Rng::new(o.seed ^ 0x6469_7363_6f76_6572);
+    let mut cand: Vec<usize> = set.clone();
+    if cand.is_empty() {
+        cand.extend(best_single);
+    }
+    let aliases: Vec<Vec<usize>> = cand.iter().map(|&k| alias_of(k)).collect();
+    let mut hits = vec![0usize; cand.len()];
+    let mut samples: Vec<Vec<f64>> = vec![Vec::new(); cand.len()];
+    for _ in 0..o.bootstrap {
+        let mut g = Gram::zeros(ncol);
+        for _ in 0..blocks.len() {
+            let b = (rng.next_u64() % blocks.len() as u64) as usize;
+            g.add(&blocks[b]);
+        }
+        let s = pb.forward(&g, n_eff, o.max_effects);
+        for (i, &k) in cand.iter().enumerate() {
+            if s.contains(&k) || aliases[i].iter().any(|a| s.contains(a)) {
+                hits[i] += 1;
+            }
+        }
+        if let Some(sol) = pb.fit(&g, &cand) {
+            for i in 0..cand.len() {
+                samples[i].push(sol.coef[i]);
+            }
+        }
+    }
+    let inclusion: Vec<f64> = hits.iter().map(|&h| h as f64 / o.bootstrap.max(1) as f64).collect();
+    let intervals: Vec<[f64; 2]> = samples
+        .iter()
+        .map(|s| [percentile(s, 2.5), percentile(s, 97.5)])
+        .collect();
+    let cand_sol = pb.fit(&train, &cand).ok_or_else(numerr)?;
+    let idx_nom: Vec<usize> = (0..n_nom).collect();
+    let idx_cand: Vec<usize> = (0..n_nom).chain(cand.iter().map(|&k| n_nom + k)).collect();
+    let val_nominal = val.rr;
+    let val_retuned = rss_at(&val, &idx_nom, &retune.delta);
+    let mut xc = cand_sol.delta.clone();
+    xc.extend(&cand_sol.coef);
+    let val_cand = rss_at(&val, &idx_cand, &xc);
+    let residual_ratio = val_cand / val_nominal.min(val_retuned).max(1e-300);
+
+    let vruns = p.runs(&o.validation);
+    let retuned_model = p.model(&retune.delta, &[]);
+    let eff_pairs: Vec<(usize, f64)> = cand.iter().copied().zip(cand_sol.coef.iter().copied()).collect();
+    let cand_model = p.model(&cand_sol.delta, &eff_pairs);
+    let sim_nom = sim::mean_nrmse(&nominal_model, &vruns);
+    let sim_ret = sim::mean_nrmse(&retuned_model, &vruns);
+    let sim_cand = sim::mean_nrmse(&cand_model, &vruns);
+    let simulation_ratio = sim_cand / sim_nom.min(sim_ret);
+    let excl: Vec<bool> = intervals.iter().map(|iv| iv[0] > 0.0 || iv[1] < 0.0).collect();
+    let mut failed = None;
+    let name_of = |k: usize| format!("{} {}", p.effects[k].family, p.effects[k].formula);
+    if set.is_empty() {
+        failed = Some("not selected by the information criterion on the training runs".to_string());
+    }
+    for (i, &k) in cand.iter().enumerate() {
+        if failed.is_some() {
+            break;
+        }
+        if inclusion[i] < 0.8 {
+            failed = Some(format!(
+                "{}: included in {:.0} % of block-bootstrap refits (< 80 %)",
+                name_of(k),
+                100.0 * inclusion[i]
+            ));
+        } else if !excl[i] {
+            failed = Some(format!(
+                "{}: 95 % interval [{}, {}] contains zero",
+                name_of(k),
+                num(intervals[i][0]),
+                num(intervals[i][1])
+            ));
+        }
+    }
+    if failed.is_none() && residual_ratio > 0.9 {
+        failed = Some(format!(
+            "validation residual only {:.1} % below the better of nominal and re-tuned (< 10 %)",
+            100.0 * (1.0 - residual_ratio)
+        ));
+    }
+    if failed.is_none() && !(simulation_ratio <= 0.8) {
+        failed = Some(format!(
+            "validation free-run NRMSE {} vs {} nominal / {} re-tuned: {:.1} % lower (< 20 %)",
+            num(sim_cand),
+            num(sim_nom),
+            num(sim_ret),
+            100.0 * (1.0 - simulation_ratio)
+        ));
+    }
+    let gates = Gates {
+        inclusion: inclusion.clone(),
+        interval_excludes_zero: excl.clone(),
+        residual_ratio,
+        simulation_ratio,
+        failed: failed.clone(),
+    };
+
+    // Verdict and (f) refinement on simulation error.
+    let truns = p.runs(&o.train);
+    let test_runs = p.runs(&o.test);
+    let nrmse_before = sim::mean_nrmse(&nominal_model, &test_runs);
+    let mut effects = Vec::new();
+    let mut retuned = Vec::new();
+    let mut closest = None;
+    let verdict;
+    let final_model;
+    let retune_ok = (val_retuned <= 0.9 * val_nominal) && sim_ret <= 0.8 * sim_nom;
+    if failed.is_none() {
+        verdict = "added";
+        let refined = sim::refine(&cand_model, &truns, o.refine_iterations);
+        let c = refined.coefficients();
+        let nt = p.theta0.len();
+        for (i, &k) in cand.iter().enumerate() {
+            let e = &p.effects[k];
+            effects.push(FoundEffect {
+                family: e.family.clone(),
+                formula: e.formula.clone(),
+                coefficient: c[nt + i],
+                weak_coefficient: cand_sol.coef[i],
+                interval: intervals[i],
+                inclusion: inclusion[i],
+                aliases: aliases[i].iter().map(|&a| name_of(a)).collect(),
+                in_model_terms: e.expr.monomial().is_some(),
+                reading: reading(&e.family, c[nt + i], &p),
+            });
+        }
+        retuned = retuned_list(&p, &c[..nt]);
+        final_model = refined;
+    } else if retune_ok {
+        verdict = "retune";
+        let refined = sim::refine(&retuned_model, &truns, o.refine_iterations);
+        retuned = retuned_list(&p, &refined.coefficients());
+        closest = Some(failed.clone().unwrap_or_default());
+        final_model = refined;
+    } else {
+        verdict = "none";
+        closest = Some(match cand.first() {
+            Some(&k) => format!(
+                "closest: {} (coefficient {}); failed: {}",
+                name_of(k),
+                num(cand_sol.coef[0]),
+                failed.clone().unwrap_or_default()
+            ),
+            None => "no candidate".into(),
+        });
+        final_model = nominal_model.clone();
+    }
+    for r in runs.iter_mut() {
+        if let Some(sr) = p.simruns.iter().find(|s| s.id == r.run) {
+            r.nrmse_final = Some(sim::nrmse(&final_model, sr));
+        }
+    }
+    let nrmse_after = sim::mean_nrmse(&final_model, &test_runs);
+    Ok(Discovery {
+        verdict: verdict.into(),
+        effects,
+        retuned,
+        closest,
+        gates: Some(gates),
+        runs,
+        shares,
+        windows,
+        nrmse_before,
+        nrmse_after,
+        half_width: p.half_width,
+        final_model: Some(final_model),
+        nominal_model: Some(nominal_model),
+        test_runs,
+    })
+}
+
+fn retuned_list(p: &Prepared, c: &[f64]) -> Vec<Retuned> {
+    p.nom_text
+        .iter()
+        .zip(&p.theta0)
+        .zip(c)
+        .filter(|((_, &a), &b)| a != 0.0 && ((b - a) / a).abs() > 0.05)
+        .map(|((t, &a), &b)| Retuned {
+            term: t.clone(),
+            nominal: a,
+            value: b,
+            change_percent: 100.0 * (b - a) / a,
+        })
+        .collect()
+}
+
+/// A physical reading where one exists: a force from an acceleration coefficient and the mass
+/// the nominal implies (the input gain of a second-order model `y'' = ... + u / M`).
+fn reading(family: &str, coef: f64, p: &Prepared) -> Option<String> {
+    if p.order != 2 || p.vars.len() <= p.order {
+        return None;
+    }
+    let u = &p.vars[p.order];
+    let k = p.nom_text.iter().position(|t| t == u)?;
+    let gain = p.theta0[k];
+    if gain == 0.0 {
+        return None;
+    }
+    let force = coef / gain;
+    match family {
+        "coulomb_friction" | "stribeck" => Some(format!(
+            "Coulomb force {} (in input units; mass 1/{} from the nominal input gain)",
+            num(force.abs()),
+            num(gain)
+        )),
+        "cubic_stiffness" => Some(format!("cubic spring constant {} (input units per y^3)", num(-force))),
+        "quadratic_drag" => Some(format!("drag constant {} (input units per v^2)", num(-force))),
+        _ => None,
+    }
+}
+
+/// Share of var(r) explained by each coordinate (12 quantile bins of the derivative-space residual).
+fn coordinate_shares(p: &Prepared, train: &[usize]) -> Vec<Share> {
+    let nz = p.vars.len();
+    let mut r = Vec::new();
+    let mut z: Vec<Vec<f64>> = vec![Vec::new(); nz];
+    for &ri in train {
+        let len = p.top[ri].len();
+        // Skip the ends, where the smoother is least certain.
+        let e = p.half_width.min(len / 4);
+        for i in e..len - e {
+            let zi: Vec<f64> = (0..nz).map(|v| p.zhat[ri][v][i]).collect();
+            let pn: f64 = p
+                .nom_exprs
+                .iter()
+                .zip(&p.theta0)
+                .map(|(x, c)| c * x.eval(&zi))
+                .sum();
+            r.push(p.top[ri][i] - pn);
+            for v in 0..nz {
+                z[v].push(zi[v]);
+            }
+        }
+    }
+    let mean = r.iter().sum::<f64>() / r.len().max(1) as f64;
+    let var = r.iter().map(|v| (v - mean).powi(2)).sum::<f64>().max(1e-300);
+    let mut out = Vec::new();
+    for v in 0..nz {
+        let mut order: Vec<usize> = (0..r.len()).collect();
+        order.sort_by(|&a, &b| z[v][a].total_cmp(&z[v][b]));
+        let nb = 12;
+        let mut between = 0.0;
+        let mut profile = Vec::new();
+        for b in 0..nb {
+            let s = b * order.len() / nb;
+            let e = (b + 1) * order.len() / nb;
+            if e <= s {
+                continue;
+            }
+            let idx = &order[s..e];
+            let mr = idx.iter().map(|&i| r[i]).sum::<f64>() / idx.len() as f64;
+            let mz = idx.iter().map(|&i| z[v][i]).sum::<f64>() / idx.len() as f64;
+            between += idx.len() as f64 * (mr - mean).powi(2);
+            profile.push((mz, mr));
+        }
+        out.push(Share {
+            coordinate: p.vars[v].clone(),
+            share: between / var,
+            profile,
+        });
+    }
+    out
+}
+
+impl Discovery {
+    /// The verdict, the evidence and the before/after table as text.
+    pub fn text(&self) -> String {
+        let mut s = format!("verdict: {}\n", self.verdict);
+        for e in &self.effects {
+            s += &format!(
+                "  {}: {} {}, 95 % CI [{}, {}] (weak form {}), bootstrap inclusion {:.0} %\n",
+                e.family,
+                num(e.coefficient),
+                e.formula,
+                num(e.interval[0]),
+                num(e.interval[1]),
+                num(e.weak_coefficient),
+                100.0 * e.inclusion
+            );
+            if let Some(r) = &e.reading {
+                s += &format!("    reading: {r}\n");
+            }
+            if !e.aliases.is_empty() {
+                s += &format!("    aliases (|partial corr| > 0.95): {}\n", e.aliases.join("; "));
+            }
+        }
+        for r in &self.retuned {
+            s += &format!(
+                "  retuned {}: {} -> {} ({:+.1} %)\n",
+                r.term,
+                num(r.nominal),
+                num(r.value),
+                r.change_percent
+            );
+        }
+        if let Some(c) = &self.closest {
+            s += &format!("  {c}\n");
+        }
+        if let Some(g) = &self.gates {
+            s += &format!(
+                "gates: inclusion {:?}, interval excludes 0 {:?}, validation residual ratio {:.3}, validation free-run ratio {:.3}\n",
+                g.inclusion.iter().map(|v| (v * 100.0).round() / 100.0).collect::<Vec<_>>(),
+                g.interval_excludes_zero,
+                g.residual_ratio,
+                g.simulation_ratio
+            );
+        }
+        s += "share of var(r) by coordinate:";
+        for sh in &self.shares {
+            s += &format!(" {} {:.0} %", sh.coordinate, 100.0 * sh.share);
+        }
+        s += "\n";
+        if let Some(top) = self.shares.iter().max_by(|a, b| a.share.total_cmp(&b.share)) {
+            s += &format!("  conditional mean of r along {}:", top.coordinate);
+            for (z, m) in &top.profile {
+                s += &format!(" ({}, {})", num(*z), num(*m));
+            }
+            s += "\n";
+        }
+        if !self.windows.is_empty() {
+            s += &format!(
+                "windows above 3 noise levels: {}{}\n",
+                self.windows
+                    .iter()
+                    .take(6)
+                    .map(|(r, a, b)| format!("run {r} {a:.2}-{b:.2} s"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                if self.windows.len() > 6 {
+                    format!(" (+{} more)", self.windows.len() - 6)
+                } else {
+                    String::new()
+                }
+            );
+        }
+        s += "| run | role | NRMSE nominal | above noise | NRMSE final |\n|---|---|---|---|---|\n";
+        for r in &self.runs {
+            s += &format!(
+                "| {} | {} | {:.4} | {:.4} | {} |\n",
+                r.run,
+                r.role,
+                r.nrmse_nominal,
+                r.above_noise,
+                r.nrmse_final.map(|v| format!("{v:.4}")).unwrap_or_default()
+            );
+        }
+        s += &format!(
+            "test runs: mean free-run NRMSE before {:.4}, after {:.4}\n",
+            self.nrmse_before, self.nrmse_after
+        );
+        s
+    }
+
+    /// The augmented model file: the nominal output with the final coefficients, monomial effects
+    /// as terms, and the `discovery` section.
+    pub fn augmented_model(&self, nominal: &Model) -> Result<Model> {
+        let mut m = nominal.clone();
+        let fm = self.final_model.as_ref();
+        let eq = &mut m.outputs[0];
+        let nt = eq.terms.len();
+        if let Some(fm) = fm {
+            for (t, c) in eq.terms.iter_mut().zip(fm.coefficients()) {
+                t.coefficient = c;
+            }
+            for (i, e) in self.effects.iter().enumerate() {
+                if let Some(mono) = fm.terms[nt + i].0.monomial() {
+                    let ex: Vec<(&str, u32)> =
+                        mono.iter().map(|&(v, k)| (fm.names[v].as_str(), k)).collect();
+                    eq.terms.push(Term::new(&ex, e.coefficient));
+                }
+            }
+        }
+        let eqs: Vec<OutputEquation> = m.outputs.clone();
+        m.degree = eqs
+            .iter()
+            .flat_map(|o| o.terms.iter().map(|t| t.degree() as usize))
+            .max()
+            .unwrap_or(0)
+            .max(m.degree);
+        let section = serde_json::json!({
+            "verdict": self.verdict,
+            "effects": self.effects,
+            "retuned": self.retuned,
+            "closest": self.closest,
+            "nrmse_before": self.nrmse_before,
+            "nrmse_after": self.nrmse_after,
+        });
+        m.extra.insert("discovery".into(), section);
+        m.validate()?;
+        Ok(m)
+    }
+}

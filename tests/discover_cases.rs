@@ -1,0 +1,72 @@
+//! `discover` on generated cases (one seed each, to keep CI time modest; the 10-seed matrix is
+//! `cargo run --release --example discover_acceptance`).
+
+use ctsid::discover::cases::{generate, judge, split};
+use ctsid::discover::{discover, Options};
+
+fn run(name: &str, seed: u64) -> (bool, String, ctsid::discover::Discovery) {
+    let case = generate(name, seed, 0.03).unwrap();
+    let (tr, va, te) = split();
+    let mut o = Options::new(tr, va, te);
+    o.seed = seed;
+    let d = discover(&case.records, &case.nominal, &o).unwrap();
+    let (ok, why) = judge(&case, &d);
+    (ok, why, d)
+}
+
+#[test]
+fn coulomb_friction_is_named_with_its_coefficient_and_the_error_shrinks() {
+    let (ok, why, d) = run("coulomb", 0);
+    assert!(ok, "{why}\n{}", d.text());
+    assert!(d.nrmse_before / d.nrmse_after > 3.0, "{}", d.text());
+    let e = &d.effects[0];
+    assert!(e.interval[1] < 0.0, "{}", d.text());
+}
+
+#[test]
+fn negative_control_adds_nothing() {
+    let (ok, why, d) = run("negative_none", 0);
+    assert!(ok, "{why}\n{}", d.text());
+    assert_eq!(d.verdict, "none");
+}
+
+#[test]
+fn mistuned_damping_is_retuned_not_disguised() {
+    let (ok, why, d) = run("mistuned", 0);
+    assert!(ok, "{why}\n{}", d.text());
+}
+
+#[test]
+fn quadratic_drag_is_never_named_as_cubic_damping_alone() {
+    let (_, _, d) = run("distractor_v3", 0);
+    let named: Vec<&str> = d.effects.iter().map(|e| e.family.as_str()).collect();
+    assert_ne!(named, vec!["cubic_damping"], "{}", d.text());
+}
+
+#[test]
+fn augmented_model_file_is_valid_and_carries_the_discovery() {
+    let case = generate("coulomb", 0, 0.03).unwrap();
+    let (tr, va, te) = split();
+    let d = discover(&case.records, &case.nominal, &Options::new(tr, va, te)).unwrap();
+    let m = d.augmented_model(&case.nominal).unwrap();
+    let text = m.to_json_string().unwrap();
+    let back = ctsid::model::Model::from_json_str(&text, "augmented").unwrap();
+    let disc = back.extra.get("discovery").unwrap();
+    assert_eq!(disc["verdict"], "added");
+    assert_eq!(disc["effects"][0]["family"], "coulomb_friction");
+    assert!(disc["nrmse_after"].as_f64().unwrap() < disc["nrmse_before"].as_f64().unwrap());
+}
+
+#[test]
+fn bad_inputs_are_typed_errors() {
+    let case = generate("coulomb", 0, 0.03).unwrap();
+    let mut o = Options::new(vec![0], vec![], vec![1]);
+    assert!(discover(&case.records, &case.nominal, &o).is_err());
+    o = Options::new(vec![0], vec![1], vec![2]);
+    o.confidence.insert("y^7".into(), 0.1);
+    assert!(discover(&case.records, &case.nominal, &o).is_err());
+    o.confidence.clear();
+    o.user_effects.push(("bad".into(), "sign(q)".into()));
+    assert!(discover(&case.records, &case.nominal, &o).is_err());
+    assert!(generate("nope", 0, 0.03).is_err());
+}
