@@ -5,7 +5,7 @@
 #   benches/gpu_report.sh --stage         only build, and copy the binaries to .gpu-bin/ so they can
 #                                         travel to a machine without cargo (e.g. the device tool's
 #                                         `carry`), together with the Vulkan loader debs in .gl/
-#   benches/gpu_report.sh --small         a quick run at small sizes (works on lavapipe)
+#   benches/gpu_report.sh --small         a quick run at small sizes (works on lavapipe: about 30 s here)
 #
 # On a machine without cargo the script uses the binaries in $CTSID_GPU_BIN_DIR (default
 # .gpu-bin). If the Vulkan loader is missing and .gl/*.deb exist, it unpacks them first
@@ -50,7 +50,7 @@ nv_icd=/usr/local/nvidia/share/vulkan/icd.d/nvidia_icd.json
 if [[ -z "${VK_DRIVER_FILES:-}" && -f $nv_icd ]]; then export VK_DRIVER_FILES=$nv_icd; fi
 
 if [[ $mode == small ]]; then
-    "$report" --samples 5000 --sizes 11:4,8:6,6:9 --reps 5 --check 500 "$@"
+    "$report" --samples 3000 --sizes 11:3,8:5,6:7 --reps 3 --check 500 --steps 20 "$@"
     exit
 fi
 

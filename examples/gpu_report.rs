@@ -6,12 +6,17 @@
 //! sweep time of a 200-step path (sweeps only: the active-set algebra on the CPU is extra), the
 //! ratio to a CPU reference timed in the same run, and the fraction of the arithmetic limit.
 //!
-//! The CPU column is NOT the crate's CPU engine (crate::engine::cpu::CpuEngine, not on this
-//! branch yet): it is a plain rayon f64 loop (`naive_f64_sweep`, one product of d factors per
-//! pair), labelled as such in the output. Swap it for the CPU engine once merged.
+//! The CPU columns are the crate's CPU engine ([`CpuEngine`], matrix-free, f32 and f64 products,
+//! f64 sums) on the same data in the same process, so the ratios compare engines on one machine.
+//! The path columns run `lars_path` (LassoLars, at most 200 steps and 200 terms) on a sparse
+//! polynomial label plus noise, per engine, active-set algebra included. A CPU path whose
+//! estimated time exceeds `--cpu-path-budget` seconds is cut short and its time per step
+//! extrapolated to 200 steps (marked "extrap."); the GPU path's entering order is compared with
+//! the CPU f64 path's over the steps both ran.
 //!
 //! Usage: gpu_report [--samples N] [--sizes NZ:D,NZ:D,...] [--reps K] [--check K]
 //!                   [--peak PAIRS_PER_S] [--require-real-gpu] [--cpu-max-pairs P]
+//!                   [--cpu-path-budget S] [--steps N]
 
 use std::time::Instant;
 
@@ -19,7 +24,8 @@ use rayon::prelude::*;
 
 use ctsid::basis::{Basis, BasisLimits, Code};
 use ctsid::engine::gpu::{GpuEngine, GpuOptions};
-use ctsid::engine::{Features, SweepEngine};
+use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
+use ctsid::regression::{lars_path, Method, PathOptions};
 
 struct Rng(u64);
 impl Rng {
@@ -88,8 +94,11 @@ fn main() {
     let n_check: usize = arg(&args, "--check", 2000);
     // The H100 figure: 1.25e10 pairs in about 0.55 ms of f32 arithmetic.
     let peak: f64 = arg(&args, "--peak", 1.25e10 / 0.55e-3);
-    let cpu_max_pairs: f64 = arg(&args, "--cpu-max-pairs", 2e10);
+    // Above this many pairs a CPU sweep is timed once (it takes seconds).
+    let cpu_max_pairs: f64 = arg(&args, "--cpu-max-pairs", 2e9);
     let require_real = args.iter().any(|a| a == "--require-real-gpu");
+    let cpu_path_budget: f64 = arg(&args, "--cpu-path-budget", 60.0);
+    let steps: usize = arg(&args, "--steps", 200);
 
     let mut rows_out = Vec::new();
     let mut failed = false;
@@ -168,53 +177,146 @@ fn main() {
         failed |= !ok;
 
         // Timing: warm, then reps sweeps.
-        let mut times = Vec::with_capacity(reps);
-        for _ in 0..reps {
-            let t = Instant::now();
-            eng.sweep(&v, &mut out).expect("sweep");
-            times.push(t.elapsed().as_secs_f64());
-        }
-        times.sort_by(|a, b| a.partial_cmp(b).unwrap());
-        let med = times[times.len() / 2];
+        let med = median_time(reps, || eng.sweep(&v, &mut out).expect("sweep"));
+
+        // A label with a sparse polynomial truth plus noise, for the paths.
+        let y = label(&mut rng, &basis, &feats);
+        let path_opts = PathOptions {
+            method: Method::LassoLars,
+            max_terms: steps,
+            max_steps: steps,
+            ..PathOptions::default()
+        };
+        let t = Instant::now();
+        let gpu_path = lars_path(&mut eng, &y, None, &path_opts).expect("gpu path");
+        let gpu_path_s = t.elapsed().as_secs_f64();
+        let gpu_steps = gpu_path.breakpoints.len() - 1;
         drop(eng);
 
-        // CPU reference, same process, same data; extrapolated from a subset above cpu_max_pairs.
+        // The CPU engine, f32 and f64, same data, same process.
         let pairs = (n_s * n_c) as f64;
-        let frac = (cpu_max_pairs / pairs).min(1.0);
-        let m = ((n_c as f64 * frac).ceil() as usize).max(1);
-        let cstep = (n_c / m).max(1);
-        let csub: Vec<Code> = (0..n_c).step_by(cstep).map(|j| basis.code(j)).collect();
-        let mut cout = vec![0.0; csub.len()];
-        let t2 = Instant::now();
-        naive_f64_sweep(&rows, n_z, &csub, &v, &mut cout, None);
-        let cpu = t2.elapsed().as_secs_f64() * n_c as f64 / csub.len() as f64;
-        let cpu_note = if csub.len() < n_c {
-            " (extrapolated)"
-        } else {
-            ""
-        };
+        let mut cpu_cells = Vec::new();
+        let mut order_ok = String::from("-");
+        for prec in [Precision::F32, Precision::F64] {
+            let mut cpu = CpuEngine::new(
+                &basis,
+                &feats,
+                CpuOptions {
+                    precision: prec,
+                    materialize_limit_bytes: 0,
+                },
+            )
+            .expect("cpu engine");
+            let mut cout = vec![0.0; n_c];
+            cpu.sweep(&v, &mut cout).expect("cpu sweep");
+            let cpu_reps = if pairs > cpu_max_pairs {
+                1
+            } else {
+                reps.min(5)
+            };
+            let cmed = median_time(cpu_reps, || cpu.sweep(&v, &mut cout).expect("cpu sweep"));
+            // A path costs a little over one sweep per step; cut it to the budget.
+            let cpu_steps = ((cpu_path_budget / (1.2 * cmed)) as usize).clamp(2, steps);
+            let t = Instant::now();
+            let cpath = lars_path(
+                &mut cpu,
+                &y,
+                None,
+                &PathOptions {
+                    max_steps: cpu_steps,
+                    ..path_opts
+                },
+            )
+            .expect("cpu path");
+            let ran = cpath.breakpoints.len() - 1;
+            let mut cpath_s = t.elapsed().as_secs_f64();
+            let extrap = ran < gpu_steps;
+            if extrap {
+                cpath_s *= gpu_steps as f64 / ran.max(1) as f64;
+            }
+            if prec == Precision::F64 {
+                let k = ran.min(gpu_steps);
+                let same = gpu_path.breakpoints[k].active == cpath.breakpoints[k].active;
+                order_ok = format!("{} ({k} steps)", if same { "same" } else { "DIFFERENT" });
+                failed |= !same;
+            }
+            cpu_cells.push(format!(
+                "{:.1} ms / {}x | {:.2} s{} / {}x",
+                cmed * 1e3,
+                ratio(cmed / med),
+                cpath_s,
+                if extrap { " extrap." } else { "" },
+                ratio(cpath_s / gpu_path_s)
+            ));
+        }
 
         rows_out.push(format!(
-            "| {n_s} x {n_c} (n_z={n_z}, d={d}) | {:.3} ms | {:.3} s | {:.1} ms{cpu_note} | {:.1}x | {:.1} % | {worst:.1e} {} | {:.2} s / {:.0} ms |",
+            "| {n_s} x {n_c} (n_z={n_z}, d={d}) | {:.3} ms | {:.1} % | {:.2} s ({gpu_steps} steps) | {} | {} | {order_ok} | {worst:.1e} {} | {:.2} s / {:.0} ms |",
             med * 1e3,
-            200.0 * med,
-            cpu * 1e3,
-            cpu / med,
             100.0 * pairs / peak / med,
+            gpu_path_s,
+            cpu_cells[0],
+            cpu_cells[1],
             if ok { "ok" } else { "FAIL" },
             setup,
             first * 1e3,
         ));
     }
     let threads = rayon::current_num_threads();
-    println!("\nGPU sweep report ({} samples, median of {reps} sweeps; CPU column: naive rayon f64 loop on {threads} threads, NOT the crate's CPU engine)\n", n_s);
-    println!("| problem | GPU per sweep | 200 sweeps (path, sweeps only) | CPU ref per sweep | ratio | of arithmetic limit ({:.2e} pairs/s) | max rel err vs f64 | setup / first sweep |", peak);
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("\nGPU engine report ({n_s} samples; sweeps: median of {reps}; paths: LassoLars, {steps} steps/terms at most, active-set work included; CPU engine on {threads} threads, same run; ratio = CPU time / GPU time)\n");
+    println!("| problem | GPU sweep | of arithmetic limit ({peak:.2e} pairs/s) | GPU path | CPU f32 sweep / ratio | CPU f32 path / ratio | CPU f64 sweep / ratio | CPU f64 path / ratio | GPU vs CPU f64 active set | max rel err vs f64 | GPU setup / first sweep |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for r in rows_out {
         println!("{r}");
     }
     if failed {
-        eprintln!("gpu_report: correctness check FAILED (max rel err >= 1e-5)");
+        eprintln!("gpu_report: correctness check FAILED (max rel err >= 1e-5, or the GPU path's active set differs from the CPU f64 path's)");
         std::process::exit(1);
+    }
+}
+
+fn median_time(reps: usize, mut f: impl FnMut()) -> f64 {
+    let mut times: Vec<f64> = (0..reps.max(1))
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64()
+        })
+        .collect();
+    times.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    times[times.len() / 2]
+}
+
+/// Six random monomials of the basis with coefficients of either sign, plus 1 % noise.
+fn label(rng: &mut Rng, basis: &Basis, f: &Features) -> Vec<f64> {
+    let n = f.n_samples;
+    let mut y = vec![0.0; n];
+    for t in 0..6 {
+        let j = 1 + (rng.next() % (basis.len() as u64 - 1)) as usize;
+        let c = if t % 2 == 0 { 1.0 } else { -1.5 };
+        let code = basis.code(j);
+        let mut col = vec![c; n];
+        for k in code.vars() {
+            col.iter_mut().zip(f.column(k)).for_each(|(a, z)| *a *= z);
+        }
+        y.iter_mut().zip(&col).for_each(|(a, b)| *a += b);
+    }
+    let sd = (y.iter().map(|x| x * x).sum::<f64>() / n as f64)
+        .sqrt()
+        .max(1e-12);
+    for yi in &mut y {
+        *yi += 0.01 * sd * rng.uniform();
+    }
+    y
+}
+
+/// Two or three significant digits (ratios span 1e-3 on lavapipe to 1e3 on a real GPU).
+fn ratio(x: f64) -> String {
+    if x >= 10.0 {
+        format!("{x:.0}")
+    } else if x >= 1.0 {
+        format!("{x:.1}")
+    } else {
+        format!("{x:.3}")
     }
 }

@@ -190,6 +190,10 @@ pub struct GpuEngine {
     timeout: Duration,
     n_samples: usize,
     n_candidates: usize,
+    /// Fault injection for the end-to-end fallback test (tests/gpu_fallback.rs): with
+    /// `CTSID_GPU_LOSE_DEVICE_AFTER=N` the device is destroyed before sweep N + 1, a real loss.
+    lose_after: Option<usize>,
+    sweeps: usize,
 }
 
 /// Factor degree, table length, factors per candidate and chunk for a problem (pure; see docs).
@@ -672,6 +676,10 @@ impl GpuEngine {
             features: features.clone(),
             codes: basis.codes().to_vec(),
             timeout: options.timeout,
+            lose_after: std::env::var("CTSID_GPU_LOSE_DEVICE_AFTER")
+                .ok()
+                .and_then(|x| x.parse().ok()),
+            sweeps: 0,
             n_samples: n_s,
             n_candidates: n_c,
         };
@@ -937,6 +945,11 @@ impl SweepEngine for GpuEngine {
             ));
         }
         let v32 = to_f32("v", v, self.n_samples)?;
+        if self.lose_after.is_some_and(|n| self.sweeps >= n) {
+            self.device.destroy();
+            let _ = self.device.poll(wgpu::PollType::Poll);
+        }
+        self.sweeps += 1;
         self.run(Mode::Sweep, &v32, out)
     }
 

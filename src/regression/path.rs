@@ -17,6 +17,11 @@
 //!   Each time a candidate enters, its exact correlation is computed from its f64 column; when the
 //!   incremental value differs by more than `refresh_tol` (relative), all correlations are
 //!   recomputed with one exact sweep of the residual before the step goes on.
+//! - Sweeps decide, exact columns measure: the swept correlations pick the entering candidate
+//!   and the candidate that limits the step, but C (hence alpha) and that candidate's
+//!   correlation and direction product (hence gamma and the coefficients) are recomputed from
+//!   its exact f64 column. An f32 engine (GPU, or CPU in f32) then gives the f64 engine's
+//!   breakpoints to rounding whenever it makes the same choices (tests/gpu_lars.rs).
 //! - A candidate whose entry would make the active Gram matrix singular (Cholesky pivot below
 //!   `collinearity_tol`, i.e. its distance to the span of the active columns, in unit norm) is
 //!   skipped for the rest of the path and reported; nothing becomes NaN.
@@ -188,6 +193,25 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// x~ = s * (x - m) / n with the exact weighted mean and centred norm of `col` (zeros when
+/// the column is constant).
+fn standardised(col: &[f64], w: &[f64], sw: f64, sqrt_w: &[f64]) -> Vec<f64> {
+    let m = w.iter().zip(col).map(|(a, b)| a * b).sum::<f64>() / sw;
+    let s = w
+        .iter()
+        .zip(col)
+        .map(|(a, b)| a * (b - m) * (b - m))
+        .sum::<f64>()
+        .sqrt();
+    if !(s > 0.0) {
+        return vec![0.0; col.len()];
+    }
+    col.iter()
+        .zip(sqrt_w)
+        .map(|(x, q)| q * (x - m) / s)
+        .collect()
+}
+
 struct Standardiser<'a> {
     engine: &'a mut dyn SweepEngine,
     mean: Vec<f64>,
@@ -320,6 +344,7 @@ pub fn lars_path(
     let mut prev_alpha = f64::INFINITY;
     let mut rel_res_at_last_bp = 1.0;
 
+    let mut last_idx;
     loop {
         // Largest |correlation| among the inactive usable candidates (first one on ties, like argmax).
         let mut c_idx = usize::MAX;
@@ -330,8 +355,9 @@ pub fn lars_path(
                 c_idx = j;
             }
         }
-        let c = if c_idx == usize::MAX { 0.0 } else { big };
-        let alpha = c / n as f64;
+        last_idx = c_idx;
+        let mut c = if c_idx == usize::MAX { 0.0 } else { big };
+        let mut alpha = c / n as f64;
         let rel_res = dot(&r, &r).sqrt() / y_norm;
         // Breakpoint n_iter: coefficients from the end of the last step, alpha from now.
         let bp = Breakpoint {
@@ -421,6 +447,13 @@ pub fn lars_path(
                 refreshed_this_iter = true;
                 continue;
             }
+            // The breakpoint's alpha and the step's C from the exact f64 column rather than the
+            // swept value (which carries the engine's f32 rounding): with f32 sweeps this is what
+            // keeps the breakpoints equal to an f64 engine's, not only the entering order.
+            cov[c_idx] = exact;
+            c = exact.abs();
+            alpha = c / n as f64;
+            path.breakpoints[n_iter].alpha = alpha;
             let g: Vec<f64> = xa.par_iter().map(|x| dot(x, &xt)).collect();
             let (wv, pivot) = chol.pivot(&g, dot(&xt, &xt));
             let pivot = pivot.max(f64::EPSILON);
@@ -503,7 +536,32 @@ pub fn lars_path(
                 .filter(|&j| inactive(j))
                 .map(|j| (c + cov[j]) / (aa + a[j] + TINY32)),
         );
-        let mut gamma = g1.min(g2).min(c / aa);
+        // The candidate that limits the step: its exact f64 correlation and direction product
+        // replace the swept ones, so gamma (hence every coefficient) is exact given that choice.
+        let g_exact = {
+            let g12 = g1.min(g2);
+            let arg = (0..nc).filter(|&j| inactive(j)).find(|&j| {
+                (c - cov[j]) / (aa - a[j] + TINY32) == g12
+                    || (c + cov[j]) / (aa + a[j] + TINY32) == g12
+            });
+            match arg {
+                Some(j) if g12 < c / aa => {
+                    let col = sd.engine.columns(&[j])?.pop().expect("one column");
+                    let xt = standardised(&col, &w, sw, &path.sqrt_w);
+                    let (cj, aj) = (dot(&xt, &r), dot(&xt, &u));
+                    let g = min_pos(
+                        [(c - cj) / (aa - aj + TINY32), (c + cj) / (aa + aj + TINY32)].into_iter(),
+                    );
+                    if g < f64::MAX {
+                        g
+                    } else {
+                        g12
+                    }
+                }
+                _ => g1.min(g2),
+            }
+        };
+        let mut gamma = g_exact.min(c / aa);
         let z: Vec<f64> = coef
             .iter()
             .zip(&ls)
@@ -552,6 +610,26 @@ pub fn lars_path(
             stop_next = Some(StopReason::Relevance);
         }
         rel_res_at_last_bp = new_rel;
+    }
+    // A path that stops before adding the candidate of its last breakpoint: that alpha too from
+    // the exact column (as every entering breakpoint's), unless the swept value had drifted.
+    if matches!(
+        path.stop,
+        StopReason::MaxSteps
+            | StopReason::MaxTerms
+            | StopReason::SampleLimit
+            | StopReason::ExactFit
+            | StopReason::Relevance
+    ) && last_idx != usize::MAX
+    {
+        let col = sd.engine.columns(&[last_idx])?.pop().expect("one column");
+        let exact = dot(&standardised(&col, &w, sw, &path.sqrt_w), &r);
+        let drift = (exact - cov[last_idx]).abs() / cov[last_idx].abs().max(f64::MIN_POSITIVE);
+        if drift <= opts.refresh_tol {
+            if let Some(bp) = path.breakpoints.last_mut() {
+                bp.alpha = exact.abs() / n as f64;
+            }
+        }
     }
     path.sweeps = sd.sweeps;
     Ok(path)
