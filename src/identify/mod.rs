@@ -22,6 +22,7 @@
 //! fixed, until a sweep changes nothing (at most three sweeps).
 
 pub mod profile;
+pub mod refine;
 pub mod split;
 
 use crate::derivatives::{differentiate_runs, DerivativeOptions, Derivatives};
