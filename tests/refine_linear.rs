@@ -30,7 +30,12 @@ const TRUE: [f64; 4] = [0.5, -4.0, -0.8, 4.0];
 
 /// Runs of the true system driven by seeded multi-sines, with noise `eta` as the paper's model.
 fn runs(first: usize, n_runs: usize, eta: f64) -> Vec<RunData> {
-    let truth = model(TRUE).compile().unwrap();
+    runs_of(&model(TRUE), first, n_runs, eta)
+}
+
+/// Runs of `system`.
+pub fn runs_of(system: &Model, first: usize, n_runs: usize, eta: f64) -> Vec<RunData> {
+    let truth = system.compile().unwrap();
     (first..first + n_runs)
         .map(|r| {
             let mut rng = Rng::new(stream_seed(7, r as u64, 0));
@@ -119,4 +124,73 @@ fn recovers_perturbed_coefficients_of_a_linear_system() {
     let g = refine_gated(&start, &train, &val, &RefineOptions::default()).unwrap();
     assert!(g.kept, "{}", g.message);
     assert_eq!(coefficients(&g.model), c);
+}
+
+#[test]
+fn gate_refuses_a_refinement_that_does_not_help_on_validation_runs() {
+    // The fitting runs come from another system than the validation runs, and the starting model
+    // is the validation runs' own system: refining on the fitting runs lowers their error but
+    // raises the validation error, so the gate must keep the starting model.
+    let other = model([0.2, -6.0, -0.5, 5.0]);
+    let fit = runs_of(&other, 0, 3, 0.03);
+    let val = runs(100, 3, 0.03);
+    let start = model(TRUE);
+    let g = refine_gated(&start, &fit, &val, &RefineOptions::default()).unwrap();
+    eprintln!(
+        "{}; fit runs {:?} -> {:?}",
+        g.message, g.train_before, g.train_after
+    );
+    assert!(!g.kept, "{}", g.message);
+    assert!(g.message.contains("refused"));
+    assert_eq!(coefficients(&g.model), TRUE.to_vec());
+    // The refinement itself worked (on its own runs): it is the gate that said no.
+    assert!(g.train_after[0] < 0.5 * g.train_before[0]);
+    assert!(g.gate_after[0] > g.gate_before[0]);
+    let r = g.refined.unwrap();
+    let c = coefficients(&r.model);
+    assert!((c[1] + 6.0).abs() < 0.2, "{c:?}");
+}
+
+/// y'' = c0 + c1 y + c2 y' + c3 u + c4 y^3
+fn cubic(c: [f64; 5]) -> Model {
+    Model::new(
+        &["u"],
+        vec![OutputEquation::new(
+            "y",
+            2,
+            vec![
+                Term::new(&[], c[0]),
+                Term::new(&[("y", 1)], c[1]),
+                Term::new(&[("y_d1", 1)], c[2]),
+                Term::new(&[("u", 1)], c[3]),
+                Term::new(&[("y", 3)], c[4]),
+            ],
+        )],
+        Some(0.02),
+    )
+}
+
+#[test]
+fn a_trial_step_that_diverges_is_rejected_not_fatal() {
+    // From y-coefficient -1 instead of -4, the first Gauss-Newton steps of this cubic model
+    // overshoot into models whose simulation blows up (a positive cubic term, or a stiffness
+    // sign change): those steps must be rejected and the fit must still converge.
+    let truth = [0.5, -4.0, -0.8, 4.0, -0.3];
+    let train = runs_of(&cubic(truth), 0, 4, 0.03);
+    let r = refine(
+        &cubic([0.5, -1.0, -0.8, 4.0, -0.3]),
+        &train,
+        &RefineOptions::default(),
+    )
+    .unwrap();
+    let c = coefficients(&r.model);
+    eprintln!(
+        "{} diverged trial steps of {} rejected; cost {:.4} -> {:.5}; {c:?}",
+        r.diverged, r.rejected, r.cost_before, r.cost_after
+    );
+    assert!(r.diverged >= 1, "the case must exercise a diverging trial step");
+    for (k, (a, b)) in c.iter().zip(truth).enumerate() {
+        let bound = if k == 0 { 0.10 } else { 0.03 };
+        assert!((a - b).abs() < bound * b.abs(), "coefficient {k}: {a} vs {b}");
+    }
 }

@@ -65,6 +65,9 @@ pub struct RefineOptions {
     /// difference quotients are not dominated by integration error).
     pub rtol: f64,
     pub atol: f64,
+    /// A simulated state beyond this many times the largest magnitude in the data (outputs and
+    /// state spreads) counts as diverged.
+    pub divergence_factor: f64,
 }
 
 impl Default for RefineOptions {
@@ -76,6 +79,7 @@ impl Default for RefineOptions {
             tolerance: 1e-4,
             rtol: 1e-7,
             atol: 1e-9,
+            divergence_factor: 1e6,
         }
     }
 }
@@ -109,9 +113,11 @@ pub struct Refined {
     /// starting and the refined model, free-run from the starting and the refined initial states.
     pub cost_before: f64,
     pub cost_after: f64,
-    /// Accepted and rejected (diverged or not lower) trial steps.
+    /// Accepted and rejected (diverged or not lower) trial steps; `diverged` counts the
+    /// rejected ones whose simulation diverged.
     pub accepted: usize,
     pub rejected: usize,
+    pub diverged: usize,
     /// Jacobian evaluations.
     pub iterations: usize,
     pub seconds: f64,
@@ -390,8 +396,11 @@ fn levenberg_marquardt(
                     break;
                 }
                 // Diverged, or not lower: shorter, more gradient-like step.
-                _ => {
+                r => {
                     stats.rejected += 1;
+                    if r.is_none() {
+                        stats.diverged += 1;
+                    }
                     lambda *= 10.0;
                 }
             }
@@ -474,7 +483,7 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
             }
         })
         .collect();
-    let sim_opts = SimOptions {
+    let mut sim_opts = SimOptions {
         rtol: opts.rtol,
         atol: opts.atol,
         ..Default::default()
@@ -535,6 +544,14 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
             }
         })
         .collect();
+    // A trial whose states leave the data's range by orders of magnitude has diverged: stopping
+    // it there saves the time of integrating a blow-up up to the simulator's default bound.
+    let largest = state_scale
+        .iter()
+        .chain(&out_scale)
+        .chain(runs.iter().flat_map(|r| r.y.iter().flatten()))
+        .fold(0.0f64, |a, v| a.max(v.abs()));
+    sim_opts.bound = (opts.divergence_factor * largest).min(sim_opts.bound);
     let total: usize = runs.iter().map(|r| r.t.len()).sum();
     let mut problem = Problem {
         base: &compiled,
@@ -557,6 +574,7 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
         cost_after: f64::NAN,
         accepted: 0,
         rejected: 0,
+        diverged: 0,
         iterations: 0,
         seconds: 0.0,
     };
