@@ -52,7 +52,10 @@ fn identify_refines_the_throttle_and_reports_it() {
     if rep.kept {
         assert!(rep.validation_after[0] < rep.validation_before[0]);
         assert_eq!(rep.refined[0], on.model.outputs[0].to_text());
-        assert!(b <= a * 1.05, "kept a refinement that simulates worse: {a} -> {b}");
+        assert!(
+            b <= a * 1.05,
+            "kept a refinement that simulates worse: {a} -> {b}"
+        );
     } else {
         assert!(rep.validation_after[0] >= rep.validation_before[0]);
         assert_eq!(on.model, off.model);

@@ -46,7 +46,7 @@ pub fn runs_of(system: &Model, first: usize, n_runs: usize, eta: f64) -> Vec<Run
                     (
                         rng.uniform_in(-1.0, 1.0),
                         rng.uniform_in(0.2, 3.0),
-                        rng.uniform_in(0.0, 6.28),
+                        rng.uniform_in(0.0, std::f64::consts::TAU),
                     )
                 })
                 .collect();
@@ -59,7 +59,7 @@ pub fn runs_of(system: &Model, first: usize, n_runs: usize, eta: f64) -> Vec<Run
                 &truth,
                 &x0,
                 &t,
-                &[u.clone()],
+                std::slice::from_ref(&u),
                 &SimOptions {
                     rtol: 1e-10,
                     atol: 1e-12,
@@ -67,7 +67,11 @@ pub fn runs_of(system: &Model, first: usize, n_runs: usize, eta: f64) -> Vec<Run
                 },
             )
             .unwrap();
-            let y = add_noise(&tr.series(0), eta, &mut Rng::new(stream_seed(7, r as u64, 1)));
+            let y = add_noise(
+                &tr.series(0),
+                eta,
+                &mut Rng::new(stream_seed(7, r as u64, 1)),
+            );
             let x0 = estimate_initial_derivatives(&t, &y, 2, &r.to_string(), "test").unwrap();
             RunData {
                 id: r.to_string(),
@@ -89,12 +93,7 @@ fn coefficients(m: &Model) -> Vec<f64> {
 fn recovers_perturbed_coefficients_of_a_linear_system() {
     let train = runs(0, 4, 0.03);
     let val = runs(100, 3, 0.03);
-    let start = model([
-        TRUE[0] * 1.3,
-        TRUE[1] * 0.75,
-        TRUE[2] * 1.25,
-        TRUE[3] * 0.8,
-    ]);
+    let start = model([TRUE[0] * 1.3, TRUE[1] * 0.75, TRUE[2] * 1.25, TRUE[3] * 0.8]);
     let t = std::time::Instant::now();
     let r = refine(&start, &train, &RefineOptions::default()).unwrap();
     let c = coefficients(&r.model);
@@ -111,7 +110,11 @@ fn recovers_perturbed_coefficients_of_a_linear_system() {
         let rel = (a - b).abs() / b.abs();
         // The constant is small beside the others' contributions: a looser bound.
         let bound = if k == 0 { 0.10 } else { 0.03 };
-        assert!(rel < bound, "coefficient {k}: {a} vs true {b} ({:.1} %)", rel * 100.0);
+        assert!(
+            rel < bound,
+            "coefficient {k}: {a} vs true {b} ({:.1} %)",
+            rel * 100.0
+        );
     }
     assert!(r.cost_after < r.cost_before);
     let before = free_run_nrmse(&start, &val).unwrap()[0];
@@ -188,9 +191,15 @@ fn a_trial_step_that_diverges_is_rejected_not_fatal() {
         "{} diverged trial steps of {} rejected; cost {:.4} -> {:.5}; {c:?}",
         r.diverged, r.rejected, r.cost_before, r.cost_after
     );
-    assert!(r.diverged >= 1, "the case must exercise a diverging trial step");
+    assert!(
+        r.diverged >= 1,
+        "the case must exercise a diverging trial step"
+    );
     for (k, (a, b)) in c.iter().zip(truth).enumerate() {
         let bound = if k == 0 { 0.10 } else { 0.03 };
-        assert!((a - b).abs() < bound * b.abs(), "coefficient {k}: {a} vs {b}");
+        assert!(
+            (a - b).abs() < bound * b.abs(),
+            "coefficient {k}: {a} vs {b}"
+        );
     }
 }

@@ -65,7 +65,10 @@ fn throttle_refinement_removes_the_bias() {
     let c = coefficients(&g.model);
     let ct = coefficients(&truth);
     for (k, (a, b)) in c.iter().zip(&ct).enumerate() {
-        eprintln!("  term {k}: {a:.6e} vs {b:.6e} ({:+.2} %)", (a - b) / b * 100.0);
+        eprintln!(
+            "  term {k}: {a:.6e} vs {b:.6e} ({:+.2} %)",
+            (a - b) / b * 100.0
+        );
     }
     assert!(after < 0.02, "{before} -> {after}");
     // Relative to the y'' coefficient (term 3), before and after.

@@ -601,7 +601,11 @@ fn refine_run(model: &ModelFile, prep: &Prepared, outputs: &[usize], r: usize) -
         id: run.id.clone(),
         t,
         y: outputs.iter().map(|&c| run.channels[c].clone()).collect(),
-        u: prep.inputs.iter().map(|&c| run.channels[c].clone()).collect(),
+        u: prep
+            .inputs
+            .iter()
+            .map(|&c| run.channels[c].clone())
+            .collect(),
         x0: states.iter().map(|s| s[0]).collect(),
         states: Some(states),
     }

@@ -289,7 +289,11 @@ impl<'a> Problem<'a> {
                             .zip(&r0.rows)
                             .map(|(a, b)| (a - b) / h)
                             .collect(),
-                        e.end.iter().zip(&r0.end).map(|(a, b)| (a - b) / h).collect(),
+                        e.end
+                            .iter()
+                            .zip(&r0.end)
+                            .map(|(a, b)| (a - b) / h)
+                            .collect(),
                     ),
                     // A perturbed simulation that fails holds that parameter for this iteration.
                     None => (vec![0.0; r0.rows.len()], vec![0.0; n]),
@@ -334,7 +338,7 @@ impl<'a> Problem<'a> {
                 let d = self.defect(theta, s, &l.r0.end);
                 let mut idx2 = idx.clone();
                 idx2.extend((0..n).map(|j| nc + (s + 1) * n + j));
-                for j in 0..n {
+                for (j, dj) in d.iter().enumerate() {
                     let w = self.defect_weight / self.state_scale[j];
                     let mut row: Vec<f64> = l.cols.iter().map(|c| c.1[j] * w).collect();
                     row.extend((0..n).map(|i| if i == j { -w } else { 0.0 }));
@@ -342,7 +346,7 @@ impl<'a> Problem<'a> {
                         if row[a] == 0.0 {
                             continue;
                         }
-                        jtr[idx2[a]] += row[a] * d[j];
+                        jtr[idx2[a]] += row[a] * dj;
                         for b in 0..row.len() {
                             jtj[(idx2[a], idx2[b])] += row[a] * row[b];
                         }
@@ -453,9 +457,9 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
             || r.u.len() != n_in
             || r.y.iter().chain(&r.u).any(|c| c.len() != len)
             || r.x0.len() != n
-            || r.states.as_ref().is_some_and(|s| {
-                s.len() != n || s.iter().any(|c| c.len() != len)
-            });
+            || r.states
+                .as_ref()
+                .is_some_and(|s| s.len() != n || s.iter().any(|c| c.len() != len));
         if bad {
             return Err(Error::InvalidData(format!(
                 "run '{}': refinement needs {n_out} output and {n_in} input channels of equal length, an initial state of {n} values and state guesses of that shape",
@@ -472,7 +476,9 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
         }
     }
     let all_coef = compiled.coefficients();
-    let free: Vec<usize> = (0..all_coef.len()).filter(|&k| all_coef[k] != 0.0).collect();
+    let free: Vec<usize> = (0..all_coef.len())
+        .filter(|&k| all_coef[k] != 0.0)
+        .collect();
     let out_scale: Vec<f64> = (0..n_out)
         .map(|i| {
             let s = spread(runs.iter().flat_map(|r| r.y[i].iter()));
@@ -508,7 +514,12 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
         for (k, &a) in starts.iter().enumerate() {
             let last = k + 1 == starts.len();
             let b = if last { len - 1 } else { starts[k + 1] };
-            segs.push(Segment { run: ri, a, b, last });
+            segs.push(Segment {
+                run: ri,
+                a,
+                b,
+                last,
+            });
             let x = if a == 0 {
                 r.x0.clone()
             } else if let Some(st) = &r.states {
@@ -536,7 +547,10 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
                 None => spread(seg_x0.iter().map(|x| &x[j])),
             };
             // An output's own spread when its derivative guesses do not vary.
-            let i = (0..n_out).rev().find(|&i| compiled.offset(i) <= j).unwrap_or(0);
+            let i = (0..n_out)
+                .rev()
+                .find(|&i| compiled.offset(i) <= j)
+                .unwrap_or(0);
             if s > 0.0 {
                 s
             } else {
@@ -622,7 +636,9 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
     }
     problem = problem.with_segments(whole);
     let mut theta = theta2.clone();
-    let mut c_after = problem.residuals(&theta).map_or(f64::INFINITY, |r| cost(&r));
+    let mut c_after = problem
+        .residuals(&theta)
+        .map_or(f64::INFINITY, |r| cost(&r));
     if opts.polish_iterations > 0 {
         if let Some((th, c)) = levenberg_marquardt(
             &problem,
