@@ -177,6 +177,9 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         );
     }
     text += &format!("Weighting: {}.\n", id.weighting);
+    if let Some(r) = &id.refinement {
+        text += &format!("Refinement by free-run simulation error: {}.\n", r.message);
+    }
     print!("{text}");
 
     if let Some(path) = &a.output_model {
@@ -185,6 +188,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             "outputs": id.outputs,
             "test_nrmse": id.test_nrmse(),
             "weighting": id.weighting,
+            "refinement": id.refinement,
             "settings": {"degree": a.degree, "eta": a.eta, "engine": a.engine.to_string(), "train": split.train.iter().map(|&r| ids[r].clone()).collect::<Vec<_>>()},
         }));
         model.write(&path.display().to_string())?;

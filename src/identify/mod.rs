@@ -22,8 +22,18 @@
 //! orders are coupled. The search is coordinate-wise: every output starts at the largest
 //! candidate order, then each output in turn takes the order the eta-rule picks with the others
 //! fixed, until a sweep changes nothing (at most three sweeps).
+//!
+//! # Refinement
+//! With the selected structure fixed, [`refine`] fits the nonzero coefficients and the initial
+//! states to the measured outputs by free-run simulation (Levenberg-Marquardt, multiple shooting),
+//! which removes the bias that derivative noise leaves in the derivative fit. It is judged on
+//! runs it did not see: the validation runs, or else the first of the k folds of the training
+//! runs (refined on the others; with one training run, the training run itself, a proxy that
+//! cannot refuse much). The refined model is kept only if its free-run NRMSE there is lower, and
+//! the report says which was kept ([`RefinementReport`]).
 
 pub mod profile;
+pub mod refine;
 pub mod split;
 
 use crate::derivatives::{differentiate_runs, DerivativeOptions, Derivatives};
@@ -71,6 +81,9 @@ pub struct Settings {
     pub same_filter: bool,
     /// Print progress lines to standard error.
     pub progress: bool,
+    /// Refine the selected structure by free-run simulation error (see the module docs).
+    pub refine: bool,
+    pub refine_options: refine::RefineOptions,
 }
 
 impl Settings {
@@ -87,6 +100,8 @@ impl Settings {
             weighting: true,
             same_filter: true,
             progress: false,
+            refine: true,
+            refine_options: refine::RefineOptions::default(),
         }
     }
 
@@ -191,6 +206,29 @@ pub struct RunSimulation {
     pub error: Option<String>,
 }
 
+/// What the simulation-error refinement did.
+#[derive(Debug, Clone, Serialize)]
+pub struct RefinementReport {
+    /// Whether the refined coefficients were kept (else the derivative fit's are in the model).
+    pub kept: bool,
+    pub message: String,
+    /// Runs the refinement fitted and runs that judged it (ids).
+    pub fit_runs: Vec<String>,
+    pub gate_runs: Vec<String>,
+    /// What judged it: "validation runs", "held-out training fold" or "training runs (proxy)".
+    pub gate: String,
+    /// Free-run NRMSE per output, derivative fit (before) and refined (after).
+    pub train_before: Vec<f64>,
+    pub train_after: Vec<f64>,
+    pub validation_before: Vec<f64>,
+    pub validation_after: Vec<f64>,
+    /// The derivative fit's equations and the refined ones.
+    pub derivative_fit: Vec<String>,
+    pub refined: Vec<String>,
+    pub iterations: usize,
+    pub seconds: f64,
+}
+
 /// Everything an identification produces.
 #[derive(Debug, Clone)]
 pub struct Identification {
@@ -200,6 +238,8 @@ pub struct Identification {
     /// Derivatives of every output on every run: derivatives[output][run].
     pub derivatives: Vec<Vec<Derivatives>>,
     pub weighting: String,
+    /// `None` when refinement was switched off.
+    pub refinement: Option<RefinementReport>,
 }
 
 impl Identification {
@@ -565,6 +605,14 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let mut model = ModelFile::new(&input_names, equations, Some(rs.tau));
     model.degree = settings.degree;
     model.validate()?;
+    let refinement = if settings.refine {
+        let (refined, report) = refine_selected(&model, &prep, &outputs, split)?;
+        say(format!("{} ({:.2} s)", report.message, report.seconds));
+        model = refined;
+        Some(report)
+    } else {
+        None
+    };
 
     let simulations = simulate_runs(
         &model,
@@ -586,7 +634,85 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         simulations,
         derivatives: prep.derivs,
         weighting,
+        refinement,
     })
+}
+
+/// The data of run `r` for the refinement, with the smoothed derivatives as state guesses.
+fn refine_run(model: &ModelFile, prep: &Prepared, outputs: &[usize], r: usize) -> refine::RunData {
+    let run = &prep.rs.runs[r];
+    let t: Vec<f64> = (0..run.len())
+        .map(|k| run.t0 + k as f64 * prep.rs.tau)
+        .collect();
+    let states: Vec<Vec<f64>> = model
+        .outputs
+        .iter()
+        .enumerate()
+        .flat_map(|(o, eq)| (0..eq.order).map(move |k| prep.derivs[o][r].values[k].clone()))
+        .collect();
+    refine::RunData {
+        id: run.id.clone(),
+        t,
+        y: outputs.iter().map(|&c| run.channels[c].clone()).collect(),
+        u: prep
+            .inputs
+            .iter()
+            .map(|&c| run.channels[c].clone())
+            .collect(),
+        x0: states.iter().map(|s| s[0]).collect(),
+        states: Some(states),
+    }
+}
+
+/// Refines the selected model and gates it (see the module docs).
+fn refine_selected(
+    model: &ModelFile,
+    prep: &Prepared,
+    outputs: &[usize],
+    split: &Split,
+) -> Result<(ModelFile, RefinementReport)> {
+    let (fit, gate_runs, gate) = match &split.validation {
+        Some(v) => (split.train.clone(), v.clone(), "validation runs"),
+        None => match split.folds(prep.settings.folds).into_iter().next() {
+            Some((fit, held)) if split.train.len() >= 2 => (fit, held, "held-out training fold"),
+            _ => (
+                split.train.clone(),
+                split.train.clone(),
+                "training runs (proxy)",
+            ),
+        },
+    };
+    let data = |runs: &[usize]| -> Vec<refine::RunData> {
+        runs.iter()
+            .map(|&r| refine_run(model, prep, outputs, r))
+            .collect()
+    };
+    let g = refine::refine_gated(
+        model,
+        &data(&fit),
+        &data(&gate_runs),
+        &prep.settings.refine_options,
+    )?;
+    let ids = |runs: &[usize]| -> Vec<String> {
+        runs.iter().map(|&r| prep.rs.runs[r].id.clone()).collect()
+    };
+    let eqs = |m: &ModelFile| -> Vec<String> { m.outputs.iter().map(|o| o.to_text()).collect() };
+    let report = RefinementReport {
+        kept: g.kept,
+        message: format!("{} ({gate})", g.message),
+        fit_runs: ids(&fit),
+        gate_runs: ids(&gate_runs),
+        gate: gate.into(),
+        train_before: g.train_before.clone(),
+        train_after: g.train_after.clone(),
+        validation_before: g.gate_before.clone(),
+        validation_after: g.gate_after.clone(),
+        derivative_fit: eqs(model),
+        refined: g.refined.as_ref().map_or_else(Vec::new, |r| eqs(&r.model)),
+        iterations: g.refined.as_ref().map_or(0, |r| r.iterations),
+        seconds: g.refined.as_ref().map_or(0.0, |r| r.seconds),
+    };
+    Ok((g.model, report))
 }
 
 fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<Candidate> {
