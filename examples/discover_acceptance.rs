@@ -45,7 +45,11 @@ fn main() {
                     let extra = d
                         .closest
                         .clone()
-                        .or_else(|| d.effects.first().map(|e| format!("aliases {:?}", e.aliases)))
+                        .or_else(|| {
+                            d.effects
+                                .first()
+                                .map(|e| format!("aliases {:?}", e.aliases))
+                        })
                         .unwrap_or_default();
                     println!(
                         "{name} seed {seed}: {} {} m={} [{:.1} s] {why} | {extra}",

@@ -22,8 +22,8 @@
 
 pub mod basis;
 pub mod demo;
-pub mod discover;
 pub mod derivatives;
+pub mod discover;
 pub mod engine;
 pub mod error;
 pub mod identify;

@@ -91,7 +91,10 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
             "approximate" => 1.0,
             s => {
                 let v: f64 = s.trim_end_matches('%').parse().map_err(|_| {
-                    Error::param("confidence", format!("'{c}': '{s}' is not a percentage, 'fixed' or 'approximate'"))
+                    Error::param(
+                        "confidence",
+                        format!("'{c}': '{s}' is not a percentage, 'fixed' or 'approximate'"),
+                    )
                 })?;
                 if !(v >= 0.0 && v.is_finite()) {
                     return Err(Error::param("confidence", format!("'{c}': must be >= 0")));
@@ -106,7 +109,8 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
         let (name, ex) = e
             .split_once('=')
             .ok_or_else(|| Error::param("effect", format!("'{e}': use NAME=EXPRESSION")))?;
-        o.user_effects.push((name.trim().to_string(), ex.trim().to_string()));
+        o.user_effects
+            .push((name.trim().to_string(), ex.trim().to_string()));
     }
     let d = discover(&rs, &nominal, &o)?;
     print!("{}", d.text());

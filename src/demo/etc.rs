@@ -201,6 +201,20 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         }
     }
     let id = main_id.unwrap();
+    if let Some(r) = &id.refinement {
+        let _ = writeln!(
+            out,
+            "Refinement on free-run simulation error (n = 3, d = {}): {} ({}; gate: {}, NRMSE {:.4} -> {:.4}; {} iterations, {:.1} s).\n",
+            o.degree,
+            if r.kept { "kept" } else { "refused" },
+            r.message,
+            r.gate,
+            r.validation_before.first().copied().unwrap_or(f64::NAN),
+            r.validation_after.first().copied().unwrap_or(f64::NAN),
+            r.iterations,
+            r.seconds
+        );
+    }
     let _ = writeln!(
         out,
         "## Test runs ({}), n = 3\n\n{}",

@@ -121,7 +121,10 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
             2,
             |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.5 * (x[1] / 1e-3).tanh(),
             msd(0.4, 4.0),
-            Expect::Added { family: "coulomb_friction", coef: -0.5 },
+            Expect::Added {
+                family: "coulomb_friction",
+                coef: -0.5,
+            },
             2.0,
             0.0,
             false,
@@ -130,7 +133,10 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
             2,
             |x, u| -0.8 * x[1] - 1.0 * x[0] - 2.0 * x[0].powi(3) + u,
             msd(0.8, 1.0),
-            Expect::Added { family: "cubic_stiffness", coef: -2.0 },
+            Expect::Added {
+                family: "cubic_stiffness",
+                coef: -2.0,
+            },
             1.5,
             0.0,
             false,
@@ -139,7 +145,10 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
             2,
             |x, u| -0.2 * x[1] - 1.0 * x[0] - 0.8 * x[1].abs() * x[1] + u,
             msd(0.2, 1.0),
-            Expect::Added { family: "quadratic_drag", coef: -0.8 },
+            Expect::Added {
+                family: "quadratic_drag",
+                coef: -0.8,
+            },
             1.5,
             0.0,
             false,
@@ -153,7 +162,10 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
                 Term::new(&[("y", 1)], -0.25),
                 Term::new(&[("u", 1)], 0.5),
             ],
-            Expect::Added { family: "sqrt_outflow", coef: -0.5 },
+            Expect::Added {
+                family: "sqrt_outflow",
+                coef: -0.5,
+            },
             0.25,
             1.0,
             false,
@@ -180,7 +192,10 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
             2,
             |x, u| -0.4 * x[1] - 4.0 * x[0] + u,
             msd(0.52, 4.0),
-            Expect::Retune { term: "y_d1", value: -0.4 },
+            Expect::Retune {
+                term: "y_d1",
+                value: -0.4,
+            },
             2.0,
             0.0,
             false,
@@ -189,7 +204,11 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
             2,
             |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.5 * (x[1] / 1e-3).tanh(),
             msd(0.4, 4.0),
-            Expect::Distractor { family: "coulomb_friction", coef: -0.5, wrong: "input_relay" },
+            Expect::Distractor {
+                family: "coulomb_friction",
+                coef: -0.5,
+                wrong: "input_relay",
+            },
             3.0,
             0.0,
             true,
@@ -198,7 +217,11 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
             2,
             |x, u| -0.8 * x[1] - 1.0 * x[0] - 2.0 * x[0].powi(3) + u,
             msd(0.8, 1.0),
-            Expect::Distractor { family: "cubic_stiffness", coef: -2.0, wrong: "trigonometric" },
+            Expect::Distractor {
+                family: "cubic_stiffness",
+                coef: -2.0,
+                wrong: "trigonometric",
+            },
             1.0,
             0.0,
             false,
@@ -207,7 +230,11 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
             2,
             |x, u| -0.2 * x[1] - 1.0 * x[0] - 0.8 * x[1].abs() * x[1] + u,
             msd(0.2, 1.0),
-            Expect::Distractor { family: "quadratic_drag", coef: -0.8, wrong: "cubic_damping" },
+            Expect::Distractor {
+                family: "quadratic_drag",
+                coef: -0.8,
+                wrong: "cubic_damping",
+            },
             1.5,
             0.0,
             false,
@@ -237,7 +264,9 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
         } else {
             let k = 5;
             Multisine {
-                a: (0..k).map(|_| amp * rng.uniform_in(0.3, 1.0) / (k as f64).sqrt() * 1.4).collect(),
+                a: (0..k)
+                    .map(|_| amp * rng.uniform_in(0.3, 1.0) / (k as f64).sqrt() * 1.4)
+                    .collect(),
                 w: (0..k)
                     .map(|_| 2.0 * std::f64::consts::PI * rng.uniform_in(0.05, 1.2))
                     .collect(),
@@ -281,7 +310,11 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
         });
     }
     let records = RecordSet::new(tau, vec!["y".into(), "u".into()], runs)?;
-    let nominal = Model::new(&["u"], vec![OutputEquation::new("y", order, nominal_terms)], Some(tau));
+    let nominal = Model::new(
+        &["u"],
+        vec![OutputEquation::new("y", order, nominal_terms)],
+        Some(tau),
+    );
     Ok(Case {
         name: CASES.iter().find(|c| **c == name).copied().unwrap_or("?"),
         records,
@@ -322,10 +355,17 @@ pub fn judge(case: &Case, d: &super::Discovery) -> (bool, String) {
                 Some(v) if ok && ((v - value) / value).abs() <= 0.1 => {
                     (true, format!("{term} = {v:.4}"))
                 }
-                _ => (false, format!("verdict {} retuned {:?} named {:?}", d.verdict, v, named)),
+                _ => (
+                    false,
+                    format!("verdict {} retuned {:?} named {:?}", d.verdict, v, named),
+                ),
             }
         }
-        Expect::Distractor { family, coef, wrong } => {
+        Expect::Distractor {
+            family,
+            coef,
+            wrong,
+        } => {
             if named == [*wrong] {
                 return (false, format!("named the distractor {wrong} alone"));
             }

@@ -149,7 +149,9 @@ pub fn build(
         // and nominal monomials written as a family formula.
         if let Some(m) = expr.monomial() {
             if nominal_monomials.contains(&m)
-                || out.iter().any(|o: &Effect| o.expr.monomial().as_ref() == Some(&m))
+                || out
+                    .iter()
+                    .any(|o: &Effect| o.expr.monomial().as_ref() == Some(&m))
             {
                 continue;
             }

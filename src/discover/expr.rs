@@ -194,7 +194,9 @@ fn lex(text: &str) -> Result<Vec<Tok>> {
                 && (c[i].is_ascii_digit()
                     || c[i] == '.'
                     || ((c[i] == 'e' || c[i] == 'E') && i + 1 < c.len())
-                    || ((c[i] == '-' || c[i] == '+') && i > s && (c[i - 1] == 'e' || c[i - 1] == 'E')))
+                    || ((c[i] == '-' || c[i] == '+')
+                        && i > s
+                        && (c[i - 1] == 'e' || c[i - 1] == 'E')))
             {
                 i += 1;
             }
@@ -361,7 +363,11 @@ mod tests {
     #[test]
     fn parses_and_evaluates() {
         let v: Vec<String> = ["y", "y_d1", "u"].iter().map(|s| s.to_string()).collect();
-        let e = Expr::parse("-0.5*sign(y_d1) + abs(y_d1)*y_d1 - y^3/2 + sqrt(abs(y))", &v).unwrap();
+        let e = Expr::parse(
+            "-0.5*sign(y_d1) + abs(y_d1)*y_d1 - y^3/2 + sqrt(abs(y))",
+            &v,
+        )
+        .unwrap();
         let z = [4.0, -2.0, 1.0];
         assert!((e.eval(&z) - (0.5 - 4.0 - 32.0 + 2.0)).abs() < 1e-12);
         assert_eq!(
@@ -373,6 +379,8 @@ mod tests {
         assert!(Expr::parse("foo(y)", &v).is_err());
         assert!(Expr::parse("(y", &v).is_err());
         let s = Expr::parse("sign(y_d1)", &v).unwrap();
-        assert!((s.eval_smooth(&[0.0, 1e-3, 0.0], &[1.0, 1e-3, 1.0]) - 0.5f64.sqrt()).abs() < 1e-12);
+        assert!(
+            (s.eval_smooth(&[0.0, 1e-3, 0.0], &[1.0, 1e-3, 1.0]) - 0.5f64.sqrt()).abs() < 1e-12
+        );
     }
 }

@@ -231,7 +231,11 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
                 "confidence",
                 format!(
                     "no nominal term '{name}' (terms are: {})",
-                    eq.terms.iter().map(|t| t.monomial()).collect::<Vec<_>>().join(", ")
+                    eq.terms
+                        .iter()
+                        .map(|t| t.monomial())
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 ),
             ));
         }
@@ -271,7 +275,11 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
     let mut median = vec![0.0; nz];
     let mut p99 = vec![0.0; nz];
     for v in 0..nz {
-        let all: Vec<f64> = o.train.iter().flat_map(|&r| zhat[r][v].iter().copied()).collect();
+        let all: Vec<f64> = o
+            .train
+            .iter()
+            .flat_map(|&r| zhat[r][v].iter().copied())
+            .collect();
         let mean = all.iter().sum::<f64>() / all.len().max(1) as f64;
         sd[v] = (all.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / all.len().max(1) as f64)
             .sqrt()
@@ -280,15 +288,27 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         let abs: Vec<f64> = all.iter().map(|x| x.abs()).collect();
         p99[v] = percentile(&abs, 99.0).max(1e-12);
     }
-    let scales = Scales { sd: sd.clone(), median, p99 };
-    let nom_monos: Vec<Vec<(usize, u32)>> =
-        eq.terms.iter().map(|t| monomial_exponents(t, &vars)).collect();
+    let scales = Scales {
+        sd: sd.clone(),
+        median,
+        p99,
+    };
+    let nom_monos: Vec<Vec<(usize, u32)>> = eq
+        .terms
+        .iter()
+        .map(|t| monomial_exponents(t, &vars))
+        .collect();
     let effects = dictionary::build(&vars, n, &scales, &nom_monos, &o.user_effects)?;
     // Zero crossings of the smoothed output (the raw one crosses its mean at every noise sample).
     let train_y: Vec<&[f64]> = o.train.iter().map(|&r| zhat[r][0].as_slice()).collect();
-    let m = o.half_width.unwrap_or_else(|| weak::choose_half_width(&train_y));
+    let m = o
+        .half_width
+        .unwrap_or_else(|| weak::choose_half_width(&train_y));
     if m < 2 {
-        return Err(Error::param("half width", format!("{m} samples; use at least 2")));
+        return Err(Error::param(
+            "half width",
+            format!("{m} samples; use at least 2"),
+        ));
     }
     let mut rows = Vec::with_capacity(rs.runs.len());
     let mut simruns = Vec::new();
@@ -305,7 +325,11 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         }
         let y = ys[ri];
         let sgn = |k: usize| if k % 2 == 0 { 1.0 } else { -1.0 };
-        let label = w.integrate(n, y).into_iter().map(|v| sgn(n) * v).collect::<Vec<f64>>();
+        let label = w
+            .integrate(n, y)
+            .into_iter()
+            .map(|v| sgn(n) * v)
+            .collect::<Vec<f64>>();
         // A column: exact integration by parts for a single state variable, else psi * phi(z_hat).
         let column = |e: &Expr| -> Vec<f64> {
             if let Some(mono) = e.monomial() {
@@ -452,7 +476,8 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let blocks = block_grams(&p, &o.train);
     let train = sum_grams(&blocks, ncol);
     let val = sum_grams(&block_grams(&p, &o.validation), ncol);
-    let numerr = || Error::Numerical("discover: the weak-form normal equations are singular".into());
+    let numerr =
+        || Error::Numerical("discover: the weak-form normal equations are singular".into());
 
     // (a) compare and (b) localise.
     let nominal_model = p.model(&[], &[]);
@@ -558,7 +583,10 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             }
         }
     }
-    let inclusion: Vec<f64> = hits.iter().map(|&h| h as f64 / o.bootstrap.max(1) as f64).collect();
+    let inclusion: Vec<f64> = hits
+        .iter()
+        .map(|&h| h as f64 / o.bootstrap.max(1) as f64)
+        .collect();
     let intervals: Vec<[f64; 2]> = samples
         .iter()
         .map(|s| [percentile(s, 2.5), percentile(s, 97.5)])
@@ -575,13 +603,20 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
 
     let vruns = p.runs(&o.validation);
     let retuned_model = p.model(&retune.delta, &[]);
-    let eff_pairs: Vec<(usize, f64)> = cand.iter().copied().zip(cand_sol.coef.iter().copied()).collect();
+    let eff_pairs: Vec<(usize, f64)> = cand
+        .iter()
+        .copied()
+        .zip(cand_sol.coef.iter().copied())
+        .collect();
     let cand_model = p.model(&cand_sol.delta, &eff_pairs);
     let sim_nom = sim::mean_nrmse(&nominal_model, &vruns);
     let sim_ret = sim::mean_nrmse(&retuned_model, &vruns);
     let sim_cand = sim::mean_nrmse(&cand_model, &vruns);
     let simulation_ratio = sim_cand / sim_nom.min(sim_ret);
-    let excl: Vec<bool> = intervals.iter().map(|iv| iv[0] > 0.0 || iv[1] < 0.0).collect();
+    let excl: Vec<bool> = intervals
+        .iter()
+        .map(|iv| iv[0] > 0.0 || iv[1] < 0.0)
+        .collect();
     let mut failed = None;
     let name_of = |k: usize| format!("{} {}", p.effects[k].family, p.effects[k].formula);
     if set.is_empty() {
@@ -737,8 +772,14 @@ fn reading(family: &str, coef: f64, p: &Prepared) -> Option<String> {
             num(force.abs()),
             num(gain)
         )),
-        "cubic_stiffness" => Some(format!("cubic spring constant {} (input units per y^3)", num(-force))),
-        "quadratic_drag" => Some(format!("drag constant {} (input units per v^2)", num(-force))),
+        "cubic_stiffness" => Some(format!(
+            "cubic spring constant {} (input units per y^3)",
+            num(-force)
+        )),
+        "quadratic_drag" => Some(format!(
+            "drag constant {} (input units per v^2)",
+            num(-force)
+        )),
         _ => None,
     }
 }
@@ -767,7 +808,11 @@ fn coordinate_shares(p: &Prepared, train: &[usize]) -> Vec<Share> {
         }
     }
     let mean = r.iter().sum::<f64>() / r.len().max(1) as f64;
-    let var = r.iter().map(|v| (v - mean).powi(2)).sum::<f64>().max(1e-300);
+    let var = r
+        .iter()
+        .map(|v| (v - mean).powi(2))
+        .sum::<f64>()
+        .max(1e-300);
     let mut out = Vec::new();
     for v in 0..nz {
         let mut order: Vec<usize> = (0..r.len()).collect();
@@ -815,7 +860,10 @@ impl Discovery {
                 s += &format!("    reading: {r}\n");
             }
             if !e.aliases.is_empty() {
-                s += &format!("    aliases (|partial corr| > 0.95): {}\n", e.aliases.join("; "));
+                s += &format!(
+                    "    aliases (|partial corr| > 0.95): {}\n",
+                    e.aliases.join("; ")
+                );
             }
         }
         for r in &self.retuned {
@@ -844,7 +892,11 @@ impl Discovery {
             s += &format!(" {} {:.0} %", sh.coordinate, 100.0 * sh.share);
         }
         s += "\n";
-        if let Some(top) = self.shares.iter().max_by(|a, b| a.share.total_cmp(&b.share)) {
+        if let Some(top) = self
+            .shares
+            .iter()
+            .max_by(|a, b| a.share.total_cmp(&b.share))
+        {
             s += &format!("  conditional mean of r along {}:", top.coordinate);
             for (z, m) in &top.profile {
                 s += &format!(" ({}, {})", num(*z), num(*m));
@@ -898,8 +950,10 @@ impl Discovery {
             }
             for (i, e) in self.effects.iter().enumerate() {
                 if let Some(mono) = fm.terms[nt + i].0.monomial() {
-                    let ex: Vec<(&str, u32)> =
-                        mono.iter().map(|&(v, k)| (fm.names[v].as_str(), k)).collect();
+                    let ex: Vec<(&str, u32)> = mono
+                        .iter()
+                        .map(|&(v, k)| (fm.names[v].as_str(), k))
+                        .collect();
                     eq.terms.push(Term::new(&ex, e.coefficient));
                 }
             }

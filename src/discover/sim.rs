@@ -8,7 +8,7 @@
 use rayon::prelude::*;
 
 use super::expr::Expr;
-use crate::simulate::{simulate, rms_nrmse, SampledInput, SimOptions, System};
+use crate::simulate::{rms_nrmse, simulate, SampledInput, SimOptions, System};
 
 /// A single-output model: terms `c_j * phi_j(z)`.
 #[derive(Debug, Clone)]

@@ -758,7 +758,31 @@ pub fn refine_gated(
 ) -> Result<Gated> {
     let train_before = free_run_nrmse(model, fit)?;
     let gate_before = free_run_nrmse(model, gate)?;
-    let refined = match refine(model, fit, opts) {
+    // A derivative fit with spurious nonlinear terms can blow up in free run, and then no
+    // shooting segment can be simulated. Its linear part is the natural fallback start: the
+    // gate below still decides against the full starting model.
+    let linear_part = || -> Option<Model> {
+        let mut m = model.clone();
+        let mut dropped = false;
+        for eq in m.outputs.iter_mut() {
+            let before = eq.terms.len();
+            eq.terms.retain(|t| t.degree() <= 1);
+            dropped |= eq.terms.len() < before;
+        }
+        (dropped && m.outputs.iter().all(|eq| !eq.terms.is_empty())).then_some(m)
+    };
+    let first = refine(model, fit, opts);
+    let (first, start_note) = match (&first, linear_part()) {
+        (Err(Error::Numerical(_)), Some(lin)) => match refine(&lin, fit, opts) {
+            Ok(r) => (
+                Ok(r),
+                " (the full derivative fit could not be simulated; refined its linear terms)",
+            ),
+            Err(_) => (first, ""),
+        },
+        _ => (first, ""),
+    };
+    let refined = match first {
         Ok(r) => r,
         Err(e @ Error::Numerical(_)) => {
             return Ok(Gated {
@@ -779,9 +803,9 @@ pub fn refine_gated(
     let (b, a) = (overall(&gate_before), overall(&gate_after));
     let kept = a < b;
     let message = if kept {
-        format!("refinement kept: free-run NRMSE on the gate runs {b:.4} -> {a:.4}")
+        format!("refinement kept: free-run NRMSE on the gate runs {b:.4} -> {a:.4}{start_note}")
     } else {
-        format!("refinement refused: free-run NRMSE on the gate runs {b:.4} -> {a:.4} is not lower")
+        format!("refinement refused: free-run NRMSE on the gate runs {b:.4} -> {a:.4} is not lower{start_note}")
     };
     Ok(Gated {
         model: if kept {
