@@ -53,6 +53,7 @@ pub const ROBUST_ITERATIONS: usize = 3;
 /// Samples used to refine each simulated run's initial state.
 pub const INIT_WINDOW: usize = 200;
 use profile::{eta_rule, Profile};
+use rayon::prelude::*;
 use serde::Serialize;
 pub use split::Split;
 
@@ -175,6 +176,12 @@ pub struct Candidate {
     pub train: Profile,
     pub equation: String,
     pub n_terms: usize,
+    /// Orders of every output this candidate was fitted with, and the fit on all training runs
+    /// (reused by the final fit when the selection lands on it).
+    #[serde(skip)]
+    pub orders: Vec<usize>,
+    #[serde(skip)]
+    pub model: Option<crate::regression::Model>,
 }
 
 /// Selection and test results of one output.
@@ -423,18 +430,32 @@ impl Prepared<'_> {
     }
 
     /// Validation profile of output i at orders `ord`.
-    fn validate(&self, i: usize, ord: &[usize], split: &Split) -> Result<Profile> {
+    /// Validation profile of output i at orders `ord`; `train_fit` is the fit on all training runs.
+    fn validate(
+        &self,
+        i: usize,
+        ord: &[usize],
+        split: &Split,
+        train_fit: &crate::regression::Model,
+    ) -> Result<Profile> {
         match &split.validation {
             Some(val) => {
-                let m = self.fit(i, ord, &split.train)?;
-                let (e, l) = self.residuals(&m, i, ord, val)?;
+                let (e, l) = self.residuals(train_fit, i, ord, val)?;
                 Ok(Profile::new(&e, &l))
             }
             None => {
+                // Folds are independent fits: run them in parallel, concatenate in fold order.
+                let folds = split.folds(self.settings.folds);
+                let parts: Vec<Result<(Vec<f64>, Vec<f64>)>> = folds
+                    .par_iter()
+                    .map(|(fit_runs, val)| {
+                        let m = self.fit(i, ord, fit_runs)?;
+                        self.residuals(&m, i, ord, val)
+                    })
+                    .collect();
                 let (mut e, mut l) = (Vec::new(), Vec::new());
-                for (fit_runs, val) in split.folds(self.settings.folds) {
-                    let m = self.fit(i, ord, &fit_runs)?;
-                    let (ef, lf) = self.residuals(&m, i, ord, &val)?;
+                for p in parts {
+                    let (ef, lf) = p?;
                     e.extend(ef);
                     l.extend(lf);
                 }
@@ -573,7 +594,14 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let mut equations = Vec::new();
     for i in 0..ny {
         let (_, _, w, excluded) = prep.design(i, &ord, &split.train);
-        let m = prep.fit(i, &ord, &split.train)?;
+        let reuse = candidates[i]
+            .iter_mut()
+            .find(|c| c.orders == ord)
+            .and_then(|c| c.model.take());
+        let m = match reuse {
+            Some(m) => m,
+            None => prep.fit(i, &ord, &split.train)?,
+        };
         let test = if split.test.is_empty() {
             None
         } else {
@@ -716,8 +744,8 @@ fn refine_selected(
 }
 
 fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<Candidate> {
-    let validation = prep.validate(i, ord, split)?;
     let m = prep.fit(i, ord, &split.train)?;
+    let validation = prep.validate(i, ord, split, &m)?;
     let (e, l) = prep.residuals(&m, i, ord, &split.train)?;
     Ok(Candidate {
         order: ord[i],
@@ -725,6 +753,8 @@ fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<
         train: Profile::new(&e, &l),
         equation: m.equation(),
         n_terms: m.terms.len(),
+        orders: ord.to_vec(),
+        model: Some(m),
     })
 }
 
