@@ -251,12 +251,11 @@ pub fn differentiate_runs(
             let covs = &level_covs[j];
             let cov = &covs[pick(covs, n)].1;
             let scale: Vec<f64> = (0..=max_order).map(|k| (hl / tau).powi(k as i32)).collect();
-            cov.smooth(y, |i, x| {
+            smooth_two_way(cov, y, |i, x, var| {
                 let w = weights[j][i];
                 if w == 0.0 {
                     return;
                 }
-                let var = cov.var(i);
                 for k in 0..=max_order {
                     let v = x[k] * scale[k];
                     mean[k][i] += w * v;
@@ -268,12 +267,11 @@ pub fn differentiate_runs(
             let cov = &covs[pick(covs, n)].1;
             let scale: Vec<f64> = (0..=max_order).map(|k| (h / tau).powi(k as i32)).collect();
             let width = (1.0 / h).max(2.0);
-            cov.smooth(y, |i, x| {
+            smooth_two_way(cov, y, |i, x, var| {
                 let b = end_weight(i.min(n - 1 - i) as f64, width);
                 if b == 0.0 {
                     return;
                 }
-                let var = cov.var(i);
                 for k in 0..=max_order {
                     let v = x[k] * scale[k];
                     let vm = var[k] * s2 * scale[k] * scale[k];
@@ -372,4 +370,36 @@ fn window_sum(v: &[f64], half: usize) -> Vec<f64> {
     (0..n)
         .map(|i| pre[(i + half + 1).min(n)] - pre[i.saturating_sub(half)])
         .collect()
+}
+
+/// Smoothed states and their variances at every sample, from two passes.
+///
+/// The integrator chain's initial state is diffuse, which a covariance-form filter can only
+/// approximate (a large but finite prior variance, in units of the noise variance), so the
+/// estimates carry a small start-up bias for the first few bandwidths; at the far end there is
+/// none. Smoothing the time-reversed run as well, and taking each half from the pass whose start
+/// is far away, removes it (in the middle the two passes agree to rounding). Odd derivatives
+/// change sign under time reversal.
+fn smooth_two_way(cov: &Cov, y: &[f64], mut emit: impl FnMut(usize, &[f64], &[f64])) {
+    let n = y.len();
+    let half = n / 2;
+    cov.smooth(y, |i, x| {
+        if i >= half {
+            emit(i, x, cov.var(i));
+        }
+    });
+    let rev: Vec<f64> = y.iter().rev().copied().collect();
+    let mut flipped = Vec::new();
+    cov.smooth(&rev, |j, x| {
+        let i = n - 1 - j;
+        if i < half {
+            flipped.clear();
+            flipped.extend(
+                x.iter()
+                    .enumerate()
+                    .map(|(k, v)| if k % 2 == 1 { -v } else { *v }),
+            );
+            emit(i, &flipped, cov.var(j));
+        }
+    });
 }

@@ -47,6 +47,9 @@ use crate::simulate::{fit_initial_state, rms_nrmse, simulate_model, SimOptions};
 /// Labels whose sigma exceeds this multiple of the median label sigma are left out.
 pub const EXCLUDE_SIGMA: f64 = 3.0;
 
+/// Relative residual below which eBIC treats a derivative-domain fit as exact.
+pub const RSS_FLOOR: f64 = 1e-4;
+
 /// Reweighting passes of the robust fit.
 pub const ROBUST_ITERATIONS: usize = 3;
 
@@ -353,9 +356,10 @@ impl Prepared<'_> {
         let h = self.eqs[i].outs[i].first().map_or(1.0, |d| d.h);
         Regression::builder()
             .effective_samples(used as f64 * (h / std::f64::consts::PI).min(1.0))
-            // Derivative labels are never better than ~1e-7 relative: below that, eBIC should
-            // treat a fit as exact rather than reward terms that fit rounding.
-            .rss_floor(1e-7)
+            // Reconstructed derivatives are never better than ~1e-4 relative (input kinks, ends):
+            // below that, eBIC should treat a fit as exact rather than reward terms that fit the
+            // smoother's own error.
+            .rss_floor(RSS_FLOOR)
             .degree(self.settings.degree)
             .method(Method::LassoLars)
             .max_terms(self.settings.max_terms)

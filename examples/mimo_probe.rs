@@ -1,0 +1,63 @@
+//! Diagnostic: the MIMO plant's output equations at a given degree and max terms (noise-free).
+use ctsid::demo::records;
+use ctsid::identify::{identify, Orders, Settings, Split};
+use ctsid::plants::{dataset, Plant};
+fn main() {
+    let a: Vec<String> = std::env::args().collect();
+    let d: usize = a[1].parse().unwrap();
+    let mt: usize = a[2].parse().unwrap();
+    let eta: f64 = a.get(3).map(|s| s.parse().unwrap()).unwrap_or(0.0);
+    let plant = Plant::mimo();
+    let runs = dataset(&plant, 30, 1000, 0.01, eta, 1).unwrap();
+    let rs = records(&runs, &plant.input_names(), &plant.output_names(), 0.01).unwrap();
+    let ids: Vec<String> = (0..30).map(|i| i.to_string()).collect();
+    let split = Split::new(
+        (0..25).collect(),
+        Some(vec![25, 26]),
+        (27..30).collect(),
+        &ids,
+    )
+    .unwrap();
+    let mut s = Settings::new(plant.output_names(), plant.input_names(), d);
+    s.orders = Orders::Fixed(vec![3, 3, 3]);
+    s.max_terms = mt;
+    s.engine = ctsid::regression::EngineChoice::Cpu;
+    s.refine = std::env::var("REFINE").is_ok();
+    s.same_filter = std::env::var("NOSAME").is_err();
+    s.weighting = std::env::var("NOWEIGHT").is_err();
+    let t = std::time::Instant::now();
+    let id = identify(&rs, &split, &s).unwrap();
+    for o in &id.model.outputs {
+        println!("{} terms: {}", o.terms.len(), o.to_text());
+    }
+    println!(
+        "test NRMSE {:?}, {:.1} s",
+        id.test_nrmse(),
+        t.elapsed().as_secs_f64()
+    );
+    for o in 0..3 {
+        let d = &id.derivatives[o][0];
+        let tr = &runs[0].derivatives[o];
+        let err: Vec<f64> = (0..4)
+            .map(|k| {
+                (100..900)
+                    .map(|i| (d.values[k][i] - tr[k][i]).abs())
+                    .fold(0.0, f64::max)
+                    / tr[k].iter().map(|v| v.abs()).fold(0.0, f64::max)
+            })
+            .collect();
+        println!(
+            "output {o}: h {:.3} noise {:.2e} max rel err (interior) {:?}",
+            d.h, d.noise_sd, err
+        );
+        let scale = tr[3].iter().map(|v| v.abs()).fold(0.0, f64::max);
+        let head: Vec<String> = [0usize, 2, 4, 6, 8, 10, 15, 20, 30, 50]
+            .iter()
+            .map(|&i| format!("{}:{:.1e}", i, (d.values[3][i] - tr[3][i]).abs() / scale))
+            .collect();
+        println!(
+            "   start errors of the third derivative: {}",
+            head.join(" ")
+        );
+    }
+}
