@@ -88,6 +88,20 @@ pub struct Settings {
     /// Refine the selected structure by free-run simulation error (see the module docs).
     pub refine: bool,
     pub refine_options: refine::RefineOptions,
+    /// What the eta-rule compares across candidate orders (see [`Selection`]).
+    pub selection: Selection,
+}
+
+/// The error profile the eta-rule compares across candidate orders.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum Selection {
+    /// The paper's: residuals of y^(n) - P(z) on validation runs (or k-fold).
+    Derivative,
+    /// Free-run simulation error y_sim - y on the gate runs, after refinement (single-output
+    /// models; a MIMO search falls back to `Derivative`). The derivative profile of a stiff or
+    /// badly conditioned plant can be dominated by derivative error at the true order, while
+    /// what the user will do with the model is simulate it.
+    Simulation,
 }
 
 impl Settings {
@@ -103,6 +117,7 @@ impl Settings {
             max_terms: 40,
             weighting: true,
             same_filter: true,
+            selection: Selection::Simulation,
             progress: false,
             refine: true,
             refine_options: refine::RefineOptions::default(),
@@ -185,6 +200,11 @@ pub struct Candidate {
     pub orders: Vec<usize>,
     #[serde(skip)]
     pub model: Option<crate::regression::Model>,
+    /// Free-run simulation error profile on the gate runs (Selection::Simulation), and the
+    /// refined model it was measured on.
+    pub simulation: Option<Profile>,
+    #[serde(skip)]
+    pub refined: Option<(ModelFile, Option<RefinementReport>)>,
 }
 
 /// Selection and test results of one output.
@@ -568,11 +588,20 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
                     for &n in cands {
                         let mut o = ord.clone();
                         o[i] = n;
-                        let c = candidate(&prep, i, &o, split)?;
+                        let mut c = candidate(&prep, i, &o, split)?;
                         say(format!("output '{}' order {n}: validation p50/p95/p100 = {:.4}/{:.4}/{:.4}, {} terms", settings.outputs[i], c.validation.p50(), c.validation.p95(), c.validation.p100(), c.n_terms));
+                        if settings.selection == Selection::Simulation && ny == 1 {
+                            simulation_score(&prep, &outputs, split, &mut c)?;
+                            if let Some(p) = &c.simulation {
+                                say(format!("output '{}' order {n}: free-run p50/p95/p100 = {:.4}/{:.4}/{:.4} on the gate runs", settings.outputs[i], p.p50(), p.p95(), p.p100()));
+                            }
+                        }
                         list.push(c);
                     }
-                    let profiles: Vec<Profile> = list.iter().map(|c| c.validation).collect();
+                    let profiles: Vec<Profile> = list
+                        .iter()
+                        .map(|c| c.simulation.unwrap_or(c.validation))
+                        .collect();
                     let pick = eta_rule(&profiles, settings.eta).ok_or_else(|| {
                         Error::Numerical(format!(
                             "no candidate order of '{}' could be scored",
@@ -637,7 +666,19 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let mut model = ModelFile::new(&input_names, equations, Some(rs.tau));
     model.degree = settings.degree;
     model.validate()?;
-    let refinement = if settings.refine {
+    let pre_refined = if ny == 1 {
+        reports[0]
+            .candidates
+            .iter_mut()
+            .find(|c| c.orders == ord)
+            .and_then(|c| c.refined.take())
+    } else {
+        None
+    };
+    let refinement = if let Some((refined, report)) = pre_refined {
+        model = refined;
+        report
+    } else if settings.refine {
         let (refined, report) = refine_selected(&model, &prep, &outputs, split)?;
         say(format!("{} ({:.2} s)", report.message, report.seconds));
         model = refined;
@@ -759,6 +800,8 @@ fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<
         n_terms: m.terms.len(),
         orders: ord.to_vec(),
         model: Some(m),
+        simulation: None,
+        refined: None,
     })
 }
 
@@ -881,4 +924,70 @@ fn equation_data(
         })
         .collect::<Result<Vec<_>>>()?;
     Ok(EqData { outs, ins })
+}
+
+/// Scores a single-output candidate by free-run simulation: its derivative fit (refined when
+/// refinement is on) is simulated on the gate runs, and the profile of y_sim - y is what the
+/// eta-rule compares. A candidate that diverges scores infinity.
+fn simulation_score(
+    prep: &Prepared,
+    outputs: &[usize],
+    split: &Split,
+    c: &mut Candidate,
+) -> Result<()> {
+    let Some(m) = &c.model else { return Ok(()) };
+    let terms: Vec<ModelTerm> = m
+        .terms
+        .iter()
+        .map(|t| {
+            let ex: Vec<(&str, u32)> = t.exponents.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+            ModelTerm::new(&ex, t.coefficient)
+        })
+        .collect();
+    let input_names: Vec<&str> = prep.settings.inputs.iter().map(String::as_str).collect();
+    let mut model = ModelFile::new(
+        &input_names,
+        vec![OutputEquation::new(
+            &prep.settings.outputs[0],
+            c.order,
+            terms,
+        )],
+        Some(prep.rs.tau),
+    );
+    model.degree = prep.settings.degree;
+    model.validate()?;
+    let (model, report) = if prep.settings.refine {
+        let (m, r) = refine_selected(&model, prep, outputs, split)?;
+        (m, Some(r))
+    } else {
+        (model, None)
+    };
+    let gate: Vec<usize> = match &split.validation {
+        Some(v) => v.clone(),
+        None => split
+            .folds(prep.settings.folds)
+            .into_iter()
+            .next()
+            .map(|f| f.1)
+            .unwrap_or_else(|| split.train.clone()),
+    };
+    let sims = simulate_runs(&model, prep.rs, &prep.derivs, outputs, &prep.inputs, &gate)?;
+    let (mut e, mut l) = (Vec::new(), Vec::new());
+    let mut diverged = false;
+    for (sim, &r) in sims.iter().zip(&gate) {
+        if sim.error.is_some() || sim.simulated.is_empty() {
+            diverged = true;
+            break;
+        }
+        let y = &prep.rs.runs[r].channels[outputs[0]];
+        e.extend(sim.simulated[0].iter().zip(y).map(|(a, b)| a - b));
+        l.extend(y.iter().copied());
+    }
+    c.simulation = Some(if diverged || e.is_empty() {
+        Profile([f64::INFINITY; 7])
+    } else {
+        Profile::new(&e, &l)
+    });
+    c.refined = Some((model, report));
+    Ok(())
 }
