@@ -50,6 +50,10 @@ pub const EXCLUDE_SIGMA: f64 = 3.0;
 /// Relative residual below which eBIC treats a derivative-domain fit as exact.
 pub const RSS_FLOOR: f64 = 1e-4;
 
+/// Training runs a candidate order is refined and scored on when the eta-rule compares
+/// simulation profiles.
+pub const SCORE_RUNS: usize = 10;
+
 /// Reweighting passes of the robust fit.
 pub const ROBUST_ITERATIONS: usize = 3;
 
@@ -203,8 +207,6 @@ pub struct Candidate {
     /// Free-run simulation error profile on the gate runs (Selection::Simulation), and the
     /// refined model it was measured on.
     pub simulation: Option<Profile>,
-    #[serde(skip)]
-    pub refined: Option<(ModelFile, Option<RefinementReport>)>,
 }
 
 /// Selection and test results of one output.
@@ -666,19 +668,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let mut model = ModelFile::new(&input_names, equations, Some(rs.tau));
     model.degree = settings.degree;
     model.validate()?;
-    let pre_refined = if ny == 1 {
-        reports[0]
-            .candidates
-            .iter_mut()
-            .find(|c| c.orders == ord)
-            .and_then(|c| c.refined.take())
-    } else {
-        None
-    };
-    let refinement = if let Some((refined, report)) = pre_refined {
-        model = refined;
-        report
-    } else if settings.refine {
+    let refinement = if settings.refine {
         let (refined, report) = refine_selected(&model, &prep, &outputs, split)?;
         say(format!("{} ({:.2} s)", report.message, report.seconds));
         model = refined;
@@ -801,7 +791,6 @@ fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<
         orders: ord.to_vec(),
         model: Some(m),
         simulation: None,
-        refined: None,
     })
 }
 
@@ -956,6 +945,13 @@ fn simulation_score(
     );
     model.degree = prep.settings.degree;
     model.validate()?;
+    // Scoring refines every candidate: on at most SCORE_RUNS training runs, to keep the search
+    // affordable; the selected structure is refined again on all of them.
+    let split = &Split {
+        train: split.train.iter().copied().take(SCORE_RUNS).collect(),
+        validation: split.validation.clone(),
+        test: Vec::new(),
+    };
     let (model, report) = if prep.settings.refine {
         let (m, r) = refine_selected(&model, prep, outputs, split)?;
         (m, Some(r))
@@ -988,6 +984,6 @@ fn simulation_score(
     } else {
         Profile::new(&e, &l)
     });
-    c.refined = Some((model, report));
+    let _ = report;
     Ok(())
 }
