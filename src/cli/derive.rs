@@ -4,7 +4,6 @@ use clap::Args;
 use ctsid::derivatives::{differentiate_runs, DerivativeOptions};
 use ctsid::records::{CsvSpec, RecordSet};
 use ctsid::{Error, Result};
-use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -58,70 +57,17 @@ pub fn run(a: DeriveArgs) -> Result<()> {
     } else {
         differentiate_runs(&runs, rs.tau, a.order, &opts)?
     };
-    // Map each CSV row back to (run, sample) so the output keeps the file's row order.
-    let mut at = std::collections::HashMap::new();
-    for (r, run) in rs.runs.iter().enumerate() {
-        for (i, &row) in run.rows.iter().enumerate() {
-            at.insert(row, (r, i));
-        }
-    }
-    let p = a.input.display().to_string();
-    let mut rdr = csv::Reader::from_path(&a.input).map_err(|e| Error::Io {
-        path: p.clone(),
-        message: e.to_string(),
-    })?;
-    let sink: Box<dyn Write> = match &a.output {
-        Some(o) => Box::new(std::fs::File::create(o).map_err(|e| Error::Io {
-            path: o.display().to_string(),
-            message: e.to_string(),
-        })?),
-        None => Box::new(std::io::stdout().lock()),
-    };
-    let mut w = csv::Writer::from_writer(sink);
-    let io = |e: csv::Error| Error::Io {
-        path: a
-            .output
-            .as_ref()
-            .map_or("standard output".into(), |o| o.display().to_string()),
-        message: e.to_string(),
-    };
-    let mut header: Vec<String> = rdr
-        .headers()
-        .map_err(|e| Error::Csv {
-            path: p.clone(),
-            row: 1,
-            message: e.to_string(),
-        })?
-        .iter()
-        .map(String::from)
+    let mut names: Vec<String> = (0..=a.order)
+        .map(|k| format!("{}_d{k}", a.column))
         .collect();
-    for k in 0..=a.order {
-        header.push(format!("{}_d{k}", a.column));
-    }
-    for k in 0..=a.order {
-        header.push(format!("{}_sigma{k}", a.column));
-    }
-    w.write_record(&header).map_err(io)?;
-    for (idx, rec) in rdr.records().enumerate() {
-        let row = idx + 2;
-        let rec = rec.map_err(|e| Error::Csv {
-            path: p.clone(),
-            row,
-            message: e.to_string(),
-        })?;
-        let (r, i) = at[&row];
-        let mut fields: Vec<String> = rec.iter().map(String::from).collect();
-        for k in 0..=a.order {
-            fields.push(format!("{:.12e}", ders[r].values[k][i]));
+    names.extend((0..=a.order).map(|k| format!("{}_sigma{k}", a.column)));
+    let n_orders = a.order + 1;
+    super::csvout::write_with_columns(&a.input, a.output.as_deref(), &rs, &names, |r, i, k| {
+        if k < n_orders {
+            format!("{:.12e}", ders[r].values[k][i])
+        } else {
+            format!("{:.6e}", ders[r].sigma[k - n_orders][i])
         }
-        for k in 0..=a.order {
-            fields.push(format!("{:.6e}", ders[r].sigma[k][i]));
-        }
-        w.write_record(&fields).map_err(io)?;
-    }
-    w.flush().map_err(|e| Error::Io {
-        path: "output".into(),
-        message: e.to_string(),
     })?;
     let d0 = &ders[0];
     eprintln!(

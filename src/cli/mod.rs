@@ -1,5 +1,6 @@
 //! Subcommand definitions and dispatch. Each subcommand lives in its own file.
 
+mod csvout;
 mod demo;
 mod derive;
 mod discover;

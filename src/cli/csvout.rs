@@ -1,0 +1,82 @@
+//! Writing a CSV file back with extra columns beside the input's, in the file's row order.
+//!
+//! `derive` and `simulate` read their data through [`RecordSet`], which groups rows into runs
+//! and remembers each sample's CSV row; this maps every row back to its (run, sample) so the
+//! output keeps the input's rows and columns untouched.
+
+use ctsid::records::RecordSet;
+use ctsid::{Error, Result};
+use std::collections::HashMap;
+use std::io::Write;
+use std::path::Path;
+
+/// Copies `input` to `output` (standard output when `None`) with the columns `names` appended;
+/// `cell(run, sample, k)` gives column k's text for a row. Extra names that already exist in
+/// the file are refused.
+pub fn write_with_columns(
+    input: &Path,
+    output: Option<&Path>,
+    rs: &RecordSet,
+    names: &[String],
+    cell: impl Fn(usize, usize, usize) -> String,
+) -> Result<()> {
+    let mut at = HashMap::new();
+    for (r, run) in rs.runs.iter().enumerate() {
+        for (i, &row) in run.rows.iter().enumerate() {
+            at.insert(row, (r, i));
+        }
+    }
+    let p = input.display().to_string();
+    let mut rdr = csv::Reader::from_path(input).map_err(|e| Error::Io {
+        path: p.clone(),
+        message: e.to_string(),
+    })?;
+    let mut header: Vec<String> = rdr
+        .headers()
+        .map_err(|e| Error::Csv {
+            path: p.clone(),
+            row: 1,
+            message: e.to_string(),
+        })?
+        .iter()
+        .map(String::from)
+        .collect();
+    if let Some(n) = names.iter().find(|n| header.contains(n)) {
+        return Err(Error::InvalidData(format!(
+            "{p}: already has a column '{n}'; rename it or write elsewhere"
+        )));
+    }
+    let out_name = output.map_or("standard output".to_string(), |o| o.display().to_string());
+    let sink: Box<dyn Write> = match output {
+        Some(o) => Box::new(std::fs::File::create(o).map_err(|e| Error::Io {
+            path: out_name.clone(),
+            message: e.to_string(),
+        })?),
+        None => Box::new(std::io::stdout().lock()),
+    };
+    let mut w = csv::Writer::from_writer(sink);
+    let io = |e: csv::Error| Error::Io {
+        path: out_name.clone(),
+        message: e.to_string(),
+    };
+    header.extend(names.iter().cloned());
+    w.write_record(&header).map_err(io)?;
+    for (idx, rec) in rdr.records().enumerate() {
+        let row = idx + 2;
+        let rec = rec.map_err(|e| Error::Csv {
+            path: p.clone(),
+            row,
+            message: e.to_string(),
+        })?;
+        let mut fields: Vec<String> = rec.iter().map(String::from).collect();
+        match at.get(&row) {
+            Some(&(r, i)) => fields.extend((0..names.len()).map(|k| cell(r, i, k))),
+            None => fields.extend(names.iter().map(|_| String::new())),
+        }
+        w.write_record(&fields).map_err(io)?;
+    }
+    w.flush().map_err(|e| Error::Io {
+        path: out_name.clone(),
+        message: e.to_string(),
+    })
+}
