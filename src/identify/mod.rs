@@ -643,16 +643,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
             let (e, l) = prep.residuals(&m, i, &ord, &split.test)?;
             Some(Profile::new(&e, &l))
         };
-        let terms: Vec<ModelTerm> = m
-            .terms
-            .iter()
-            .map(|t| {
-                let ex: Vec<(&str, u32)> =
-                    t.exponents.iter().map(|(k, v)| (k.as_str(), *v)).collect();
-                ModelTerm::new(&ex, t.coefficient)
-            })
-            .collect();
-        equations.push(OutputEquation::new(&settings.outputs[i], ord[i], terms));
+        equations.push(equation_of(&m, &settings.outputs[i], ord[i]));
         reports.push(OutputReport {
             name: settings.outputs[i].clone(),
             candidates: std::mem::take(&mut candidates[i]),
@@ -925,22 +916,10 @@ fn simulation_score(
     c: &mut Candidate,
 ) -> Result<()> {
     let Some(m) = &c.model else { return Ok(()) };
-    let terms: Vec<ModelTerm> = m
-        .terms
-        .iter()
-        .map(|t| {
-            let ex: Vec<(&str, u32)> = t.exponents.iter().map(|(k, v)| (k.as_str(), *v)).collect();
-            ModelTerm::new(&ex, t.coefficient)
-        })
-        .collect();
     let input_names: Vec<&str> = prep.settings.inputs.iter().map(String::as_str).collect();
     let mut model = ModelFile::new(
         &input_names,
-        vec![OutputEquation::new(
-            &prep.settings.outputs[0],
-            c.order,
-            terms,
-        )],
+        vec![equation_of(m, &prep.settings.outputs[0], c.order)],
         Some(prep.rs.tau),
     );
     model.degree = prep.settings.degree;
@@ -986,4 +965,18 @@ fn simulation_score(
     });
     let _ = report;
     Ok(())
+}
+
+/// The model-file equation `name^(order) = ...` of a fitted sparse polynomial (the regression's
+/// feature names are already the model file's variable names).
+fn equation_of(m: &crate::regression::Model, name: &str, order: usize) -> OutputEquation {
+    let terms: Vec<ModelTerm> = m
+        .terms
+        .iter()
+        .map(|t| {
+            let ex: Vec<(&str, u32)> = t.exponents.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+            ModelTerm::new(&ex, t.coefficient)
+        })
+        .collect();
+    OutputEquation::new(name, order, terms)
 }
