@@ -963,7 +963,9 @@ fn simulation_score(
     } else {
         Profile::new(&e, &l)
     });
-    let _ = report;
+    if let (Some(r), true) = (&report, prep.settings.progress) {
+        eprintln!("order {} scoring: {}", c.order, r.message);
+    }
     Ok(())
 }
 
