@@ -167,9 +167,6 @@ impl Problem {
             }
             let Some((k, obj)) = best else { break };
             let bic_gain = n_ind * (obj.max(1e-300) / cur.objective.max(1e-300)).ln() + n_ind.ln();
-            if std::env::var("CTSID_DISCOVER_DEBUG").is_ok() {
-                eprintln!("forward: best {k} objective {obj:e} (from {:e}), n_ind {n_ind}, bic gain {bic_gain}", cur.objective);
-            }
             if bic_gain >= 0.0 {
                 break;
             }
