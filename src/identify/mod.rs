@@ -586,19 +586,24 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
             for sweep in 0..3 {
                 let mut changed = false;
                 for i in 0..ny {
-                    let mut list = Vec::new();
-                    for &n in cands {
-                        let mut o = ord.clone();
-                        o[i] = n;
-                        let mut c = candidate(&prep, i, &o, split)?;
-                        say(format!("output '{}' order {n}: validation p50/p95/p100 = {:.4}/{:.4}/{:.4}, {} terms", settings.outputs[i], c.validation.p50(), c.validation.p95(), c.validation.p100(), c.n_terms));
-                        if settings.selection == Selection::Simulation && ny == 1 {
-                            simulation_score(&prep, &outputs, split, &mut c)?;
-                            if let Some(p) = &c.simulation {
-                                say(format!("output '{}' order {n}: free-run p50/p95/p100 = {:.4}/{:.4}/{:.4} on the gate runs", settings.outputs[i], p.p50(), p.p95(), p.p100()));
+                    // Candidate orders are independent fits: score them in parallel, report in order.
+                    let list: Vec<Candidate> = cands
+                        .par_iter()
+                        .map(|&n| {
+                            let mut o = ord.clone();
+                            o[i] = n;
+                            let mut c = candidate(&prep, i, &o, split)?;
+                            if settings.selection == Selection::Simulation && ny == 1 {
+                                simulation_score(&prep, &outputs, split, &mut c)?;
                             }
+                            Ok(c)
+                        })
+                        .collect::<Result<_>>()?;
+                    for c in &list {
+                        say(format!("output '{}' order {}: validation p50/p95/p100 = {:.4}/{:.4}/{:.4}, {} terms", settings.outputs[i], c.order, c.validation.p50(), c.validation.p95(), c.validation.p100(), c.n_terms));
+                        if let Some(p) = &c.simulation {
+                            say(format!("output '{}' order {}: free-run p50/p95/p100 = {:.4}/{:.4}/{:.4} on the gate runs", settings.outputs[i], c.order, p.p50(), p.p95(), p.p100()));
                         }
-                        list.push(c);
                     }
                     let profiles: Vec<Profile> = list
                         .iter()
