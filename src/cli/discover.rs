@@ -2,7 +2,7 @@
 
 use clap::Args;
 use ctsid::discover::{discover, Options};
-use ctsid::identify::split::{parse_runs, resolve};
+use ctsid::identify::Split;
 use ctsid::model::Model;
 use ctsid::records::{CsvSpec, RecordSet};
 use ctsid::report::write_file;
@@ -24,15 +24,10 @@ pub struct DiscoverArgs {
     pub tau: Option<f64>,
     #[arg(long)]
     pub time_column: Option<String>,
-    /// Training runs, like `0-3` (default: the first half of the runs).
-    #[arg(long)]
-    pub train: Option<String>,
-    /// Validation runs (default: the next quarter).
-    #[arg(long)]
-    pub validation: Option<String>,
-    /// Test runs (default: the rest).
-    #[arg(long)]
-    pub test: Option<String>,
+    /// Omitted lists: training = the first half of the runs, validation = the next quarter,
+    /// test = the rest.
+    #[command(flatten)]
+    pub split: super::runs::SplitArgs,
     /// Prior half-width of a nominal term, `TERM=PCT` (`y_d1=10`, `u=fixed`, `1=approximate`).
     #[arg(long)]
     pub confidence: Vec<String>,
@@ -62,13 +57,9 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     let rs = RecordSet::from_csv(&a.data, &spec)?;
     let names: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
     let n = names.len();
-    let pick = |arg: &Option<String>, what: &str, default: Vec<usize>| -> Result<Vec<usize>> {
-        match arg {
-            Some(t) => resolve(&names, &parse_runs(t)?, what),
-            None => Ok(default),
-        }
-    };
-    if n < 3 && (a.train.is_none() || a.validation.is_none() || a.test.is_none()) {
+    let given = a.split.resolve(&names)?;
+    let sp = &a.split;
+    if n < 3 && (sp.train.is_none() || sp.validation.is_none() || sp.test.is_none()) {
         return Err(Error::param(
             "split",
             format!("{n} runs; give --train, --validation and --test explicitly (one run each at least)"),
@@ -76,9 +67,16 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     }
     let h = (n / 2).max(1);
     let q = ((n - h) / 2).max(1);
-    let train = pick(&a.train, "--train", (0..h).collect())?;
-    let validation = pick(&a.validation, "--validation", (h..h + q).collect())?;
-    let test = pick(&a.test, "--test", (h + q..n).collect())?;
+    let train = given.train.unwrap_or_else(|| (0..h).collect());
+    let validation = given.validation.unwrap_or_else(|| (h..h + q).collect());
+    let test = given.test.unwrap_or_else(|| (h + q..n).collect());
+    // The same checks as identify: non-empty training, no run in two lists.
+    let checked = Split::new(train, Some(validation), test, &names)?;
+    let (train, validation, test) = (
+        checked.train,
+        checked.validation.unwrap_or_default(),
+        checked.test,
+    );
     let mut o = Options::new(train, validation, test);
     o.seed = a.seed;
     let mut conf = BTreeMap::new();

@@ -1,7 +1,7 @@
 //! `ctsid identify`: the main job on measured data.
 
 use clap::Args;
-use ctsid::identify::split::{parse_runs, resolve};
+use ctsid::identify::split::parse_runs;
 use ctsid::identify::{identify, Orders, Settings, Split};
 use ctsid::records::{CsvSpec, RecordSet};
 use ctsid::regression::EngineChoice;
@@ -26,15 +26,10 @@ pub struct IdentifyArgs {
     pub tau: Option<f64>,
     #[arg(long)]
     pub time_column: Option<String>,
-    /// Training runs, like `0-24,30` (default: every run not in validation or test).
-    #[arg(long)]
-    pub train: Option<String>,
-    /// Validation runs (default: 5-fold over the training runs).
-    #[arg(long)]
-    pub validation: Option<String>,
-    /// Test runs (scored and simulated, never fitted).
-    #[arg(long)]
-    pub test: Option<String>,
+    /// Omitted lists: training = every run not in validation or test; no validation runs =
+    /// 5-fold over the training runs; no test runs.
+    #[command(flatten)]
+    pub split: super::runs::SplitArgs,
     /// Candidate orders searched with the eta-rule, like `1..4` or `1,2,3`.
     #[arg(long, default_value = "1..4", conflicts_with = "order")]
     pub orders: String,
@@ -87,14 +82,10 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     };
     let rs = RecordSet::from_csv(&a.data, &spec)?;
     let ids: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
-    let pick = |t: &Option<String>, what: &str| -> Result<Option<Vec<usize>>> {
-        t.as_deref()
-            .map(|t| resolve(&parse_runs(t)?, &ids, what))
-            .transpose()
-    };
-    let validation = pick(&a.validation, "validation")?;
-    let test = pick(&a.test, "test")?.unwrap_or_default();
-    let train = match pick(&a.train, "train")? {
+    let given = a.split.resolve(&ids)?;
+    let validation = given.validation;
+    let test = given.test.unwrap_or_default();
+    let train = match given.train {
         Some(t) => t,
         None => (0..ids.len())
             .filter(|r| !test.contains(r) && !validation.as_ref().is_some_and(|v| v.contains(r)))

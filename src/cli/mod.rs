@@ -11,6 +11,7 @@ mod simulate;
 use clap::{Parser, Subcommand};
 
 mod regress;
+mod runs;
 use ctsid::Result;
 
 #[derive(Parser, Debug)]
