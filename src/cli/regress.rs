@@ -7,6 +7,7 @@
 
 use clap::{Args, ValueEnum};
 use ctsid::engine::Features;
+use ctsid::records::{CsvSpec, RecordSet};
 use ctsid::regression::{EngineChoice, Method, Regression};
 use ctsid::{Error, Result};
 use std::path::PathBuf;
@@ -55,64 +56,18 @@ pub enum EngineArg {
     Auto,
 }
 
-/// Reads the named columns of a CSV file as f64, with row numbers (1-based, header = row 1) in errors.
+/// Reads the named columns through the shared record loader (same one-line errors as every
+/// command). Regression treats rows as independent samples: no run grouping, and the sampling
+/// period the loader asks for plays no part.
 fn read_columns(path: &std::path::Path, wanted: &[String]) -> Result<Vec<Vec<f64>>> {
-    let p = path.display().to_string();
-    let mut rdr = csv::ReaderBuilder::new()
-        .trim(csv::Trim::All)
-        .from_path(path)
-        .map_err(|e| Error::Io {
-            path: p.clone(),
-            message: e.to_string(),
-        })?;
-    let headers = rdr
-        .headers()
-        .map_err(|e| Error::Csv {
-            path: p.clone(),
-            row: 1,
-            message: e.to_string(),
-        })?
-        .clone();
-    let idx: Vec<usize> = wanted
-        .iter()
-        .map(|w| {
-            headers
-                .iter()
-                .position(|h| h == w)
-                .ok_or_else(|| Error::MissingColumn {
-                    path: p.clone(),
-                    column: w.clone(),
-                    available: headers.iter().collect::<Vec<_>>().join(", "),
-                })
-        })
-        .collect::<Result<_>>()?;
-    let mut cols = vec![Vec::new(); wanted.len()];
-    for (r, rec) in rdr.records().enumerate() {
-        let row = r + 2;
-        let rec = rec.map_err(|e| Error::Csv {
-            path: p.clone(),
-            row,
-            message: e.to_string(),
-        })?;
-        for (c, &k) in idx.iter().enumerate() {
-            let s = rec.get(k).unwrap_or("");
-            match s.parse::<f64>() {
-                Ok(v) if v.is_finite() => cols[c].push(v),
-                _ => {
-                    return Err(Error::NonFinite {
-                        path: p.clone(),
-                        row,
-                        column: wanted[c].clone(),
-                        value: s.to_string(),
-                    })
-                }
-            }
-        }
-    }
-    if cols.first().is_none_or(|c| c.is_empty()) {
-        return Err(Error::InvalidData(format!("{p}: no data rows")));
-    }
-    Ok(cols)
+    let spec = CsvSpec {
+        columns: wanted.to_vec(),
+        run_column: None,
+        time_column: None,
+        tau: Some(1.0),
+    };
+    let mut rs = RecordSet::from_csv(path, &spec)?;
+    Ok(rs.runs.remove(0).channels)
 }
 
 pub fn run(a: RegressArgs) -> Result<()> {

@@ -5,7 +5,7 @@
 
 use super::score::{coverage, normalised_percentile, spearman, trimmed_range};
 use super::{differentiate_with, DerivativeOptions, Derivatives};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use std::path::Path;
 
 pub const SIGNALS: [&str; 4] = ["sys3_multisine", "sines", "chirp", "etc_s1"];
@@ -80,72 +80,26 @@ pub struct Signal {
 }
 
 pub fn load_signal(dir: &Path, name: &str) -> Result<Signal> {
-    let path = dir.join(format!("{name}.csv"));
-    let p = path.display().to_string();
-    let mut rdr = csv::Reader::from_path(&path).map_err(|e| Error::Io {
-        path: p.clone(),
-        message: e.to_string(),
-    })?;
-    let header: Vec<String> = rdr
-        .headers()
-        .map_err(|e| Error::Csv {
-            path: p.clone(),
-            row: 1,
-            message: e.to_string(),
-        })?
-        .iter()
-        .map(String::from)
-        .collect();
-    let col = |n: &str| {
-        header
-            .iter()
-            .position(|h| h == n)
-            .ok_or_else(|| Error::MissingColumn {
-                path: p.clone(),
-                column: n.into(),
-                available: header.join(", "),
-            })
+    let mut columns: Vec<String> = (0..5).map(|k| format!("y{k}")).collect();
+    columns.extend(NOISES.iter().map(|n| format!("ym_{n}pct")));
+    let spec = crate::records::CsvSpec {
+        columns,
+        run_column: None,
+        time_column: Some("t".into()),
+        tau: None,
     };
-    let tcol = col("t")?;
-    let ycols: Vec<usize> = (0..5)
-        .map(|k| col(&format!("y{k}")))
-        .collect::<Result<_>>()?;
-    let ncols: Vec<(u32, usize)> = NOISES
-        .iter()
-        .map(|&n| Ok((n, col(&format!("ym_{n}pct"))?)))
-        .collect::<Result<_>>()?;
-    let mut t = Vec::new();
-    let mut truth = vec![Vec::new(); 5];
-    let mut noisy: Vec<(u32, Vec<f64>)> = ncols.iter().map(|&(n, _)| (n, Vec::new())).collect();
-    for (r, rec) in rdr.records().enumerate() {
-        let rec = rec.map_err(|e| Error::Csv {
-            path: p.clone(),
-            row: r + 2,
-            message: e.to_string(),
-        })?;
-        let num = |c: usize| {
-            rec[c].parse::<f64>().map_err(|_| Error::NonFinite {
-                path: p.clone(),
-                row: r + 2,
-                column: header[c].clone(),
-                value: rec[c].into(),
-            })
-        };
-        t.push(num(tcol)?);
-        for k in 0..5 {
-            truth[k].push(num(ycols[k])?);
-        }
-        for (j, &(_, c)) in ncols.iter().enumerate() {
-            noisy[j].1.push(num(c)?);
-        }
-    }
-    if t.len() < 2 {
-        return Err(Error::InvalidData(format!("{p}: fewer than two rows")));
-    }
+    let rs = crate::records::RecordSet::from_csv(dir.join(format!("{name}.csv")), &spec)?;
+    let mut ch = rs
+        .runs
+        .into_iter()
+        .next()
+        .map(|r| r.channels)
+        .unwrap_or_default();
+    let noisy = NOISES.iter().copied().zip(ch.split_off(5)).collect();
     Ok(Signal {
         name: name.into(),
-        tau: t[1] - t[0],
-        truth,
+        tau: rs.tau,
+        truth: ch,
         noisy,
     })
 }
