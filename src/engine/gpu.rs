@@ -547,9 +547,24 @@ impl GpuEngine {
         let centred_pipe = pipe(&sweep_bgl, &centred_mod, "centred");
         let finalize_pipe = pipe(&finalize_bgl, &finalize_mod, "finalize");
 
-        fn whole(b: &wgpu::Buffer) -> wgpu::BindingResource<'_> {
-            b.as_entire_binding()
-        }
+        // Bind groups list their resources in binding order: binding k is resources[k].
+        let bind = |label: &str,
+                    layout: &wgpu::BindGroupLayout,
+                    resources: Vec<wgpu::BindingResource<'_>>| {
+            let entries: Vec<wgpu::BindGroupEntry> = resources
+                .into_iter()
+                .enumerate()
+                .map(|(k, resource)| wgpu::BindGroupEntry {
+                    binding: k as u32,
+                    resource,
+                })
+                .collect();
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(label),
+                layout,
+                entries: &entries,
+            })
+        };
         let windows: Vec<Window> = spans
             .iter()
             .map(|&(start, len)| {
@@ -568,62 +583,37 @@ impl GpuEngine {
                     contents: bytemuck::cast_slice(&params),
                     usage: wgpu::BufferUsages::UNIFORM,
                 });
-                let sweep_bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("sweep"),
-                    layout: &sweep_bgl,
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: whole(&pbuf),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: whole(&z_buf),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: whole(&v_buf),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 3,
-                            resource: whole(&recipe_buf),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 4,
-                            resource: whole(&cand_buf),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 5,
-                            resource: whole(&mean_buf),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 6,
-                            resource: whole(&partial_buf),
-                        },
-                    ],
+                let sweep_bg = bind(
+                    "sweep",
+                    &sweep_bgl,
+                    [
+                        &pbuf,
+                        &z_buf,
+                        &v_buf,
+                        &recipe_buf,
+                        &cand_buf,
+                        &mean_buf,
+                        &partial_buf,
+                    ]
+                    .into_iter()
+                    .map(|b| b.as_entire_binding())
+                    .collect(),
+                );
+                // The finalize pass writes this window's slice of the output only.
+                let out_slice = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                    buffer: &out_buf,
+                    offset: (start * 8) as u64,
+                    size: wgpu::BufferSize::new((len * 8) as u64),
                 });
-                let finalize_bg = device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("finalize"),
-                    layout: &finalize_bgl,
-                    entries: &[
-                        wgpu::BindGroupEntry {
-                            binding: 0,
-                            resource: whole(&pbuf),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 1,
-                            resource: whole(&partial_buf),
-                        },
-                        wgpu::BindGroupEntry {
-                            binding: 2,
-                            resource: wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                                buffer: &out_buf,
-                                offset: (start * 8) as u64,
-                                size: wgpu::BufferSize::new((len * 8) as u64),
-                            }),
-                        },
+                let finalize_bg = bind(
+                    "finalize",
+                    &finalize_bgl,
+                    vec![
+                        pbuf.as_entire_binding(),
+                        partial_buf.as_entire_binding(),
+                        out_slice,
                     ],
-                });
+                );
                 Window {
                     start,
                     len,
