@@ -36,7 +36,8 @@ use ctsid::engine::gpu::{GpuEngine, GpuOptions};
 use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
 use ctsid::regression::{lars_path, Event, Method, Path, PathOptions, Regression};
 use ctsid::Error;
-use serde_json::Value;
+mod common;
+use common::lars_fixtures::{load, problem};
 
 /// Relative tolerance of alphas and coefficients (issue 4: "coefficients to 1e-6 relative").
 const TOL: f64 = 1e-6;
@@ -246,99 +247,24 @@ fn weighted_path_matches_the_cpu_engine() {
     );
 }
 
-struct Fixture {
-    name: String,
-    method: Method,
-    z: Vec<Vec<f64>>,
-    exponents: Vec<Vec<u32>>,
-    y: Vec<f64>,
-    steps: usize,
-}
-
-fn fixtures() -> Vec<Fixture> {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/lars");
-    let mut files: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "json"))
-        .collect();
-    files.sort();
-    assert!(files.len() >= 7, "fixtures missing in {dir}");
-    files
-        .iter()
-        .map(|p| {
-            let v: Value = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
-            let arr = |x: &Value| x.as_array().unwrap().clone();
-            Fixture {
-                name: v["name"].as_str().unwrap().to_string(),
-                method: if v["method"] == "lar" {
-                    Method::Lars
-                } else {
-                    Method::LassoLars
-                },
-                z: arr(&v["Z"])
-                    .iter()
-                    .map(|r| arr(r).iter().map(|x| x.as_f64().unwrap()).collect())
-                    .collect(),
-                exponents: arr(&v["exponents"])
-                    .iter()
-                    .map(|r| arr(r).iter().map(|e| e.as_u64().unwrap() as u32).collect())
-                    .collect(),
-                y: arr(&v["y"]).iter().map(|x| x.as_f64().unwrap()).collect(),
-                steps: arr(&v["alphas"]).len() - 1,
-            }
-        })
-        .collect()
-}
-
-/// The fixture's candidates through the basis: the fixture's columns are the basis without the
-/// constant, in the same order (checked), and X is these columns standardised.
-fn fixture_problem(f: &Fixture) -> (Basis, Features) {
-    let nz = f.z[0].len();
-    let degree = f
-        .exponents
-        .iter()
-        .map(|e| e.iter().sum::<u32>())
-        .max()
-        .unwrap() as usize;
-    let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
-    let basis = Basis::new(&names, degree, BasisLimits::default()).unwrap();
-    assert_eq!(basis.len(), f.exponents.len() + 1, "{}", f.name);
-    for (j, e) in f.exponents.iter().enumerate() {
-        assert_eq!(
-            basis.code(j + 1),
-            Code::from_exponents(e).unwrap(),
-            "{}: column {j}",
-            f.name
-        );
-    }
-    let feats = Features::new(
-        names,
-        (0..nz)
-            .map(|k| f.z.iter().map(|r| r[k]).collect())
-            .collect(),
-    );
-    (basis, feats)
-}
-
 #[test]
 fn sklearn_fixture_paths_match_the_cpu_engine() {
     let mut ran = 0;
-    for fx in fixtures() {
-        let (basis, feats) = fixture_problem(&fx);
+    for fx in load() {
+        let (basis, feats) = problem(&fx);
         let Some(mut gpu) = gpu_or_skip(&feats, &basis) else {
             return;
         };
         let opts = PathOptions {
             method: fx.method,
             max_terms: 10_000,
-            max_steps: fx.steps,
+            max_steps: fx.steps(),
             ..PathOptions::default()
         };
         let cpu_path = lars_path(&mut cpu64(&basis, &feats), &fx.y, None, &opts).unwrap();
         assert_eq!(
             cpu_path.breakpoints.len(),
-            fx.steps + 1,
+            fx.steps() + 1,
             "{}: the CPU engine's path is not the fixture's",
             fx.name
         );

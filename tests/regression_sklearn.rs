@@ -2,92 +2,11 @@
 //! tests/data/lars; see the README there). Every breakpoint: same active set in the same order,
 //! alphas and coefficients equal to 1e-8 relative.
 
-use ctsid::basis::{Basis, BasisLimits, Code};
-use ctsid::engine::{CpuEngine, CpuOptions, DenseEngine, Features, Precision, SweepEngine};
-use ctsid::regression::{lars_path, Method, PathOptions};
-use serde_json::Value;
+use ctsid::engine::{CpuEngine, CpuOptions, DenseEngine, Precision, SweepEngine};
+use ctsid::regression::{lars_path, PathOptions};
 
-struct Fixture {
-    name: String,
-    method: Method,
-    z: Vec<Vec<f64>>,
-    exponents: Vec<Vec<u32>>,
-    x_cols: Vec<Vec<f64>>,
-    y: Vec<f64>,
-    alphas: Vec<f64>,
-    coefs: Vec<Vec<f64>>,
-    active: Vec<usize>,
-}
-
-fn load() -> Vec<Fixture> {
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/lars");
-    let mut files: Vec<_> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "json"))
-        .collect();
-    files.sort();
-    assert!(files.len() >= 7, "fixtures missing in {dir}");
-    files
-        .iter()
-        .map(|p| {
-            let v: Value = serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
-            let mat = |k: &str| -> Vec<Vec<f64>> {
-                v[k].as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|r| {
-                        r.as_array()
-                            .unwrap()
-                            .iter()
-                            .map(|x| x.as_f64().unwrap())
-                            .collect()
-                    })
-                    .collect()
-            };
-            let vecf = |k: &str| -> Vec<f64> {
-                v[k].as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|x| x.as_f64().unwrap())
-                    .collect()
-            };
-            let x = mat("X");
-            let p_ = x[0].len();
-            Fixture {
-                name: v["name"].as_str().unwrap().to_string(),
-                method: if v["method"] == "lar" {
-                    Method::Lars
-                } else {
-                    Method::LassoLars
-                },
-                z: mat("Z"),
-                exponents: v["exponents"]
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|r| {
-                        r.as_array()
-                            .unwrap()
-                            .iter()
-                            .map(|e| e.as_u64().unwrap() as u32)
-                            .collect()
-                    })
-                    .collect(),
-                x_cols: (0..p_).map(|j| x.iter().map(|r| r[j]).collect()).collect(),
-                y: vecf("y"),
-                alphas: vecf("alphas"),
-                coefs: mat("coefs"),
-                active: v["active"]
-                    .as_array()
-                    .unwrap()
-                    .iter()
-                    .map(|x| x.as_u64().unwrap() as usize)
-                    .collect(),
-            }
-        })
-        .collect()
-}
+mod common;
+use common::lars_fixtures::{load, problem, Fixture};
 
 /// Runs the path on `engine` and compares with the fixture; `map` turns an engine candidate into a fixture column.
 fn check(f: &Fixture, engine: &mut dyn SweepEngine, map: impl Fn(usize) -> usize, what: &str) {
@@ -158,31 +77,7 @@ fn sklearn_paths_on_the_given_design() {
 #[test]
 fn sklearn_paths_from_z_through_the_basis_and_cpu_engine() {
     for f in load() {
-        let nz = f.z[0].len();
-        let degree = f
-            .exponents
-            .iter()
-            .map(|e| e.iter().sum::<u32>())
-            .max()
-            .unwrap() as usize;
-        let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
-        let basis = Basis::new(&names, degree, BasisLimits::default()).unwrap();
-        // The fixture's columns are the basis without the constant, in the same order.
-        assert_eq!(basis.len(), f.exponents.len() + 1, "{}", f.name);
-        for (j, e) in f.exponents.iter().enumerate() {
-            assert_eq!(
-                basis.code(j + 1),
-                Code::from_exponents(e).unwrap(),
-                "{}: column {j}",
-                f.name
-            );
-        }
-        let feats = Features::new(
-            names.clone(),
-            (0..nz)
-                .map(|k| f.z.iter().map(|r| r[k]).collect())
-                .collect(),
-        );
+        let (basis, feats) = problem(&f);
         for materialize in [0, usize::MAX] {
             let mut e = CpuEngine::new(
                 &basis,
@@ -276,21 +171,7 @@ fn alpha_min_interpolates_like_scikit_learn() {
 fn f32_sweeps_keep_the_entering_order_of_well_separated_paths() {
     // The f32 engine only steers the path; on these small problems it must pick the same terms.
     for f in load().iter().filter(|f| f.name.contains("small")) {
-        let nz = f.z[0].len();
-        let degree = f
-            .exponents
-            .iter()
-            .map(|e| e.iter().sum::<u32>())
-            .max()
-            .unwrap() as usize;
-        let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
-        let basis = Basis::new(&names, degree, BasisLimits::default()).unwrap();
-        let feats = Features::new(
-            names.clone(),
-            (0..nz)
-                .map(|k| f.z.iter().map(|r| r[k]).collect())
-                .collect(),
-        );
+        let (basis, feats) = problem(f);
         let mut e = CpuEngine::new(
             &basis,
             &feats,

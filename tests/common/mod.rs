@@ -1,0 +1,4 @@
+//! Helpers shared by several test files.
+#![allow(dead_code)]
+
+pub mod lars_fixtures;
