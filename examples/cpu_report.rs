@@ -164,8 +164,9 @@ fn main() {
     let t0 = Instant::now();
     let path = lars_path(&mut e, &y, None, &opts).unwrap();
     println!(
-        "25000 x 12376 LassoLars path: {} steps, {:.2} s",
+        "25000 x 12376 LassoLars path: {} steps ({:?}), {:.2} s",
         path.breakpoints.len() - 1,
+        path.stop,
         t0.elapsed().as_secs_f64()
     );
     let t0 = Instant::now();
