@@ -3,8 +3,8 @@
 //!
 //! `cargo run --release --example discover_acceptance -- [SEEDS] [ETA] [CASE ...]`
 
-use ctsid::discover::cases::{generate, judge, split, CASES};
-use ctsid::discover::{discover, Options};
+use ctsid::discover::cases::{generate, judge, options, CASES};
+use ctsid::discover::discover;
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -28,9 +28,7 @@ fn main() {
                     continue;
                 }
             };
-            let (tr, va, te) = split();
-            let mut o = Options::new(tr, va, te);
-            o.seed = seed;
+            let mut o = options(&case, seed);
             if let Ok(m) = std::env::var("HW") {
                 o.half_width = m.parse().ok();
             }
@@ -52,11 +50,14 @@ fn main() {
                         })
                         .unwrap_or_default();
                     println!(
-                        "{name} seed {seed}: {} {} m={} [{:.1} s] {why} | {extra}",
+                        "{name} seed {seed}: {} {} m={} [{:.1} s] {why} | test {:.4} -> {:.4} | weak {:?} | {extra}",
                         if ok { "PASS" } else { "FAIL" },
                         d.verdict,
                         d.half_width,
-                        t.elapsed().as_secs_f64()
+                        t.elapsed().as_secs_f64(),
+                        d.nrmse_before,
+                        d.nrmse_after,
+                        d.effects.iter().map(|e| e.weak_coefficient).collect::<Vec<_>>(),
                     );
                 }
                 Err(e) => println!("{name} seed {seed}: FAIL error {e}"),

@@ -1,14 +1,12 @@
 //! `discover` on generated cases (one seed each, to keep CI time modest; the 10-seed matrix is
 //! `cargo run --release --example discover_acceptance`).
 
-use ctsid::discover::cases::{generate, judge, split};
+use ctsid::discover::cases::{generate, judge, options, split};
 use ctsid::discover::{discover, Options};
 
 fn run(name: &str, seed: u64) -> (bool, String, ctsid::discover::Discovery) {
     let case = generate(name, seed, 0.03).unwrap();
-    let (tr, va, te) = split();
-    let mut o = Options::new(tr, va, te);
-    o.seed = seed;
+    let o = options(&case, seed);
     let d = discover(&case.records, &case.nominal, &o).unwrap();
     let (ok, why) = judge(&case, &d);
     (ok, why, d)
@@ -21,6 +19,20 @@ fn coulomb_friction_is_named_with_its_coefficient_and_the_error_shrinks() {
     assert!(d.nrmse_before / d.nrmse_after > 3.0, "{}", d.text());
     let e = &d.effects[0];
     assert!(e.interval[1] < 0.0, "{}", d.text());
+}
+
+#[test]
+fn cubic_stiffness_and_quadratic_drag_are_named_with_their_coefficients() {
+    for name in ["duffing", "quadratic_drag"] {
+        let (ok, why, d) = run(name, 1);
+        assert!(ok, "{name}: {why}\n{}", d.text());
+    }
+}
+
+#[test]
+fn friction_is_not_confused_with_an_input_relay() {
+    let (ok, why, d) = run("distractor_relay", 2);
+    assert!(ok, "{why}\n{}", d.text());
 }
 
 #[test]

@@ -58,8 +58,24 @@ fn discover_cli_uses_the_given_split() {
         &vl,
         "--test",
         &sl,
+        "--report",
+        dir.join("report").to_str().unwrap(),
     ]);
     assert!(ok, "{err}");
+    // The report: evidence, a before/after plot per test run, the residual along each coordinate.
+    let rep = dir.join("report");
+    for f in ["discovery.json", "summary.md"] {
+        assert!(rep.join(f).is_file(), "{f} missing");
+    }
+    for r in &test {
+        let svg =
+            std::fs::read_to_string(rep.join(format!("test_run_{}.svg", rs.runs[*r].id))).unwrap();
+        assert!(
+            svg.starts_with("<svg") && svg.contains("nominal (free run)"),
+            "{svg}"
+        );
+    }
+    assert!(rep.join("residual_along_y.svg").is_file());
     let lib = discover(rs, &case.nominal, &Options::new(train, val, test)).unwrap();
     assert!(
         out.contains(&lib.verdict),

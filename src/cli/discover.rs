@@ -39,7 +39,8 @@ pub struct DiscoverArgs {
     /// Write the augmented model file here.
     #[arg(short = 'o', long)]
     pub output_model: Option<PathBuf>,
-    /// Write the evidence (discovery.json, summary.md) into this folder.
+    /// Write the evidence (discovery.json, summary.md, and SVG plots: each test run before and
+    /// after, the residual along each coordinate) into this folder.
     #[arg(long)]
     pub report: Option<PathBuf>,
 }
@@ -120,6 +121,9 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
             .map_err(|e| Error::Numerical(format!("discovery JSON: {e}")))?;
         write_file(dir, "discovery.json", &json)?;
         write_file(dir, "summary.md", &d.text())?;
+        for (name, svg) in d.plots() {
+            write_file(dir, &name, &svg)?;
+        }
     }
     Ok(())
 }

@@ -15,6 +15,10 @@ use nalgebra::{DMatrix, DVector};
 
 use super::weak::OVERLAP;
 
+/// Two effects whose columns correlate above this after the nominal columns are partialled out
+/// are aliases: the data cannot tell them apart.
+pub const ALIAS: f64 = 0.95;
+
 /// Sufficient statistics of a block of rows: columns are the free nominal terms, then effects.
 #[derive(Debug, Clone)]
 pub struct Gram {
@@ -144,17 +148,20 @@ impl Problem {
 
     /// Forward selection of at most `max_effects` effects: each step adds the effect that lowers
     /// the penalised objective most, while the Bayesian information criterion (with the number of
-    /// independent windows) improves; effects in `banned` are never tried.
+    /// independent windows) improves. Once an effect is in, its aliases (partial correlation
+    /// above [`ALIAS`] after the nominal columns) are never tried: two names for one signal are
+    /// one effect, not two.
     pub fn forward(&self, gram: &Gram, n_eff: usize, max_effects: usize) -> Vec<usize> {
         let n_ind = (gram.rows as f64 / OVERLAP).max(2.0);
         let mut set: Vec<usize> = Vec::new();
+        let mut banned = vec![false; n_eff];
         let Some(mut cur) = self.fit(gram, &set) else {
             return set;
         };
         while set.len() < max_effects {
             let mut best: Option<(usize, f64)> = None;
             for k in 0..n_eff {
-                if set.contains(&k) {
+                if set.contains(&k) || banned[k] {
                     continue;
                 }
                 let mut s = set.clone();
@@ -171,6 +178,13 @@ impl Problem {
                 break;
             }
             set.push(k);
+            for (j, b) in banned.iter_mut().enumerate() {
+                if !*b && j != k {
+                    *b = partial_correlation(gram, self.n_nom, self.n_nom + k, self.n_nom + j)
+                        .abs()
+                        > ALIAS;
+                }
+            }
             cur = self.fit(gram, &set).unwrap_or(cur);
         }
         set

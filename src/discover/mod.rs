@@ -77,7 +77,7 @@ impl Options {
             max_effects: 2,
             user_effects: Vec::new(),
             half_width: None,
-            refine_iterations: 8,
+            refine_iterations: 25,
         }
     }
 }
@@ -299,6 +299,7 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         .map(|t| monomial_exponents(t, &vars))
         .collect();
     let effects = dictionary::build(&vars, n, &scales, &nom_monos, &o.user_effects)?;
+    let effects = distinct_on_data(effects, &zhat, &o.train);
     // Zero crossings of the smoothed output (the raw one crosses its mean at every noise sample).
     let train_y: Vec<&[f64]> = o.train.iter().map(|&r| zhat[r][0].as_slice()).collect();
     let m = o
@@ -387,6 +388,64 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
     })
 }
 
+/// Drops candidates that the training data cannot tell from a simpler one: a column that is
+/// constant there, or takes one value on more than 95 % of the samples (`sign(y)` of a level
+/// that crosses zero only in noise: an offset but for a few samples), unless it is the offset
+/// itself; and a column equal to an earlier candidate's (`abs(y)*y` and `y^2` of a positive
+/// level). Keeping them would only split the bootstrap's votes between two names for one column.
+fn distinct_on_data(effects: Vec<Effect>, zhat: &[Vec<Vec<f64>>], train: &[usize]) -> Vec<Effect> {
+    let nz = zhat.first().map_or(0, |r| r.len());
+    let rows: Vec<Vec<f64>> = train
+        .iter()
+        .flat_map(|&r| {
+            let len = zhat[r].first().map_or(0, |c| c.len());
+            (0..len)
+                .step_by(4)
+                .map(move |i| (0..nz).map(|v| zhat[r][v][i]).collect::<Vec<f64>>())
+        })
+        .collect();
+    let mut kept: Vec<(Effect, Vec<f64>)> = Vec::new();
+    for e in effects {
+        let col: Vec<f64> = rows.iter().map(|z| e.expr.eval(z)).collect();
+        if col.iter().any(|v| !v.is_finite()) {
+            kept.push((e, col));
+            continue;
+        }
+        let scale = col.iter().fold(0.0f64, |a, v| a.max(v.abs())).max(1e-300);
+        let (lo, hi) = col
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        let mode_share = {
+            let mut v = col.clone();
+            v.sort_by(|a, b| a.total_cmp(b));
+            let (mut best, mut run) = (0usize, 0usize);
+            for i in 0..v.len() {
+                run = if i > 0 && v[i] == v[i - 1] {
+                    run + 1
+                } else {
+                    1
+                };
+                best = best.max(run);
+            }
+            best as f64 / v.len().max(1) as f64
+        };
+        if (hi - lo <= 1e-9 * scale || mode_share > 0.95) && e.formula != "1" {
+            continue;
+        }
+        let same = kept.iter().any(|(_, c)| {
+            c.iter()
+                .zip(&col)
+                .all(|(a, b)| (a - b).abs() <= 1e-9 * scale)
+        });
+        if !same {
+            kept.push((e, col));
+        }
+    }
+    kept.into_iter().map(|(e, _)| e).collect()
+}
+
 const BLOCK: usize = 8;
 
 fn block_grams(p: &Prepared, runs: &[usize]) -> Vec<Gram> {
@@ -448,6 +507,13 @@ impl Prepared {
             eps: self.eps.clone(),
         }
     }
+    /// Per term of [`Prepared::model`]'s models: whether the simulation refit must hold it
+    /// (nominal terms that are not free); effects are always free.
+    fn fixed_mask(&self) -> Vec<bool> {
+        (0..self.theta0.len())
+            .map(|j| !self.free.contains(&j))
+            .collect()
+    }
     fn runs(&self, idx: &[usize]) -> Vec<SimRun> {
         idx.iter().map(|&r| self.simruns[r].clone()).collect()
     }
@@ -492,6 +558,10 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             "test"
         } else {
             continue;
+        };
+        let sr = &SimRun {
+            x0: sim::fit_x0(&nominal_model, sr),
+            ..sr.clone()
         };
         let sim = sim::free_run(&nominal_model, sr);
         let (nr, above) = match &sim {
@@ -552,7 +622,9 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let alias_of = |k: usize| -> Vec<usize> {
         (0..n_eff)
             .filter(|&j| j != k)
-            .filter(|&j| fit::partial_correlation(&train, n_nom, n_nom + k, n_nom + j).abs() > 0.95)
+            .filter(|&j| {
+                fit::partial_correlation(&train, n_nom, n_nom + k, n_nom + j).abs() > fit::ALIAS
+            })
             .collect()
     };
 
@@ -601,14 +673,28 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let val_cand = rss_at(&val, &idx_cand, &xc);
     let residual_ratio = val_cand / val_nominal.min(val_retuned).max(1e-300);
 
+    // The simulation gate compares structures at their best: each one refined on free-run error
+    // of the training runs (coefficients and initial states) before it is scored on validation.
     let vruns = p.runs(&o.validation);
-    let retuned_model = p.model(&retune.delta, &[]);
+    let truns = p.runs(&o.train);
+    let fixed = p.fixed_mask();
+    let retuned_model = sim::refine(
+        &p.model(&retune.delta, &[]),
+        &truns,
+        &fixed,
+        o.refine_iterations,
+    );
     let eff_pairs: Vec<(usize, f64)> = cand
         .iter()
         .copied()
         .zip(cand_sol.coef.iter().copied())
         .collect();
-    let cand_model = p.model(&cand_sol.delta, &eff_pairs);
+    let cand_model = sim::refine(
+        &p.model(&cand_sol.delta, &eff_pairs),
+        &truns,
+        &fixed,
+        o.refine_iterations,
+    );
     let sim_nom = sim::mean_nrmse(&nominal_model, &vruns);
     let sim_ret = sim::mean_nrmse(&retuned_model, &vruns);
     let sim_cand = sim::mean_nrmse(&cand_model, &vruns);
@@ -664,8 +750,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         failed: failed.clone(),
     };
 
-    // Verdict and (f) refinement on simulation error.
-    let truns = p.runs(&o.train);
+    // Verdict; the models were refined on simulation error above (f).
     let test_runs = p.runs(&o.test);
     let nrmse_before = sim::mean_nrmse(&nominal_model, &test_runs);
     let mut effects = Vec::new();
@@ -676,7 +761,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let retune_ok = (val_retuned <= 0.9 * val_nominal) && sim_ret <= 0.8 * sim_nom;
     if failed.is_none() {
         verdict = "added";
-        let refined = sim::refine(&cand_model, &truns, o.refine_iterations);
+        let refined = cand_model.clone();
         let c = refined.coefficients();
         let nt = p.theta0.len();
         for (i, &k) in cand.iter().enumerate() {
@@ -697,7 +782,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         final_model = refined;
     } else if retune_ok {
         verdict = "retune";
-        let refined = sim::refine(&retuned_model, &truns, o.refine_iterations);
+        let refined = retuned_model.clone();
         retuned = retuned_list(&p, &refined.coefficients());
         closest = Some(failed.clone().unwrap_or_default());
         final_model = refined;
@@ -736,6 +821,10 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         nominal_model: Some(nominal_model),
         test_runs,
     })
+}
+
+fn rms_nrmse_of(sim: &[f64], y: &[f64]) -> f64 {
+    crate::simulate::rms_nrmse(sim, y).1
 }
 
 fn retuned_list(p: &Prepared, c: &[f64]) -> Vec<Retuned> {
@@ -842,6 +931,96 @@ fn coordinate_shares(p: &Prepared, train: &[usize]) -> Vec<Share> {
 }
 
 impl Discovery {
+    /// The report's plots as `(file name, SVG)`: each test run's measurement against the free
+    /// runs of the nominal and the final model (both from their own [`sim::fit_x0`] start),
+    /// and the conditional mean of the derivative-space residual along each coordinate.
+    pub fn plots(&self) -> Vec<(String, String)> {
+        use crate::report::svg::{line_plot, Series};
+        let mut out = Vec::new();
+        if let (Some(nom), Some(fin)) = (&self.nominal_model, &self.final_model) {
+            for r in &self.test_runs {
+                let sim_of = |m: &AugModel| {
+                    let rr = SimRun {
+                        x0: sim::fit_x0(m, r),
+                        ..r.clone()
+                    };
+                    sim::free_run(m, &rr)
+                };
+                let (Some(a), Some(b)) = (sim_of(nom), sim_of(fin)) else {
+                    continue;
+                };
+                let series = [
+                    Series {
+                        label: "measured",
+                        x: &r.t,
+                        y: &r.y,
+                        color: "#999999",
+                        band: None,
+                        dashed: false,
+                    },
+                    Series {
+                        label: "nominal (free run)",
+                        x: &r.t,
+                        y: &a,
+                        color: "#d62728",
+                        band: None,
+                        dashed: true,
+                    },
+                    Series {
+                        label: &format!("{} model (free run)", self.verdict),
+                        x: &r.t,
+                        y: &b,
+                        color: "#1f77b4",
+                        band: None,
+                        dashed: false,
+                    },
+                ];
+                out.push((
+                    format!("test_run_{}.svg", r.id),
+                    line_plot(
+                        &format!(
+                            "test run {}: NRMSE {} before, {} after",
+                            r.id,
+                            num(rms_nrmse_of(&a, &r.y)),
+                            num(rms_nrmse_of(&b, &r.y))
+                        ),
+                        "t (s)",
+                        "y",
+                        &series,
+                    ),
+                ));
+            }
+        }
+        for sh in &self.shares {
+            if sh.profile.is_empty() {
+                continue;
+            }
+            let x: Vec<f64> = sh.profile.iter().map(|p| p.0).collect();
+            let y: Vec<f64> = sh.profile.iter().map(|p| p.1).collect();
+            out.push((
+                format!("residual_along_{}.svg", sh.coordinate),
+                line_plot(
+                    &format!(
+                        "conditional mean of the residual along {} ({:.0} % of var(r))",
+                        sh.coordinate,
+                        100.0 * sh.share
+                    ),
+                    &sh.coordinate,
+                    "mean of r = y^(n) - P_nominal(z)",
+                    &[Series {
+                        label: "binned mean",
+                        x: &x,
+                        y: &y,
+                        color: "#1f77b4",
+                        band: None,
+                        dashed: false,
+                    }],
+                ),
+            ));
+        }
+        out
+    }
+
     /// The verdict, the evidence and the before/after table as text.
     pub fn text(&self) -> String {
         let mut s = format!("verdict: {}\n", self.verdict);
