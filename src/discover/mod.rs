@@ -21,6 +21,7 @@
 //! uniformly sampled runs, only `y` and the inputs measured; initial states of the free runs come
 //! from the derivative smoother at the first sample.
 
+pub mod benchmarks;
 pub mod cases;
 pub mod dictionary;
 pub mod expr;

@@ -1,0 +1,174 @@
+//! Real-data setups for `discover` on the measured benchmarks in `../shared/data` (see each
+//! record's README there): Silverbox (an electronic Duffing oscillator) against a linear
+//! nominal, EMPS (a prismatic joint) against mass and viscous friction. Used by the examples
+//! `silverbox_discover` and `emps_discover` and by `tests/discover_real.rs`.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::sim::{fit_x0_on, free_run, AugModel, SimRun};
+use super::Options;
+use crate::derivatives::{differentiate_runs, DerivativeOptions};
+use crate::error::{Error, Result};
+use crate::model::{Model, OutputEquation, Term};
+use crate::records::{RecordSet, Run};
+
+/// Records, nominal model and options of one benchmark, and how many samples the benchmark's
+/// convention gives a model to set its initial state (scored on the rest).
+pub struct Setup {
+    pub records: RecordSet,
+    pub nominal: Model,
+    pub options: Options,
+    pub init_samples: usize,
+}
+
+fn columns(path: &str, cols: &[usize]) -> Result<Vec<Vec<f64>>> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| Error::param("benchmark", format!("{path}: {e}")))?;
+    let mut out = vec![Vec::new(); cols.len()];
+    for (row, line) in text.lines().enumerate().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        for (o, &c) in out.iter_mut().zip(cols) {
+            let v = f
+                .get(c)
+                .and_then(|s| s.trim().parse::<f64>().ok())
+                .ok_or_else(|| {
+                    Error::param("benchmark", format!("{path}: row {}: column {c}", row + 1))
+                })?;
+            o.push(v);
+        }
+    }
+    Ok(out)
+}
+
+fn run(id: &str, y: &[f64], u: &[f64], first_row: usize) -> Run {
+    Run {
+        id: id.into(),
+        channels: vec![y.to_vec(), u.to_vec()],
+        t0: 0.0,
+        rows: (first_row..first_row + y.len()).collect(),
+    }
+}
+
+/// Silverbox (`SNLS80mV.csv`): the training multisine (samples 40650..105712) in 6 runs (train
+/// 4, validation 2), the full arrow (100..40575) as the test run; the nominal
+/// `y'' = a0 y + a1 y' + b u + c` by least squares on smoothed derivatives of the training runs.
+pub fn silverbox(path: &str) -> Result<Setup> {
+    let c = columns(path, &[2, 3])?;
+    let (u, y) = (&c[0], &c[1]);
+    if y.len() < 105712 {
+        return Err(Error::param("benchmark", format!("{path}: too few rows")));
+    }
+    let tau = 1.0 / 610.3515625;
+    let (a, b) = (40650usize, 105712usize);
+    let chunk = (b - a) / 6;
+    let mut runs: Vec<Run> = (0..6)
+        .map(|k| {
+            let (s, e) = (a + k * chunk, a + (k + 1) * chunk);
+            run(&format!("ms{k}"), &y[s..e], &u[s..e], s + 2)
+        })
+        .collect();
+    runs.push(run("arrow", &y[100..40575], &u[100..40575], 102));
+    let records = RecordSet::new(tau, vec!["y".into(), "u".into()], runs)?;
+    let train = vec![0, 1, 2, 3];
+    let ys: Vec<&[f64]> = train
+        .iter()
+        .map(|&r| records.runs[r].channels[0].as_slice())
+        .collect();
+    let der = differentiate_runs(&ys, tau, 2, &DerivativeOptions::default())?;
+    let mut rows = Vec::new();
+    let mut lab = Vec::new();
+    for (k, &r) in train.iter().enumerate() {
+        let d = &der[k];
+        let uu = &records.runs[r].channels[1];
+        for i in 50..uu.len() - 50 {
+            rows.push([d.values[0][i], d.values[1][i], uu[i], 1.0]);
+            lab.push(d.values[2][i]);
+        }
+    }
+    let x = DMatrix::from_fn(rows.len(), 4, |i, j| rows[i][j]);
+    let th = x
+        .svd(true, true)
+        .solve(&DVector::from_column_slice(&lab), 1e-12)
+        .map_err(|e| Error::Numerical(format!("Silverbox nominal: {e}")))?;
+    let nominal = Model::new(
+        &["u"],
+        vec![OutputEquation::new(
+            "y",
+            2,
+            vec![
+                Term::new(&[("y", 1)], th[0]),
+                Term::new(&[("y_d1", 1)], th[1]),
+                Term::new(&[("u", 1)], th[2]),
+                Term::new(&[], th[3]),
+            ],
+        )],
+        Some(tau),
+    );
+    let mut options = Options::new(train, vec![4, 5], vec![6]);
+    options.refine_iterations = 15;
+    Ok(Setup {
+        records,
+        nominal,
+        options,
+        init_samples: 50,
+    })
+}
+
+/// EMPS: the estimation record in 6 runs (train 4, validation 2), the pulses record as the test
+/// run; input the motor force `force_N`, output the position `q_m`; nominal
+/// `q'' = -(Fv / M) q' + force / M` with the published M = 95.1089 kg, Fv = 203.5034 N s/m.
+pub fn emps(dir: &str) -> Result<Setup> {
+    let tr = columns(&format!("{dir}/EMPS_train_DATA_EMPS.csv"), &[2, 5])?;
+    let te = columns(&format!("{dir}/EMPS_test_DATA_EMPS_PULSES.csv"), &[2, 5])?;
+    let (q, f) = (&tr[0], &tr[1]);
+    let chunk = q.len() / 6;
+    let mut runs: Vec<Run> = (0..6)
+        .map(|k| {
+            let (s, e) = (k * chunk, (k + 1) * chunk);
+            run(&format!("est{k}"), &q[s..e], &f[s..e], s + 2)
+        })
+        .collect();
+    runs.push(run("pulses", &te[0], &te[1], 2));
+    let records = RecordSet::new(1e-3, vec!["q".into(), "force".into()], runs)?;
+    let (m, fv) = (95.1089, 203.5034);
+    let nominal = Model::new(
+        &["force"],
+        vec![OutputEquation::new(
+            "q",
+            2,
+            vec![
+                Term::new(&[("q_d1", 1)], -fv / m),
+                Term::new(&[("force", 1)], 1.0 / m),
+            ],
+        )],
+        Some(1e-3),
+    );
+    let mut options = Options::new(vec![0, 1, 2, 3], vec![4, 5], vec![6]);
+    options.refine_iterations = 15;
+    Ok(Setup {
+        records,
+        nominal,
+        options,
+        init_samples: 20,
+    })
+}
+
+/// Free-run RMS error of `m` on `run` after its first `init` samples, from an initial state
+/// fitted on those samples (infinite when the simulation fails).
+pub fn rms_after(m: &AugModel, run: &SimRun, init: usize) -> f64 {
+    let r = SimRun {
+        x0: fit_x0_on(m, run, init),
+        ..run.clone()
+    };
+    match free_run(m, &r) {
+        Some(s) if s.len() > init => {
+            let e2: f64 = s[init..]
+                .iter()
+                .zip(&r.y[init..])
+                .map(|(a, b)| (a - b).powi(2))
+                .sum();
+            (e2 / (s.len() - init) as f64).sqrt()
+        }
+        _ => f64::INFINITY,
+    }
+}
