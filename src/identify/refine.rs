@@ -68,6 +68,10 @@ pub struct RefineOptions {
     /// A simulated state beyond this many times the largest magnitude in the data (outputs and
     /// state spreads) counts as diverged.
     pub divergence_factor: f64,
+    /// No refinement when the starting model's free-run NRMSE on both the fit and the gate runs
+    /// is already below this: there is nothing left for simulation error to correct (noise-free
+    /// data), and the fit would cost most of an identification's time.
+    pub skip_below: f64,
 }
 
 impl Default for RefineOptions {
@@ -80,6 +84,7 @@ impl Default for RefineOptions {
             rtol: 1e-7,
             atol: 1e-9,
             divergence_factor: 1e6,
+            skip_below: 1e-3,
         }
     }
 }
@@ -758,6 +763,22 @@ pub fn refine_gated(
 ) -> Result<Gated> {
     let train_before = free_run_nrmse(model, fit)?;
     let gate_before = free_run_nrmse(model, gate)?;
+    let (tb, gb) = (overall(&train_before), overall(&gate_before));
+    if tb < opts.skip_below && gb < opts.skip_below {
+        return Ok(Gated {
+            model: model.clone(),
+            kept: false,
+            train_after: train_before.clone(),
+            gate_after: gate_before.clone(),
+            train_before,
+            gate_before,
+            refined: None,
+            message: format!(
+                "refinement skipped: the derivative fit already simulates at NRMSE {tb:.1e} (fit runs) / {gb:.1e} (gate runs), below {:.0e}",
+                opts.skip_below
+            ),
+        });
+    }
     // A derivative fit with spurious nonlinear terms can blow up in free run, and then no
     // shooting segment can be simulated. Its linear part is the natural fallback start: the
     // gate below still decides against the full starting model.
@@ -771,7 +792,15 @@ pub fn refine_gated(
         }
         (dropped && m.outputs.iter().all(|eq| !eq.terms.is_empty())).then_some(m)
     };
-    let first = refine(model, fit, opts);
+    // A start that already diverges in free run on the fit runs is not tried in full: its
+    // shooting segments blow up too, and finding that out costs most of a search's time.
+    let first = if tb.is_finite() || linear_part().is_none() {
+        refine(model, fit, opts)
+    } else {
+        Err(Error::Numerical(
+            "the derivative fit diverges in free run".into(),
+        ))
+    };
     let (first, start_note) = match (&first, linear_part()) {
         (Err(Error::Numerical(_)), Some(lin)) => match refine(&lin, fit, opts) {
             Ok(r) => (

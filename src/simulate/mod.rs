@@ -95,6 +95,9 @@ pub struct SampledInput {
     t: Vec<f64>,
     /// `values[channel][sample]`
     values: Vec<Vec<f64>>,
+    /// `(t0, dt)` when the times are uniform to 1e-9 relative: the interval of `t` is then
+    /// computed instead of searched (the solver evaluates the input several times per step).
+    uniform: Option<(f64, f64)>,
 }
 
 impl SampledInput {
@@ -110,7 +113,17 @@ impl SampledInput {
                 "every input channel needs one value per sample time".into(),
             ));
         }
-        Ok(SampledInput { t, values })
+        let uniform = (t.len() >= 2)
+            .then(|| {
+                let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
+                let tol = 1e-9 * dt.abs().max(t[t.len() - 1].abs());
+                t.iter()
+                    .enumerate()
+                    .all(|(k, &s)| (s - (t[0] + k as f64 * dt)).abs() <= tol)
+                    .then_some((t[0], dt))
+            })
+            .flatten();
+        Ok(SampledInput { t, values, uniform })
     }
 }
 
@@ -137,7 +150,20 @@ impl Input for SampledInput {
             return;
         }
         // First sample time > t.
-        let k = self.t.partition_point(|&s| s <= t);
+        let k = match self.uniform {
+            Some((t0, dt)) => {
+                // The computed guess, corrected by a step either way for rounding.
+                let mut k = (((t - t0) / dt).floor() as usize + 1).clamp(1, n - 1);
+                while k > 1 && self.t[k - 1] > t {
+                    k -= 1;
+                }
+                while k < n - 1 && self.t[k] <= t {
+                    k += 1;
+                }
+                k
+            }
+            None => self.t.partition_point(|&s| s <= t),
+        };
         let (t0, t1) = (self.t[k - 1], self.t[k]);
         let w = (t - t0) / (t1 - t0);
         for (c, v) in self.values.iter().enumerate() {
