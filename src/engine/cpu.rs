@@ -369,6 +369,8 @@ mod tests {
             (13, 4, 260),
             (7, 6, 131),
             (4, 2, 140),
+            (1, 5, 300),
+            (2, 3, 257),
         ] {
             let (b, f) = problem(nz, d, n);
             let mut dense = CpuEngine::new(
