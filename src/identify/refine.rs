@@ -792,9 +792,12 @@ pub fn refine_gated(
         }
         (dropped && m.outputs.iter().all(|eq| !eq.terms.is_empty())).then_some(m)
     };
-    // A start that already diverges in free run on the fit runs is not tried in full: its
-    // shooting segments blow up too, and finding that out costs most of a search's time.
-    let first = if tb.is_finite() || linear_part().is_none() {
+    // A start that diverges in free run on the fit runs, or does not follow the output at all
+    // (NRMSE above 1: worse than its mean), is not refined in full: its shooting segments blow
+    // up too, or dozens of spurious terms must be walked back one finite difference at a time
+    // (90 s for one 35-term candidate of the noise-free throttle search). Its linear part is
+    // the start instead.
+    let first = if tb <= 1.0 || linear_part().is_none() {
         refine(model, fit, opts)
     } else {
         Err(Error::Numerical(
@@ -805,7 +808,7 @@ pub fn refine_gated(
         (Err(Error::Numerical(_)), Some(lin)) => match refine(&lin, fit, opts) {
             Ok(r) => (
                 Ok(r),
-                " (the full derivative fit could not be simulated; refined its linear terms)",
+                " (the full derivative fit could not be simulated or did not follow the output; refined its linear terms)",
             ),
             Err(_) => (first, ""),
         },

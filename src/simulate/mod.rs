@@ -280,6 +280,73 @@ impl Radau {
     }
 }
 
+/// LU factors with partial pivoting of the small dense Newton matrix (row-major, at most a few
+/// dozen rows): hand-written because the generic dynamic-size factorisation and its allocations
+/// were a third of a simulation's time.
+struct DenseLu {
+    n: usize,
+    a: Vec<f64>,
+    /// Row i of the factored matrix is row `perm[i]` of the original.
+    perm: Vec<usize>,
+}
+
+impl DenseLu {
+    /// Factors `a` (n x n, row-major) in place; `None` when a pivot is zero or not finite.
+    fn factor(n: usize, mut a: Vec<f64>) -> Option<DenseLu> {
+        let mut perm: Vec<usize> = (0..n).collect();
+        for k in 0..n {
+            let mut p = k;
+            for i in k + 1..n {
+                if a[i * n + k].abs() > a[p * n + k].abs() {
+                    p = i;
+                }
+            }
+            let d = a[p * n + k];
+            if d == 0.0 || !d.is_finite() {
+                return None;
+            }
+            if p != k {
+                for j in 0..n {
+                    a.swap(k * n + j, p * n + j);
+                }
+                perm.swap(k, p);
+            }
+            for i in k + 1..n {
+                let f = a[i * n + k] / d;
+                a[i * n + k] = f;
+                if f != 0.0 {
+                    for j in k + 1..n {
+                        a[i * n + j] -= f * a[k * n + j];
+                    }
+                }
+            }
+        }
+        Some(DenseLu { n, a, perm })
+    }
+
+    /// Solves `A x = b`.
+    fn solve(&self, b: &[f64], x: &mut [f64]) {
+        let n = self.n;
+        for i in 0..n {
+            x[i] = b[self.perm[i]];
+        }
+        for i in 0..n {
+            let mut s = x[i];
+            for j in 0..i {
+                s -= self.a[i * n + j] * x[j];
+            }
+            x[i] = s;
+        }
+        for i in (0..n).rev() {
+            let mut s = x[i];
+            for j in i + 1..n {
+                s -= self.a[i * n + j] * x[j];
+            }
+            x[i] = s / self.a[i * n + i];
+        }
+    }
+}
+
 enum StepOutcome {
     Ok(Vec<f64>),
     /// Newton did not converge: retry with a smaller step.
@@ -305,38 +372,32 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         self.opts.atol + self.opts.rtol * x0[k].abs().max(x1[k].abs())
     }
 
-    /// LU factors of the simplified-Newton matrix `I - h (A x J)` for step `h`.
-    fn newton_matrix(
-        &self,
-        h: f64,
-        jac: &[f64],
-    ) -> nalgebra::linalg::LU<f64, nalgebra::Dyn, nalgebra::Dyn> {
+    /// LU factors of the simplified-Newton matrix `I - h (A x J)` for step `h` (`None` when it
+    /// is singular: the caller retries with a smaller step).
+    fn newton_matrix(&self, h: f64, jac: &[f64]) -> Option<DenseLu> {
         let n = self.n;
         let m = 3 * n;
         let a = self.rk.a;
-        let mut mat = DMatrix::<f64>::identity(m, m);
+        let mut mat = vec![0.0; m * m];
+        for d in 0..m {
+            mat[d * m + d] = 1.0;
+        }
         for i in 0..3 {
             for j in 0..3 {
                 let hij = h * a[i][j];
                 for r in 0..n {
                     for q in 0..n {
-                        mat[(i * n + r, j * n + q)] -= hij * jac[r * n + q];
+                        mat[(i * n + r) * m + j * n + q] -= hij * jac[r * n + q];
                     }
                 }
             }
         }
-        mat.lu()
+        DenseLu::factor(m, mat)
     }
 
     /// One Radau IIA step from (t, x0) with step h, given the factors of [`Self::newton_matrix`]
     /// for that h (from a Jacobian at or near x0: simplified Newton tolerates a slightly old one).
-    fn radau_step(
-        &mut self,
-        t: f64,
-        x0: &[f64],
-        h: f64,
-        lu: &nalgebra::linalg::LU<f64, nalgebra::Dyn, nalgebra::Dyn>,
-    ) -> StepOutcome {
+    fn radau_step(&mut self, t: f64, x0: &[f64], h: f64, lu: &DenseLu) -> StepOutcome {
         let n = self.n;
         let m = 3 * n;
         let a = self.rk.a;
@@ -347,6 +408,8 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         let mut fz = vec![0.0; m];
         let mut xs = vec![0.0; n];
         let mut out = vec![0.0; n];
+        let mut rhs = vec![0.0; m];
+        let mut dz = vec![0.0; m];
         let mut prev_norm = f64::INFINITY;
         for _iter in 0..12 {
             for i in 0..3 {
@@ -356,7 +419,6 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 self.f(t + c[i] * h, &xs, &mut out);
                 fz[i * n..(i + 1) * n].copy_from_slice(&out);
             }
-            let mut rhs = DVector::<f64>::zeros(m);
             for i in 0..3 {
                 for k in 0..n {
                     let mut s = 0.0;
@@ -366,10 +428,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                     rhs[i * n + k] = -(z[i * n + k] - h * s);
                 }
             }
-            let dz = match lu.solve(&rhs) {
-                Some(d) => d,
-                None => return StepOutcome::NoConvergence,
-            };
+            lu.solve(&rhs, &mut dz);
             let mut norm = 0.0;
             for i in 0..3 {
                 for k in 0..n {
@@ -449,10 +508,12 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
             }
             self.input.eval(t, &mut self.u);
             self.sys.jacobian(x, &self.u, &mut jac);
-            let lu_full = self.newton_matrix(hh, &jac);
-            let full = self.radau_step(t, x, hh, &lu_full);
+            let full = match self.newton_matrix(hh, &jac) {
+                Some(lu) => self.radau_step(t, x, hh, &lu),
+                None => StepOutcome::NoConvergence,
+            };
             let lu_half = match full {
-                StepOutcome::Ok(_) => Some(self.newton_matrix(0.5 * hh, &jac)),
+                StepOutcome::Ok(_) => self.newton_matrix(0.5 * hh, &jac),
                 StepOutcome::NoConvergence => None,
             };
             let half1 = match &lu_half {
@@ -828,6 +889,23 @@ pub fn rms_nrmse(sim: &[f64], meas: &[f64]) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn dense_lu_solves_with_pivoting_and_refuses_singular_matrices() {
+        // A zero leading entry forces a row swap.
+        let a = vec![0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
+        let lu = DenseLu::factor(3, a.clone()).unwrap();
+        let x_true = [1.0, -2.0, 0.5];
+        let b: Vec<f64> = (0..3)
+            .map(|i| (0..3).map(|j| a[i * 3 + j] * x_true[j]).sum())
+            .collect();
+        let mut x = [0.0; 3];
+        lu.solve(&b, &mut x);
+        for k in 0..3 {
+            assert!((x[k] - x_true[k]).abs() < 1e-14, "{x:?}");
+        }
+        assert!(DenseLu::factor(2, vec![1.0, 2.0, 2.0, 4.0]).is_none());
+    }
 
     #[test]
     fn radau_coefficients_satisfy_order_conditions() {
