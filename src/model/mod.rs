@@ -582,9 +582,11 @@ impl CompiledModel {
             .iter()
             .map(|t| {
                 t.coef
-                    * t.factors
-                        .iter()
-                        .fold(1.0, |a, &(v, e)| a * z[v].powi(e as i32))
+                    * t.factors.iter().fold(1.0, |a, &(v, e)| match e {
+                        1 => a * z[v],
+                        2 => a * z[v] * z[v],
+                        _ => a * z[v].powi(e as i32),
+                    })
             })
             .sum()
     }
@@ -607,14 +609,24 @@ impl CompiledModel {
 
     /// The state derivative: the chains of integrators closed by the polynomials.
     pub fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
-        let mut z = Vec::with_capacity(self.n_state + self.n_inputs);
-        z.extend_from_slice(x);
-        z.extend_from_slice(u);
+        // The solver calls this several times per step: no allocation for the usual sizes.
+        let nz = self.n_state + self.n_inputs;
+        let mut stack = [0.0f64; 32];
+        let mut heap = Vec::new();
+        let z: &mut [f64] = if nz <= stack.len() {
+            &mut stack[..nz]
+        } else {
+            heap.resize(nz, 0.0);
+            &mut heap
+        };
+        z[..x.len()].copy_from_slice(x);
+        z[x.len()..x.len() + u.len()].copy_from_slice(u);
+        let z = &*z;
         for (i, (&n, &o)) in self.orders.iter().zip(&self.offsets).enumerate() {
             for k in 0..n - 1 {
                 dx[o + k] = x[o + k + 1];
             }
-            dx[o + n - 1] = self.eval_output(i, &z);
+            dx[o + n - 1] = self.eval_output(i, z);
         }
     }
 

@@ -331,18 +331,14 @@ impl DenseLu {
             x[i] = b[self.perm[i]];
         }
         for i in 0..n {
-            let mut s = x[i];
-            for j in 0..i {
-                s -= self.a[i * n + j] * x[j];
-            }
-            x[i] = s;
+            let row = &self.a[i * n..i * n + i];
+            let s: f64 = row.iter().zip(&x[..i]).map(|(a, b)| a * b).sum();
+            x[i] -= s;
         }
         for i in (0..n).rev() {
-            let mut s = x[i];
-            for j in i + 1..n {
-                s -= self.a[i * n + j] * x[j];
-            }
-            x[i] = s / self.a[i * n + i];
+            let row = &self.a[i * n + i + 1..(i + 1) * n];
+            let s: f64 = row.iter().zip(&x[i + 1..n]).map(|(a, b)| a * b).sum();
+            x[i] = (x[i] - s) / self.a[i * n + i];
         }
     }
 }
@@ -360,6 +356,12 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     opts: &'a SimOptions,
     n: usize,
     u: Vec<f64>,
+    /// Newton factors by (step, Jacobian): a model linear in its states has one Jacobian, and
+    /// with one step per sample interval the same two steps (h and h/2) recur, so the factors
+    /// are computed once per run instead of twice per step.
+    lu_cache: Vec<(f64, Vec<f64>, std::rc::Rc<DenseLu>)>,
+    /// Scratch of [`Self::radau_step`] (stage values, residuals), reused across steps.
+    scratch: Vec<f64>,
 }
 
 impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
@@ -395,29 +397,64 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         DenseLu::factor(m, mat)
     }
 
+    /// The factors of [`Self::newton_matrix`] for `(h, jac)`, from the cache when both match
+    /// exactly.
+    fn factors(&mut self, h: f64, jac: &[f64]) -> Option<std::rc::Rc<DenseLu>> {
+        if let Some((_, _, lu)) = self
+            .lu_cache
+            .iter()
+            .find(|(hh, j, _)| *hh == h && j.as_slice() == jac)
+        {
+            return Some(lu.clone());
+        }
+        let lu = std::rc::Rc::new(self.newton_matrix(h, jac)?);
+        if self.lu_cache.len() >= 4 {
+            self.lu_cache.remove(0);
+        }
+        self.lu_cache.push((h, jac.to_vec(), lu.clone()));
+        Some(lu)
+    }
+
     /// One Radau IIA step from (t, x0) with step h, given the factors of [`Self::newton_matrix`]
     /// for that h (from a Jacobian at or near x0: simplified Newton tolerates a slightly old one).
     fn radau_step(&mut self, t: f64, x0: &[f64], h: f64, lu: &DenseLu) -> StepOutcome {
+        let n = self.n;
+        let m = 3 * n;
+        let mut buf = std::mem::take(&mut self.scratch);
+        buf.clear();
+        buf.resize(4 * m + 2 * n, 0.0);
+        let outcome = self.radau_iterate(t, x0, h, lu, &mut buf);
+        self.scratch = buf;
+        outcome
+    }
+
+    fn radau_iterate(
+        &mut self,
+        t: f64,
+        x0: &[f64],
+        h: f64,
+        lu: &DenseLu,
+        buf: &mut [f64],
+    ) -> StepOutcome {
         let n = self.n;
         let m = 3 * n;
         let a = self.rk.a;
         let c = self.rk.c;
         // Stage increments Z_i, started at zero (a predictor from the previous step would save
         // iterations, but zero is robust after breakpoints).
-        let mut z = vec![0.0; m];
-        let mut fz = vec![0.0; m];
-        let mut xs = vec![0.0; n];
-        let mut out = vec![0.0; n];
-        let mut rhs = vec![0.0; m];
-        let mut dz = vec![0.0; m];
+        let (z, rest) = buf.split_at_mut(m);
+        let (fz, rest) = rest.split_at_mut(m);
+        let (rhs, rest) = rest.split_at_mut(m);
+        let (dz, rest) = rest.split_at_mut(m);
+        let (xs, out) = rest.split_at_mut(n);
         let mut prev_norm = f64::INFINITY;
         for _iter in 0..12 {
             for i in 0..3 {
                 for k in 0..n {
                     xs[k] = x0[k] + z[i * n + k];
                 }
-                self.f(t + c[i] * h, &xs, &mut out);
-                fz[i * n..(i + 1) * n].copy_from_slice(&out);
+                self.f(t + c[i] * h, xs, out);
+                fz[i * n..(i + 1) * n].copy_from_slice(out);
             }
             for i in 0..3 {
                 for k in 0..n {
@@ -428,7 +465,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                     rhs[i * n + k] = -(z[i * n + k] - h * s);
                 }
             }
-            lu.solve(&rhs, &mut dz);
+            lu.solve(rhs, dz);
             let mut norm = 0.0;
             for i in 0..3 {
                 for k in 0..n {
@@ -508,12 +545,12 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
             }
             self.input.eval(t, &mut self.u);
             self.sys.jacobian(x, &self.u, &mut jac);
-            let full = match self.newton_matrix(hh, &jac) {
+            let full = match self.factors(hh, &jac) {
                 Some(lu) => self.radau_step(t, x, hh, &lu),
                 None => StepOutcome::NoConvergence,
             };
             let lu_half = match full {
-                StepOutcome::Ok(_) => self.newton_matrix(0.5 * hh, &jac),
+                StepOutcome::Ok(_) => self.factors(0.5 * hh, &jac),
                 StepOutcome::NoConvergence => None,
             };
             let half1 = match &lu_half {
@@ -649,6 +686,8 @@ pub fn simulate<S: System + ?Sized, I: Input + ?Sized>(
         opts,
         n,
         u: vec![0.0; sys.n_inputs()],
+        lu_cache: Vec::new(),
+        scratch: Vec::new(),
     };
     let mut x = x0.to_vec();
     if let Some(e) = it.diverged(times[0], &x) {
