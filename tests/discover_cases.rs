@@ -46,6 +46,12 @@ fn negative_control_adds_nothing() {
 fn mistuned_damping_is_retuned_not_disguised() {
     let (ok, why, d) = run("mistuned", 0);
     assert!(ok, "{why}\n{}", d.text());
+    // A 23 % correction is within three times the default +-20 % confidence: not flagged.
+    assert!(
+        d.retuned.iter().all(|r| !r.outside_confidence),
+        "{}",
+        d.text()
+    );
 }
 
 #[test]

@@ -122,6 +122,11 @@ pub struct Retuned {
     pub nominal: f64,
     pub value: f64,
     pub change_percent: f64,
+    /// The stated prior half-width of the term, in percent.
+    pub confidence_percent: f64,
+    /// The change is more than three times the stated half-width: the re-tuned value is not a
+    /// correction within what the user claimed to know.
+    pub outside_confidence: bool,
 }
 
 /// Coordinate shares of the derivative-space residual.
@@ -779,12 +784,12 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
                 reading: reading(&e.family, c[nt + i], &p),
             });
         }
-        retuned = retuned_list(&p, &c[..nt]);
+        retuned = retuned_list(&p, &c[..nt], o);
         final_model = refined;
     } else if retune_ok {
         verdict = "retune";
         let refined = retuned_model.clone();
-        retuned = retuned_list(&p, &refined.coefficients());
+        retuned = retuned_list(&p, &refined.coefficients(), o);
         closest = Some(failed.clone().unwrap_or_default());
         final_model = refined;
     } else {
@@ -828,17 +833,23 @@ fn rms_nrmse_of(sim: &[f64], y: &[f64]) -> f64 {
     crate::simulate::rms_nrmse(sim, y).1
 }
 
-fn retuned_list(p: &Prepared, c: &[f64]) -> Vec<Retuned> {
+fn retuned_list(p: &Prepared, c: &[f64], o: &Options) -> Vec<Retuned> {
     p.nom_text
         .iter()
         .zip(&p.theta0)
         .zip(c)
         .filter(|((_, &a), &b)| a != 0.0 && ((b - a) / a).abs() > 0.05)
-        .map(|((t, &a), &b)| Retuned {
-            term: t.clone(),
-            nominal: a,
-            value: b,
-            change_percent: 100.0 * (b - a) / a,
+        .map(|((t, &a), &b)| {
+            let conf = o.confidence.get(t).copied().unwrap_or(o.default_confidence);
+            let change = (b - a) / a;
+            Retuned {
+                term: t.clone(),
+                nominal: a,
+                value: b,
+                change_percent: 100.0 * change,
+                confidence_percent: 100.0 * conf,
+                outside_confidence: change.abs() > 3.0 * conf,
+            }
         })
         .collect()
 }
@@ -1048,11 +1059,19 @@ impl Discovery {
         }
         for r in &self.retuned {
             s += &format!(
-                "  retuned {}: {} -> {} ({:+.1} %)\n",
+                "  retuned {}: {} -> {} ({:+.1} %){}\n",
                 r.term,
                 num(r.nominal),
                 num(r.value),
-                r.change_percent
+                r.change_percent,
+                if r.outside_confidence {
+                    format!(
+                        "; more than 3x its +-{:.0} % confidence: not a small correction (a missing effect the dictionary cannot name, or parameters these runs cannot tell apart)",
+                        r.confidence_percent
+                    )
+                } else {
+                    String::new()
+                }
             );
         }
         if let Some(c) = &self.closest {
