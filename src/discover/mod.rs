@@ -231,7 +231,7 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         .iter()
         .map(|u| rs.channel_index(u))
         .collect::<Result<_>>()?;
-    for (name, _) in &o.confidence {
+    for name in o.confidence.keys() {
         if !eq.terms.iter().any(|t| t.monomial() == *name) {
             return Err(Error::param(
                 "confidence",
@@ -331,7 +331,7 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
             });
         }
         let y = ys[ri];
-        let sgn = |k: usize| if k % 2 == 0 { 1.0 } else { -1.0 };
+        let sgn = |k: usize| if k.is_multiple_of(2) { 1.0 } else { -1.0 };
         let label = w
             .integrate(n, y)
             .into_iter()
@@ -739,7 +739,10 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             100.0 * (1.0 - residual_ratio)
         ));
     }
-    if failed.is_none() && !(simulation_ratio <= 0.8) {
+    // Written so that a NaN ratio (a model that cannot be simulated) fails the gate.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    let sim_gate_fails = !(simulation_ratio <= 0.8);
+    if failed.is_none() && sim_gate_fails {
         failed = Some(format!(
             "validation free-run NRMSE {} vs {} nominal / {} re-tuned: {:.1} % lower (< 20 %)",
             num(sim_cand),

@@ -225,7 +225,9 @@ pub fn refine_runs(
     let mut lambda = 1e-3;
     for _ in 0..max_iter {
         // Columns: a coefficient touches every run; an initial state only its own run.
-        let cols: Vec<Option<Vec<(usize, Vec<f64>)>>> = active
+        // Per parameter: (run, d residuals / d parameter) for every run it touches.
+        type Column = Option<Vec<(usize, Vec<f64>)>>;
+        let cols: Vec<Column> = active
             .par_iter()
             .map(|&j| {
                 let dj = 1e-6 * scale[j];

@@ -394,6 +394,7 @@ macro_rules! simd_families {
             /// x = parent * z_var is computed in the first tile when COMPUTE (and stored when
             /// STORE or when later tiles need it), else read from `me`.
             #[inline]
+            #[allow(clippy::too_many_arguments)]
             #[target_feature(enable = $feat)]
             unsafe fn run(parent: *const $t, zvar: *const $t, me: *mut $t, vecs: *const $t, count: usize, acc: &mut [f64], compute: bool, store: bool) {
                 let mut k = 0;
