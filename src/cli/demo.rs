@@ -46,6 +46,7 @@ pub struct EtcArgs {
     /// Write the tables (Markdown, CSV) and plots (SVG) here.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// No progress lines (they are shown only when standard error is a terminal anyway).
     #[arg(long)]
     pub quiet: bool,
 }
@@ -63,6 +64,7 @@ pub struct MimoArgs {
     pub seed: u64,
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// No progress lines (they are shown only when standard error is a terminal anyway).
     #[arg(long)]
     pub quiet: bool,
 }
@@ -78,7 +80,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
                 degree: e.degree,
                 engine: e.engine,
                 out: e.out,
-                progress: !e.quiet,
+                progress: super::show_progress(e.quiet),
                 ..Default::default()
             };
             print!("{}", etc::run(&o)?);
@@ -90,7 +92,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
                 noise: m.noise,
                 seed: m.seed,
                 out: m.out,
-                progress: !m.quiet,
+                progress: super::show_progress(m.quiet),
                 ..Default::default()
             };
             print!("{}", mimo::run(&o)?);

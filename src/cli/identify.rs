@@ -51,7 +51,7 @@ pub struct IdentifyArgs {
     /// Write tables and plots into this folder.
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// No progress lines.
+    /// No progress lines (they are shown only when standard error is a terminal anyway).
     #[arg(long)]
     pub quiet: bool,
 }
@@ -99,7 +99,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     };
     s.eta = a.eta;
     s.engine = a.engine;
-    s.progress = !a.quiet;
+    s.progress = super::show_progress(a.quiet);
     let id = identify(&rs, &split, &s)?;
 
     let mut text = String::new();

@@ -54,3 +54,10 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Discover(a) => discover::run(a),
     }
 }
+
+/// Whether long stages print progress lines: on a terminal, unless `--quiet`. Piped or
+/// redirected standard error gets none, so logs and scripts see only results and errors.
+pub fn show_progress(quiet: bool) -> bool {
+    use std::io::IsTerminal;
+    !quiet && std::io::stderr().is_terminal()
+}
