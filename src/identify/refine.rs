@@ -750,6 +750,22 @@ pub struct Gated {
     pub message: String,
 }
 
+impl Gated {
+    /// The starting model kept as it is, with the reason.
+    fn unchanged(model: &Model, train: Vec<f64>, gate: Vec<f64>, message: String) -> Gated {
+        Gated {
+            model: model.clone(),
+            kept: false,
+            train_after: train.clone(),
+            gate_after: gate.clone(),
+            train_before: train,
+            gate_before: gate,
+            refined: None,
+            message,
+        }
+    }
+}
+
 /// Refines `model` on `fit` runs and keeps the result only if its free-run error on the `gate`
 /// runs (runs the refinement did not see) is lower than the starting model's.
 ///
@@ -765,24 +781,16 @@ pub fn refine_gated(
     let gate_before = free_run_nrmse(model, gate)?;
     let (tb, gb) = (overall(&train_before), overall(&gate_before));
     if tb < opts.skip_below && gb < opts.skip_below {
-        return Ok(Gated {
-            model: model.clone(),
-            kept: false,
-            train_after: train_before.clone(),
-            gate_after: gate_before.clone(),
-            train_before,
-            gate_before,
-            refined: None,
-            message: format!(
-                "refinement skipped: the derivative fit already simulates at NRMSE {tb:.1e} (fit runs) / {gb:.1e} (gate runs), below {:.0e}",
-                opts.skip_below
-            ),
-        });
+        let message = format!(
+            "refinement skipped: the derivative fit already simulates at NRMSE {tb:.1e} (fit runs) / {gb:.1e} (gate runs), below {:.0e}",
+            opts.skip_below
+        );
+        return Ok(Gated::unchanged(model, train_before, gate_before, message));
     }
     // A derivative fit with spurious nonlinear terms can blow up in free run, and then no
     // shooting segment can be simulated. Its linear part is the natural fallback start: the
     // gate below still decides against the full starting model.
-    let linear_part = || -> Option<Model> {
+    let linear_part = {
         let mut m = model.clone();
         let mut dropped = false;
         for eq in m.outputs.iter_mut() {
@@ -797,14 +805,14 @@ pub fn refine_gated(
     // up too, or dozens of spurious terms must be walked back one finite difference at a time
     // (90 s for one 35-term candidate of the noise-free throttle search). Its linear part is
     // the start instead.
-    let first = if tb <= 1.0 || linear_part().is_none() {
+    let first = if tb <= 1.0 || linear_part.is_none() {
         refine(model, fit, opts)
     } else {
-        Err(Error::Numerical(
-            "the derivative fit diverges in free run".into(),
-        ))
+        Err(Error::Numerical(format!(
+            "the derivative fit does not follow the output in free run (NRMSE {tb:.3})"
+        )))
     };
-    let (first, start_note) = match (&first, linear_part()) {
+    let (first, start_note) = match (&first, linear_part) {
         (Err(Error::Numerical(_)), Some(lin)) => match refine(&lin, fit, opts) {
             Ok(r) => (
                 Ok(r),
@@ -817,16 +825,8 @@ pub fn refine_gated(
     let refined = match first {
         Ok(r) => r,
         Err(e @ Error::Numerical(_)) => {
-            return Ok(Gated {
-                model: model.clone(),
-                kept: false,
-                train_after: train_before.clone(),
-                gate_after: gate_before.clone(),
-                train_before,
-                gate_before,
-                refined: None,
-                message: format!("refinement not applied: {e}"),
-            })
+            let message = format!("refinement not applied: {e}");
+            return Ok(Gated::unchanged(model, train_before, gate_before, message));
         }
         Err(e) => return Err(e),
     };
