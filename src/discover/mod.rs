@@ -573,11 +573,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         let (nr, above) = match &sim {
             Some(s) => {
                 let (_, nr) = crate::simulate::rms_nrmse(s, &sr.y);
-                let mean = sr.y.iter().sum::<f64>() / sr.y.len() as f64;
-                let sdy = (sr.y.iter().map(|v| (v - mean).powi(2)).sum::<f64>()
-                    / sr.y.len() as f64)
-                    .sqrt();
-                let floor = p.noise_sd[ri] / sdy.max(1e-300);
+                let floor = p.noise_sd[ri] / crate::simulate::std_dev(&sr.y).max(1e-300);
                 (nr, (nr * nr - floor * floor).max(0.0).sqrt())
             }
             None => (f64::INFINITY, f64::INFINITY),

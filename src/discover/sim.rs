@@ -9,7 +9,7 @@
 use rayon::prelude::*;
 
 use super::expr::Expr;
-use crate::simulate::{rms_nrmse, simulate, SampledInput, SimOptions, System};
+use crate::simulate::{rms_nrmse, simulate, std_dev, SampledInput, SimOptions, System};
 
 /// A single-output model: terms `c_j * phi_j(z)`.
 #[derive(Debug, Clone)]
@@ -83,8 +83,13 @@ fn options(run: &str, y: &[f64]) -> SimOptions {
 
 /// The simulated output of `m` on `run`; `None` when it diverges.
 pub fn free_run(m: &AugModel, run: &SimRun) -> Option<Vec<f64>> {
+    free_run_from(m, run, &run.x0)
+}
+
+/// [`free_run`] from the initial state `x0` instead of the run's own.
+fn free_run_from(m: &AugModel, run: &SimRun, x0: &[f64]) -> Option<Vec<f64>> {
     let input = SampledInput::new(run.t.clone(), run.u.clone()).ok()?;
-    let tr = simulate(m, &input, &run.x0, &run.t, &options(&run.id, &run.y)).ok()?;
+    let tr = simulate(m, &input, x0, &run.t, &options(&run.id, &run.y)).ok()?;
     Some(tr.series(0))
 }
 
@@ -140,14 +145,10 @@ pub fn mean_nrmse(m: &AugModel, runs: &[SimRun]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
-/// Normalised free-run residuals of one run, `(sim - y) / (sd(y) sqrt(len))`.
-fn run_residuals(m: &AugModel, r: &SimRun) -> Option<Vec<f64>> {
-    let s = free_run(m, r)?;
-    let mean = r.y.iter().sum::<f64>() / r.y.len() as f64;
-    let sd = (r.y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / r.y.len() as f64)
-        .sqrt()
-        .max(1e-300);
-    let w = 1.0 / (sd * (r.y.len() as f64).sqrt());
+/// Normalised free-run residuals of one run from `x0`, `(sim - y) / (sd(y) sqrt(len))`.
+fn run_residuals(m: &AugModel, r: &SimRun, x0: &[f64]) -> Option<Vec<f64>> {
+    let s = free_run_from(m, r, x0)?;
+    let w = 1.0 / (std_dev(&r.y).max(1e-300) * (r.y.len() as f64).sqrt());
     Some(s.iter().zip(&r.y).map(|(a, b)| (a - b) * w).collect())
 }
 
@@ -174,21 +175,25 @@ pub fn refine_runs(
         .filter(|&j| j >= nc || !fixed.get(j).copied().unwrap_or(false))
         .collect();
     let na = active.len();
-    let unpack = |th: &[f64]| -> (AugModel, Vec<SimRun>) {
-        let mm = m.with_coefficients(&th[..nc]);
-        let rr: Vec<SimRun> = runs
+    // Parameters: the coefficients, then each run's initial state.
+    let x0_of = |th: &'_ [f64], k: usize| th[nc + k * n..nc + (k + 1) * n].to_vec();
+    let finish = |th: &[f64]| -> (AugModel, Vec<SimRun>) {
+        let rr = runs
             .iter()
             .enumerate()
             .map(|(k, r)| SimRun {
-                x0: th[nc + k * n..nc + (k + 1) * n].to_vec(),
+                x0: x0_of(th, k),
                 ..r.clone()
             })
             .collect();
-        (mm, rr)
+        (m.with_coefficients(&th[..nc]), rr)
     };
     let eval = |th: &[f64]| -> Option<Vec<Vec<f64>>> {
-        let (mm, rr) = unpack(th);
-        rr.par_iter().map(|r| run_residuals(&mm, r)).collect()
+        let mm = m.with_coefficients(&th[..nc]);
+        runs.par_iter()
+            .enumerate()
+            .map(|(k, r)| run_residuals(&mm, r, &th[nc + k * n..nc + (k + 1) * n]))
+            .collect()
     };
     let mut th: Vec<f64> = m.coefficients();
     for r in runs {
@@ -201,10 +206,7 @@ pub fn refine_runs(
         scale[j] = th[j].abs().max(1e-6);
     }
     for (k, r) in runs.iter().enumerate() {
-        let sd = {
-            let mean = r.y.iter().sum::<f64>() / r.y.len() as f64;
-            (r.y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / r.y.len() as f64).sqrt()
-        };
+        let sd = std_dev(&r.y);
         for i in 0..n {
             scale[nc + k * n + i] = (th[nc + k * n + i].abs()).max(sd.max(1e-9) * 1e-2);
         }
@@ -233,7 +235,12 @@ pub fn refine_runs(
                 let dj = 1e-6 * scale[j];
                 let mut tp = th.clone();
                 tp[j] += dj;
-                let (mm, rr) = unpack(&tp);
+                // Only the coefficients need a new model; an initial state only its own run.
+                let mm = if j < nc {
+                    m.with_coefficients(&tp[..nc])
+                } else {
+                    m.with_coefficients(&th[..nc])
+                };
                 let which: Vec<usize> = if j < nc {
                     (0..nr).collect()
                 } else {
@@ -242,7 +249,7 @@ pub fn refine_runs(
                 which
                     .into_iter()
                     .map(|k| {
-                        let rp = run_residuals(&mm, &rr[k])?;
+                        let rp = run_residuals(&mm, &runs[k], &tp[nc + k * n..nc + (k + 1) * n])?;
                         Some((
                             k,
                             rp.iter().zip(&res[k]).map(|(a, b)| (a - b) / dj).collect(),
@@ -254,8 +261,7 @@ pub fn refine_runs(
         let mut jac = DMatrix::<f64>::zeros(total, na);
         for (j, c) in cols.into_iter().enumerate() {
             let Some(c) = c else {
-                let (mm, rr) = unpack(&th);
-                return (mm, rr);
+                return finish(&th);
             };
             for (k, d) in c {
                 for (i, v) in d.into_iter().enumerate() {
@@ -295,7 +301,7 @@ pub fn refine_runs(
             break;
         }
     }
-    unpack(&th)
+    finish(&th)
 }
 
 /// [`refine_runs`] without the refined initial states.

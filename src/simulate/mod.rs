@@ -904,6 +904,15 @@ pub fn fit_initial_state(
     x
 }
 
+/// Population standard deviation (0 for an empty slice).
+pub fn std_dev(x: &[f64]) -> f64 {
+    if x.is_empty() {
+        return 0.0;
+    }
+    let mean = x.iter().sum::<f64>() / x.len() as f64;
+    (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / x.len() as f64).sqrt()
+}
+
 /// RMS of `sim - meas` and NRMSE = RMS / standard deviation of `meas` (infinite when `meas`
 /// is constant and the error is not zero).
 pub fn rms_nrmse(sim: &[f64], meas: &[f64]) -> (f64, f64) {
@@ -918,8 +927,7 @@ pub fn rms_nrmse(sim: &[f64], meas: &[f64]) -> (f64, f64) {
         .sum::<f64>()
         / n as f64)
         .sqrt();
-    let mean = meas[..n].iter().sum::<f64>() / n as f64;
-    let sd = (meas[..n].iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
+    let sd = std_dev(&meas[..n]);
     let nrmse = if sd > 0.0 {
         rms / sd
     } else if rms == 0.0 {
