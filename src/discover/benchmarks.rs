@@ -10,7 +10,7 @@ use super::Options;
 use crate::derivatives::{differentiate_runs, DerivativeOptions};
 use crate::error::{Error, Result};
 use crate::model::{Model, OutputEquation, Term};
-use crate::records::{RecordSet, Run};
+use crate::records::{CsvSpec, RecordSet, Run};
 
 /// Records, nominal model and options of one benchmark, and how many samples the benchmark's
 /// convention gives a model to set its initial state (scored on the rest).
@@ -21,23 +21,22 @@ pub struct Setup {
     pub init_samples: usize,
 }
 
-fn columns(path: &str, cols: &[usize]) -> Result<Vec<Vec<f64>>> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| Error::param("benchmark", format!("{path}: {e}")))?;
-    let mut out = vec![Vec::new(); cols.len()];
-    for (row, line) in text.lines().enumerate().skip(1) {
-        let f: Vec<&str> = line.split(',').collect();
-        for (o, &c) in out.iter_mut().zip(cols) {
-            let v = f
-                .get(c)
-                .and_then(|s| s.trim().parse::<f64>().ok())
-                .ok_or_else(|| {
-                    Error::param("benchmark", format!("{path}: row {}: column {c}", row + 1))
-                })?;
-            o.push(v);
-        }
-    }
-    Ok(out)
+/// The named columns of a single-run CSV through the crate's record loader (so a missing column
+/// or a bad value is the usual one-line error), one vector per column. The benchmarks' time
+/// columns are rounded to a few digits, so the known sampling period is given instead.
+fn columns(path: &str, names: &[&str], tau: f64) -> Result<Vec<Vec<f64>>> {
+    let spec = CsvSpec {
+        columns: names.iter().map(|c| c.to_string()).collect(),
+        run_column: None,
+        time_column: None,
+        tau: Some(tau),
+    };
+    let rs = RecordSet::from_csv(path, &spec)?;
+    Ok(rs
+        .runs
+        .into_iter()
+        .next()
+        .map_or_else(Vec::new, |r| r.channels))
 }
 
 fn run(id: &str, y: &[f64], u: &[f64], first_row: usize) -> Run {
@@ -53,12 +52,12 @@ fn run(id: &str, y: &[f64], u: &[f64], first_row: usize) -> Run {
 /// 4, validation 2), the full arrow (100..40575) as the test run; the nominal
 /// `y'' = a0 y + a1 y' + b u + c` by least squares on smoothed derivatives of the training runs.
 pub fn silverbox(path: &str) -> Result<Setup> {
-    let c = columns(path, &[2, 3])?;
+    let tau = 1.0 / 610.3515625;
+    let c = columns(path, &["u_V", "y_V"], tau)?;
     let (u, y) = (&c[0], &c[1]);
     if y.len() < 105712 {
         return Err(Error::param("benchmark", format!("{path}: too few rows")));
     }
-    let tau = 1.0 / 610.3515625;
     let (a, b) = (40650usize, 105712usize);
     let chunk = (b - a) / 6;
     let mut runs: Vec<Run> = (0..6)
@@ -118,8 +117,13 @@ pub fn silverbox(path: &str) -> Result<Setup> {
 /// run; input the motor force `force_N`, output the position `q_m`; nominal
 /// `q'' = -(Fv / M) q' + force / M` with the published M = 95.1089 kg, Fv = 203.5034 N s/m.
 pub fn emps(dir: &str) -> Result<Setup> {
-    let tr = columns(&format!("{dir}/EMPS_train_DATA_EMPS.csv"), &[2, 5])?;
-    let te = columns(&format!("{dir}/EMPS_test_DATA_EMPS_PULSES.csv"), &[2, 5])?;
+    let cols = ["q_m", "force_N"];
+    let tr = columns(&format!("{dir}/EMPS_train_DATA_EMPS.csv"), &cols, 1e-3)?;
+    let te = columns(
+        &format!("{dir}/EMPS_test_DATA_EMPS_PULSES.csv"),
+        &cols,
+        1e-3,
+    )?;
     let (q, f) = (&tr[0], &tr[1]);
     let chunk = q.len() / 6;
     let mut runs: Vec<Run> = (0..6)
