@@ -2,7 +2,7 @@
 
 use clap::Args;
 use ctsid::derivatives::{differentiate_runs, DerivativeOptions};
-use ctsid::records::{CsvSpec, RecordSet};
+use ctsid::records::RecordSet;
 use ctsid::{Error, Result};
 use std::path::PathBuf;
 
@@ -16,12 +16,8 @@ pub struct DeriveArgs {
     /// Highest derivative order (1..=8).
     #[arg(long)]
     pub order: usize,
-    /// Sampling period in seconds (taken from --time-column when omitted).
-    #[arg(long)]
-    pub tau: Option<f64>,
-    /// Time column: strictly increasing and uniform within each run.
-    #[arg(long)]
-    pub time_column: Option<String>,
+    #[command(flatten)]
+    pub sampling: super::runs::SamplingArgs,
     /// Run (experiment) id column; rows with the same id form one run.
     #[arg(long)]
     pub run_column: Option<String>,
@@ -37,12 +33,9 @@ pub fn run(a: DeriveArgs) -> Result<()> {
     if a.order == 0 {
         return Err(Error::param("order", "give an order of at least 1"));
     }
-    let spec = CsvSpec {
-        columns: vec![a.column.clone()],
-        run_column: a.run_column.clone(),
-        time_column: a.time_column.clone(),
-        tau: a.tau,
-    };
+    let spec = a
+        .sampling
+        .spec(vec![a.column.clone()], a.run_column.clone(), None);
     let rs = RecordSet::from_csv(&a.input, &spec)?;
     rs.require_min_len(
         ctsid::derivatives::min_samples(a.order),

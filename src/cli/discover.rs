@@ -4,7 +4,7 @@ use clap::Args;
 use ctsid::discover::{discover, Options};
 use ctsid::identify::Split;
 use ctsid::model::Model;
-use ctsid::records::{CsvSpec, RecordSet};
+use ctsid::records::RecordSet;
 use ctsid::report::write_file;
 use ctsid::{Error, Result};
 use std::collections::BTreeMap;
@@ -20,10 +20,8 @@ pub struct DiscoverArgs {
     /// Run (experiment) id column.
     #[arg(long)]
     pub run_column: String,
-    #[arg(long)]
-    pub tau: Option<f64>,
-    #[arg(long)]
-    pub time_column: Option<String>,
+    #[command(flatten)]
+    pub sampling: super::runs::SamplingArgs,
     /// Omitted lists: training = the first half of the runs, validation = the next quarter,
     /// test = the rest.
     #[command(flatten)]
@@ -49,12 +47,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     let nominal = Model::read(&a.nominal.to_string_lossy())?;
     let mut columns: Vec<String> = nominal.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(nominal.inputs.iter().cloned());
-    let spec = CsvSpec {
-        columns,
-        run_column: Some(a.run_column.clone()),
-        time_column: a.time_column.clone(),
-        tau: a.tau,
-    };
+    let spec = a.sampling.spec(columns, Some(a.run_column.clone()), None);
     let rs = RecordSet::from_csv(&a.data, &spec)?;
     let names: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
     let n = names.len();

@@ -3,7 +3,7 @@
 use clap::Args;
 use ctsid::identify::split::parse_runs;
 use ctsid::identify::{identify, Orders, Settings, Split};
-use ctsid::records::{CsvSpec, RecordSet};
+use ctsid::records::RecordSet;
 use ctsid::regression::EngineChoice;
 use ctsid::report::{svg, write_file, Table};
 use ctsid::{Error, Result};
@@ -22,10 +22,8 @@ pub struct IdentifyArgs {
     /// Run (experiment) id column.
     #[arg(long)]
     pub run_column: Option<String>,
-    #[arg(long)]
-    pub tau: Option<f64>,
-    #[arg(long)]
-    pub time_column: Option<String>,
+    #[command(flatten)]
+    pub sampling: super::runs::SamplingArgs,
     /// Omitted lists: training = every run not in validation or test; no validation runs =
     /// 5-fold over the training runs; no test runs.
     #[command(flatten)]
@@ -74,12 +72,7 @@ fn parse_orders(text: &str) -> Result<Vec<usize>> {
 pub fn run(a: IdentifyArgs) -> Result<()> {
     let mut columns = a.output.clone();
     columns.extend(a.input.iter().cloned());
-    let spec = CsvSpec {
-        columns,
-        run_column: a.run_column.clone(),
-        time_column: a.time_column.clone(),
-        tau: a.tau,
-    };
+    let spec = a.sampling.spec(columns, a.run_column.clone(), None);
     let rs = RecordSet::from_csv(&a.data, &spec)?;
     let ids: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
     let given = a.split.resolve(&ids)?;

@@ -1,8 +1,42 @@
-//! The `--train / --validation / --test` arguments shared by the commands that split runs.
+//! Arguments shared by the commands that read records: `--tau / --time-column`, and
+//! `--train / --validation / --test` for those that split runs.
 
 use clap::Args;
 use ctsid::identify::split::{parse_runs, resolve};
+use ctsid::records::CsvSpec;
 use ctsid::Result;
+
+/// How samples are timed: a sampling period, or a time column it is read from.
+#[derive(Args, Debug)]
+pub struct SamplingArgs {
+    /// Sampling period in seconds (default: from --time-column; `simulate` falls back to the
+    /// model's tau).
+    #[arg(long)]
+    pub tau: Option<f64>,
+    /// Time column in seconds: strictly increasing and uniform within each run.
+    #[arg(long)]
+    pub time_column: Option<String>,
+}
+
+impl SamplingArgs {
+    /// The CSV spec for `columns` grouped by `run_column`, with `fallback_tau` as the period
+    /// when neither --tau nor --time-column is given.
+    pub fn spec(
+        &self,
+        columns: Vec<String>,
+        run_column: Option<String>,
+        fallback_tau: Option<f64>,
+    ) -> CsvSpec {
+        CsvSpec {
+            columns,
+            run_column,
+            time_column: self.time_column.clone(),
+            tau: self
+                .tau
+                .or(fallback_tau.filter(|_| self.time_column.is_none())),
+        }
+    }
+}
 
 /// Run lists like `0-24,30`, naming run ids of the record set. What an omitted list means is
 /// up to the command (see its help).

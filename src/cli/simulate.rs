@@ -14,7 +14,7 @@
 
 use clap::Args;
 use ctsid::model::Model;
-use ctsid::records::{CsvSpec, RecordSet};
+use ctsid::records::RecordSet;
 use ctsid::simulate::{
     estimate_initial_derivatives, fit_initial_state, initial_window, rms_nrmse, simulate_model,
     SimOptions,
@@ -30,12 +30,8 @@ pub struct SimulateArgs {
     /// Column holding the run id; rows with the same id form one run, in file order.
     #[arg(long)]
     pub run_column: String,
-    /// Sampling period in seconds (default: from the time column, else the model's tau).
-    #[arg(long)]
-    pub tau: Option<f64>,
-    /// Column holding time in seconds.
-    #[arg(long)]
-    pub time_column: Option<String>,
+    #[command(flatten)]
+    pub sampling: super::runs::SamplingArgs,
     /// Samples at the start of each run used to estimate its initial state (at least the
     /// local fit's window; the model-based refinement uses all of them).
     #[arg(long, default_value_t = 200)]
@@ -48,24 +44,17 @@ pub struct SimulateArgs {
 pub fn run(args: SimulateArgs) -> Result<()> {
     let model = Model::read(&args.model)?;
     let compiled = model.compile()?;
-    if let Some(tau) = args.tau {
+    if let Some(tau) = args.sampling.tau {
         if !(tau.is_finite() && tau > 0.0) {
             return Err(Error::InvalidTau(tau));
         }
     }
     let mut columns: Vec<String> = model.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(model.inputs.iter().cloned());
-    let spec = CsvSpec {
-        columns,
-        run_column: Some(args.run_column.clone()),
-        time_column: args.time_column.clone(),
-        // Without a time column the model's own tau is the sampling period.
-        tau: args.tau.or(if args.time_column.is_none() {
-            model.tau
-        } else {
-            None
-        }),
-    };
+    // Without a time column the model's own tau is the sampling period.
+    let spec = args
+        .sampling
+        .spec(columns, Some(args.run_column.clone()), model.tau);
     let rs = RecordSet::from_csv(&args.data, &spec)?;
     let n_out = model.outputs.len();
     let sim_names: Vec<String> = model
