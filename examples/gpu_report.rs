@@ -25,21 +25,8 @@ use rayon::prelude::*;
 use ctsid::basis::{Basis, BasisLimits, Code};
 use ctsid::engine::gpu::{GpuEngine, GpuOptions};
 use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
+use ctsid::plants::rng::Rng;
 use ctsid::regression::{lars_path, Method, PathOptions};
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E3779B97F4A7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self) -> f64 {
-        2.0 * ((self.next() >> 11) as f64 / (1u64 << 53) as f64) - 1.0
-    }
-}
 
 /// Plain rayon f64 reference: out_j = sum_i prod(z_i[vars of j]) * v_i, parallel over candidates.
 fn naive_f64_sweep(
@@ -115,9 +102,9 @@ fn main() {
         let names: Vec<String> = (0..n_z).map(|k| format!("z{k}")).collect();
         let basis = Basis::new(&names, d, BasisLimits::default()).expect("basis");
         let n_c = basis.len();
-        let mut rng = Rng(0xC7510 + n_z as u64 * 100 + d as u64);
+        let mut rng = Rng::new(0xC7510 + n_z as u64 * 100 + d as u64);
         let cols: Vec<Vec<f64>> = (0..n_z)
-            .map(|_| (0..n_s).map(|_| rng.uniform()).collect())
+            .map(|_| (0..n_s).map(|_| rng.uniform_in(-1.0, 1.0)).collect())
             .collect();
         let feats = Features::new(names.clone(), cols);
         let mut rows = vec![0.0; n_s * n_z];
@@ -126,7 +113,7 @@ fn main() {
                 rows[i * n_z + k] = feats.column(k)[i];
             }
         }
-        let v: Vec<f64> = (0..n_s).map(|_| rng.uniform()).collect();
+        let v: Vec<f64> = (0..n_s).map(|_| rng.uniform_in(-1.0, 1.0)).collect();
 
         let t0 = Instant::now();
         let mut eng = match GpuEngine::new(
@@ -292,7 +279,7 @@ fn label(rng: &mut Rng, basis: &Basis, f: &Features) -> Vec<f64> {
     let n = f.n_samples;
     let mut y = vec![0.0; n];
     for t in 0..6 {
-        let j = 1 + (rng.next() % (basis.len() as u64 - 1)) as usize;
+        let j = 1 + (rng.next_u64() % (basis.len() as u64 - 1)) as usize;
         let c = if t % 2 == 0 { 1.0 } else { -1.5 };
         let code = basis.code(j);
         let mut col = vec![c; n];
@@ -305,7 +292,7 @@ fn label(rng: &mut Rng, basis: &Basis, f: &Features) -> Vec<f64> {
         .sqrt()
         .max(1e-12);
     for yi in &mut y {
-        *yi += 0.01 * sd * rng.uniform();
+        *yi += 0.01 * sd * rng.uniform_in(-1.0, 1.0);
     }
     y
 }

@@ -38,31 +38,10 @@ use ctsid::regression::{lars_path, Event, Method, Path, PathOptions, Regression}
 use ctsid::Error;
 mod common;
 use common::lars_fixtures::{load, problem};
+use common::rng::SplitMix as Rng;
 
 /// Relative tolerance of alphas and coefficients (issue 4: "coefficients to 1e-6 relative").
 const TOL: f64 = 1e-6;
-
-/// splitmix64: a tiny seeded generator, so every case is reproducible.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E3779B97F4A7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-    /// Approximately standard normal (sum of 12 uniforms), enough for noise.
-    fn normal(&mut self) -> f64 {
-        (0..12).map(|_| self.uniform(0.0, 1.0)).sum::<f64>() - 6.0
-    }
-}
 
 fn require_gpu() -> bool {
     std::env::var("CTSID_REQUIRE_GPU").as_deref() == Ok("1")
@@ -171,7 +150,7 @@ fn random_problem(seed: u64, n_s: usize, n_z: usize, d: usize) -> (Basis, Featur
     }
     let sd = (y.iter().map(|v| v * v).sum::<f64>() / n_s as f64).sqrt();
     for yi in &mut y {
-        *yi += 0.01 * sd * rng.normal();
+        *yi += 0.01 * sd * rng.normal12();
     }
     (basis, f, y)
 }

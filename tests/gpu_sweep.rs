@@ -4,25 +4,12 @@
 //! Without an adapter every test prints "skipping: no GPU adapter" and passes, unless
 //! CTSID_REQUIRE_GPU=1, where that is a failure.
 
+mod common;
+use common::rng::SplitMix as Rng;
 use ctsid::basis::{Basis, BasisLimits};
 use ctsid::engine::gpu::{GpuEngine, GpuOptions};
 use ctsid::engine::{Features, SweepEngine};
 use ctsid::Error;
-
-/// splitmix64: a tiny seeded generator, so every case is reproducible.
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E3779B97F4A7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-}
 
 fn names(n: usize) -> Vec<String> {
     (0..n).map(|k| format!("z{k}")).collect()

@@ -1,27 +1,11 @@
 //! Recovery of known sparse polynomials, edge cases (collinear, constant and zero columns,
 //! weights) and settings validation.
 
+mod common;
+use common::rng::SplitMix as Rng;
 use ctsid::engine::Features;
 use ctsid::regression::{Method, Model, Regression};
 use ctsid::Error;
-
-struct Rng(u64);
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E3779B97F4A7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58476D1CE4E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D049BB133111EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-    }
-    fn normal(&mut self) -> f64 {
-        let (u, v) = ((self.uniform() + 1.0) / 2.0, (self.uniform() + 1.0) / 2.0);
-        (-2.0 * (1.0 - u).ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-    }
-}
 
 struct Problem {
     features: Features,
@@ -34,15 +18,19 @@ fn problem(seed: u64, nz: usize, d: usize, n: usize, n_true: usize, noise: f64) 
     let mut rng = Rng(seed);
     let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
     let cols: Vec<Vec<f64>> = (0..nz)
-        .map(|_| (0..n).map(|_| rng.uniform()).collect())
+        .map(|_| (0..n).map(|_| rng.uniform(-1.0, 1.0)).collect())
         .collect();
     let basis = ctsid::basis::Basis::new(&names, d, Default::default()).unwrap();
     let mut truth: Vec<(usize, f64)> = Vec::new();
     while truth.len() < n_true {
         let j = (rng.next() % basis.len() as u64) as usize;
         if truth.iter().all(|t| t.0 != j) {
-            let c = (0.5 + 1.5 * (rng.uniform() + 1.0) / 2.0)
-                * if rng.uniform() < 0.0 { -1.0 } else { 1.0 };
+            let c = (0.5 + 1.5 * (rng.uniform(-1.0, 1.0) + 1.0) / 2.0)
+                * if rng.uniform(-1.0, 1.0) < 0.0 {
+                    -1.0
+                } else {
+                    1.0
+                };
             truth.push((j, c));
         }
     }
@@ -186,9 +174,12 @@ fn duplicated_feature_is_skipped_without_nan() {
     for offset in [0.0, 1e-10] {
         let mut rng = Rng(9);
         let n = 500;
-        let a: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
-        let a2: Vec<f64> = a.iter().map(|x| x + offset * rng.uniform()).collect();
-        let b: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
+        let a: Vec<f64> = (0..n).map(|_| rng.uniform(-1.0, 1.0)).collect();
+        let a2: Vec<f64> = a
+            .iter()
+            .map(|x| x + offset * rng.uniform(-1.0, 1.0))
+            .collect();
+        let b: Vec<f64> = (0..n).map(|_| rng.uniform(-1.0, 1.0)).collect();
         let y: Vec<f64> = (0..n)
             .map(|i| 1.5 * a[i] - 2.0 * a[i] * b[i] + 0.3 + 0.05 * rng.normal())
             .collect();
@@ -233,7 +224,7 @@ fn duplicated_feature_is_skipped_without_nan() {
 fn zero_and_constant_features_are_excluded() {
     let mut rng = Rng(4);
     let n = 300;
-    let a: Vec<f64> = (0..n).map(|_| rng.uniform()).collect();
+    let a: Vec<f64> = (0..n).map(|_| rng.uniform(-1.0, 1.0)).collect();
     let y: Vec<f64> = a.iter().map(|x| 2.0 * x * x - 1.0).collect();
     let f = Features::new(
         vec!["a".into(), "zero".into(), "three".into()],

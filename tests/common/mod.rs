@@ -2,3 +2,4 @@
 #![allow(dead_code)]
 
 pub mod lars_fixtures;
+pub mod rng;
