@@ -599,7 +599,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     // true ones on order-3 derivatives. So a single-output search prepares each candidate order
     // on its own; MIMO searches share one preparation at the highest order (orders of the other
     // outputs change inside the coordinate search).
-    let preps: Vec<(usize, Prepared)> = match &settings.orders {
+    let mut preps: Vec<(usize, Prepared)> = match &settings.orders {
         Orders::Search(cands) if ny == 1 => cands
             .iter()
             .map(|&n| Ok((n, prepare(rs, settings, &outputs, &inputs, n, split)?)))
@@ -609,14 +609,15 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
             prepare(rs, settings, &outputs, &inputs, max_order, split)?,
         )],
     };
-    let prep_for = |ord: &[usize]| -> &Prepared {
-        if ny == 1 {
-            if let Some((_, p)) = preps.iter().find(|(n, _)| *n == ord[0]) {
-                return p;
-            }
-        }
-        &preps[preps.len() - 1].1
+    // The preparation of a fit at orders `ord`: its own order's for a single output, else the
+    // one shared preparation.
+    let prep_index = |ord: &[usize]| -> usize {
+        let own = (ny == 1)
+            .then(|| preps.iter().position(|(n, _)| *n == ord[0]))
+            .flatten();
+        own.unwrap_or(preps.len() - 1)
     };
+    let prep_for = |ord: &[usize]| -> &Prepared { &preps[prep_index(ord)].1 };
 
     // Order selection.
     let mut candidates: Vec<Vec<Candidate>> = vec![Vec::new(); ny];
@@ -677,11 +678,8 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     };
 
     // Final fits on all training runs.
-    let prep = preps
-        .into_iter()
-        .find(|(n, _)| ny > 1 || *n == ord[0])
-        .map(|(_, p)| p)
-        .ok_or_else(|| Error::Numerical("no preparation for the selected order".into()))?;
+    let selected = prep_index(&ord);
+    let prep = preps.swap_remove(selected).1;
     let mut reports = Vec::new();
     let mut equations = Vec::new();
     for i in 0..ny {
