@@ -380,3 +380,39 @@ fn bad_settings_are_refused_before_fitting() {
         assert!(matches!(gpu, Err(Error::NoGpu(_))), "{gpu:?}");
     }
 }
+
+/// The eBIC patience stop: on noisy data the chosen model is the one the whole path gives, and
+/// the path really stops early (the breakpoints after a long run without improvement are the
+/// ones eBIC can no longer choose).
+#[test]
+fn ebic_patience_stops_the_path_without_changing_the_choice() {
+    for seed in [3u64, 4, 5] {
+        let p = problem(seed, 5, 3, 4_000, 4, 0.05);
+        let fit = |patience: usize| {
+            Regression::builder()
+                .degree(3)
+                .ebic_patience(patience)
+                .build()
+                .unwrap()
+                .fit(&p.features, &p.label, "y", None)
+                .unwrap()
+        };
+        let (early, full) = (fit(10), fit(0));
+        assert_eq!(support(&early), support(&full), "seed {seed}");
+        for (a, b) in early.terms.iter().zip(&full.terms) {
+            assert!((a.coefficient - b.coefficient).abs() <= 1e-12 * b.coefficient.abs());
+        }
+        assert_eq!(
+            early.diagnostics.stop,
+            ctsid::regression::StopReason::NoImprovement,
+            "seed {seed}: {:?}",
+            early.diagnostics
+        );
+        assert!(
+            early.diagnostics.path_steps + 5 < full.diagnostics.path_steps,
+            "seed {seed}: {} vs {} steps",
+            early.diagnostics.path_steps,
+            full.diagnostics.path_steps
+        );
+    }
+}

@@ -1046,7 +1046,10 @@ fn simulation_score(
         Profile::new(&e, &l)
     });
     if let (Some(r), true) = (&report, prep.settings.progress) {
-        eprintln!("order {} scoring: {}", c.order, r.message);
+        eprintln!(
+            "order {} scoring: {} ({:.2} s, {} iterations)",
+            c.order, r.message, r.seconds, r.iterations
+        );
     }
     Ok(())
 }

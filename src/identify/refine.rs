@@ -21,13 +21,14 @@
 //!    run, started from the first segment's) and the same LM runs on the free-run error itself,
 //!    which is what the validation gate measures; the soft defects of phase 1 leave no trace.
 //!
-//! The Jacobian is by forward differences through the adaptive Radau IIA simulator of
-//! [`crate::simulate`]: one simulation of each segment per free parameter it depends on (the
-//! coefficients and its own initial state), so an iteration costs `1 + n_coef + n_state`
-//! simulations of every sample, done in parallel over segments. Identified models have few
-//! terms, so this is cheaper to get right than forward sensitivities and uses the very integrator
-//! the gate and the user simulate with. Steps are `1e-5` relative: with breakpoints at every
-//! sample the step sequence hardly depends on the parameters, so the difference quotient is smooth.
+//! The Jacobian comes from forward sensitivities carried through the adaptive Radau IIA
+//! simulator of [`crate::simulate`] ([`crate::simulate::simulate_model_sensitivities`]): each
+//! accepted step is differentiated through its own stage equations, so the columns are the
+//! exact derivatives of the very simulation the cost and the gate measure, for the price of one
+//! small factorisation and a multi-right-hand-side solve per step. Forward differences of whole
+//! simulations (one per free parameter and segment) cost 2-5x more time for the same
+//! iterations (measured on the throttle demo's scoring fits: 14.3 s -> 2.8 s for a 20-term
+//! candidate, with the same result).
 //!
 //! The normal equations are assembled block by block (each segment touches only the
 //! coefficients and its own state) and solved densely with Marquardt's scaling
@@ -44,7 +45,9 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::model::{CompiledModel, Model};
-use crate::simulate::{fit_initial_state, rms_nrmse, simulate_model, SimOptions};
+use crate::simulate::{
+    fit_initial_state, rms_nrmse, simulate_model, simulate_model_sensitivities, SimOptions,
+};
 
 /// Settings of [`refine`].
 #[derive(Debug, Clone)]
@@ -222,6 +225,54 @@ impl<'a> Problem<'a> {
         Some(SegEval { rows, end })
     }
 
+    /// [`Self::eval_segment`] with the derivatives of its rows and end state with respect to
+    /// the free coefficients and the segment's initial state, in that column order.
+    #[allow(clippy::type_complexity)]
+    fn eval_segment_sensitivities(
+        &self,
+        model: &CompiledModel,
+        s: usize,
+        x0: &[f64],
+    ) -> Option<(SegEval, Vec<(Vec<f64>, Vec<f64>)>)> {
+        let seg = self.segs[s];
+        let run = &self.runs[seg.run];
+        let t = &run.t[seg.a..=seg.b];
+        let u: Vec<Vec<f64>> = run.u.iter().map(|c| c[seg.a..=seg.b].to_vec()).collect();
+        let mut opts = self.opts.clone();
+        opts.run = run.id.clone();
+        let (tr, sens) = simulate_model_sensitivities(model, x0, t, &u, &opts, &self.free).ok()?;
+        let n = self.n;
+        let q = self.free.len() + n;
+        let m = if seg.last { t.len() } else { t.len() - 1 };
+        let n_out = run.y.len();
+        let mut rows = Vec::with_capacity(m * n_out);
+        let mut cols: Vec<(Vec<f64>, Vec<f64>)> = (0..q)
+            .map(|_| (Vec::with_capacity(m * n_out), vec![0.0; n]))
+            .collect();
+        for (i, y) in run.y.iter().enumerate() {
+            let o = model.offset(i);
+            let w = self.norm / self.out_scale[i];
+            for k in 0..m {
+                rows.push((tr.state(k)[o] - y[seg.a + k]) * w);
+                let srow = &sens[(k * n + o) * q..(k * n + o + 1) * q];
+                for (c, v) in cols.iter_mut().zip(srow) {
+                    c.0.push(v * w);
+                }
+            }
+        }
+        let last = t.len() - 1;
+        for (c, col) in cols.iter_mut().enumerate() {
+            for j in 0..n {
+                col.1[j] = sens[(last * n + j) * q + c];
+            }
+        }
+        let end = tr.state(last).to_vec();
+        if rows.iter().chain(&sens).any(|v| !v.is_finite()) {
+            return None;
+        }
+        Some((SegEval { rows, end }, cols))
+    }
+
     fn x0_of<'t>(&self, theta: &'t [f64], s: usize) -> &'t [f64] {
         let o = self.n_coef() + s * self.n;
         &theta[o..o + self.n]
@@ -253,29 +304,12 @@ impl<'a> Problem<'a> {
         Some(r)
     }
 
-    fn step_of(&self, theta: &[f64], p: usize) -> f64 {
-        if p < self.n_coef() {
-            1e-5 * theta[p].abs().max(1e-12)
-        } else {
-            let j = (p - self.n_coef()) % self.n;
-            1e-5 * theta[p].abs().max(self.state_scale[j])
-        }
-    }
-
     /// Normal equations `J^T J`, `J^T r` by forward differences, assembled per segment.
     fn normal_equations(&self, theta: &[f64]) -> (DMatrix<f64>, DVector<f64>, Vec<f64>) {
         let nc = self.n_coef();
         let n = self.n;
         let np = self.n_params();
         let base = self.model_with(theta);
-        // Perturbed models, one per free coefficient.
-        let models: Vec<CompiledModel> = (0..nc)
-            .map(|k| {
-                let mut th = theta.to_vec();
-                th[k] += self.step_of(theta, k);
-                self.model_with(&th)
-            })
-            .collect();
         // Per segment: local parameter columns [coefficients, own state] and their blocks.
         struct Local {
             r0: SegEval,
@@ -284,36 +318,7 @@ impl<'a> Problem<'a> {
         let locals: Vec<Option<Local>> = (0..self.segs.len())
             .into_par_iter()
             .map(|s| {
-                let x0 = self.x0_of(theta, s);
-                let r0 = self.eval_segment(&base, s, x0)?;
-                let mut cols = Vec::with_capacity(nc + n);
-                let diff = |e: Option<SegEval>, h: f64, r0: &SegEval| match e {
-                    Some(e) => (
-                        e.rows
-                            .iter()
-                            .zip(&r0.rows)
-                            .map(|(a, b)| (a - b) / h)
-                            .collect(),
-                        e.end
-                            .iter()
-                            .zip(&r0.end)
-                            .map(|(a, b)| (a - b) / h)
-                            .collect(),
-                    ),
-                    // A perturbed simulation that fails holds that parameter for this iteration.
-                    None => (vec![0.0; r0.rows.len()], vec![0.0; n]),
-                };
-                for (k, m) in models.iter().enumerate() {
-                    let h = self.step_of(theta, k);
-                    cols.push(diff(self.eval_segment(m, s, x0), h, &r0));
-                }
-                for j in 0..n {
-                    let p = nc + s * n + j;
-                    let h = self.step_of(theta, p);
-                    let mut xp = x0.to_vec();
-                    xp[j] += h;
-                    cols.push(diff(self.eval_segment(&base, s, &xp), h, &r0));
-                }
+                let (r0, cols) = self.eval_segment_sensitivities(&base, s, self.x0_of(theta, s))?;
                 Some(Local { r0, cols })
             })
             .collect();

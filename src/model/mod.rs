@@ -591,6 +591,36 @@ impl CompiledModel {
             .sum()
     }
 
+    /// `d rhs / d c` for the coefficients `coefs` (indices into [`CompiledModel::coefficients`]):
+    /// written row-major `n_state x coefs.len()` into `out`. Each coefficient only moves the
+    /// top derivative of its own output, by the value of its monomial.
+    pub fn coefficient_jacobian(&self, x: &[f64], u: &[f64], coefs: &[usize], out: &mut [f64]) {
+        let q = coefs.len();
+        out.iter_mut().for_each(|v| *v = 0.0);
+        let z = |v: usize| {
+            if v < x.len() {
+                x[v]
+            } else {
+                u[v - x.len()]
+            }
+        };
+        for (col, &k) in coefs.iter().enumerate() {
+            let mut rest = k;
+            let mut i = 0;
+            while rest >= self.terms[i].len() {
+                rest -= self.terms[i].len();
+                i += 1;
+            }
+            let t = &self.terms[i][rest];
+            let m = t
+                .factors
+                .iter()
+                .fold(1.0, |a, &(v, e)| a * z(v).powi(e as i32));
+            let row = self.offsets[i] + self.orders[i] - 1;
+            out[row * q + col] = m;
+        }
+    }
+
     /// `dP_i/dz` at `z`, written into `grad` (length n_state + n_inputs).
     pub fn grad_output(&self, i: usize, z: &[f64], grad: &mut [f64]) {
         grad.iter_mut().for_each(|g| *g = 0.0);

@@ -29,7 +29,9 @@ pub mod cholesky;
 pub mod path;
 pub mod select;
 
-pub use path::{lars_path, Breakpoint, Event, Method, Path, PathOptions, StopReason};
+pub use path::{
+    lars_path, lars_path_monitored, Breakpoint, Event, Method, Path, PathOptions, StopReason,
+};
 
 use crate::basis::{Basis, BasisLimits};
 use crate::engine::gpu::{GpuEngine, GpuOptions};
@@ -51,6 +53,7 @@ pub struct RegressionBuilder {
     alpha_min: f64,
     epsilon: f64,
     ebic_gamma: f64,
+    ebic_patience: usize,
     effective_samples: Option<f64>,
     prune: bool,
     fit_intercept: bool,
@@ -73,6 +76,7 @@ impl Default for RegressionBuilder {
             alpha_min: p.alpha_min,
             epsilon: p.epsilon,
             ebic_gamma: 1.0,
+            ebic_patience: 40,
             effective_samples: None,
             prune: true,
             fit_intercept: true,
@@ -116,6 +120,11 @@ impl RegressionBuilder {
     }
     setter!(/// eBIC's gamma in [0, 1] (default 1).
         ebic_gamma: f64);
+    setter!(/// Stop the path once this many breakpoints in a row have not lowered eBIC below the
+        /// best so far (default 40; 0 computes the whole path). Late breakpoints add terms that
+        /// eBIC charges for, so past a long run without improvement the choice is settled; on
+        /// noisy data the path after the chosen support is most of the path.
+        ebic_patience: usize);
     setter!(/// Backward pruning after the eBIC choice (default on).
         prune: bool);
     setter!(/// Fit an intercept (the constant monomial, reported as a term; default on).
@@ -218,6 +227,7 @@ impl RegressionBuilder {
             degree: self.degree,
             path,
             ebic_gamma: self.ebic_gamma,
+            ebic_patience: self.ebic_patience,
             effective_samples: self.effective_samples,
             prune: self.prune,
             fit_intercept: self.fit_intercept,
@@ -235,6 +245,7 @@ pub struct Regression {
     degree: usize,
     path: PathOptions,
     ebic_gamma: f64,
+    ebic_patience: usize,
     effective_samples: Option<f64>,
     prune: bool,
     fit_intercept: bool,
@@ -474,14 +485,21 @@ impl Regression {
                 ),
             ));
         }
-        let path = lars_path(engine, label, weights, &self.path)?;
         let n_rows = engine.n_samples();
         // eBIC's n: the effective number of independent samples, never more than the rows.
         let n = self
             .effective_samples
             .map_or(n_rows, |e| (e.round() as usize).clamp(2, n_rows.max(2)));
         let p = basis.len();
-        let ebics = select::path_ebic(&path, n, p, self.ebic_gamma, self.rss_floor);
+        let mut scorer = select::EbicScorer::new(n, p, self.ebic_gamma, self.rss_floor);
+        let patience = self.ebic_patience;
+        let path = lars_path_monitored(engine, label, weights, &self.path, &mut |path, b| {
+            scorer.score(path, b);
+            patience > 0 && scorer.best.is_some_and(|(_, best)| b >= best + patience)
+        })?;
+        let ebics: Vec<Option<(f64, f64)>> = (0..path.breakpoints.len())
+            .map(|b| scorer.score(&path, b))
+            .collect();
         let (chosen, ebic_choice) = ebics
             .iter()
             .enumerate()

@@ -62,6 +62,8 @@ pub enum StopReason {
     AlphaIncreasing,
     /// The label is constant: nothing to explain.
     ConstantLabel,
+    /// The caller's monitor stopped the path (model selection saw no further improvement).
+    NoImprovement,
 }
 
 /// Settings of one path.
@@ -250,6 +252,20 @@ pub fn lars_path(
     weights: Option<&[f64]>,
     opts: &PathOptions,
 ) -> Result<Path> {
+    lars_path_monitored(engine, y, weights, opts, &mut |_, _| false)
+}
+
+/// [`lars_path`] with a monitor called with the path and the index of each new breakpoint
+/// (its support is final when it is called); returning `true` stops the path there with
+/// [`StopReason::NoImprovement`]. Model selection uses it to stop computing breakpoints it
+/// can no longer choose.
+pub fn lars_path_monitored(
+    engine: &mut dyn SweepEngine,
+    y: &[f64],
+    weights: Option<&[f64]>,
+    opts: &PathOptions,
+    monitor: &mut dyn FnMut(&Path, usize) -> bool,
+) -> Result<Path> {
     let n = engine.n_samples();
     let nc = engine.n_candidates();
     if y.len() != n {
@@ -373,6 +389,10 @@ pub fn lars_path(
         }
         if let Some(reason) = stop_next {
             path.stop = reason;
+            break;
+        }
+        if monitor(&path, n_iter) {
+            path.stop = StopReason::NoImprovement;
             break;
         }
         if alpha <= opts.alpha_min + EQ_TOL {
@@ -620,6 +640,7 @@ pub fn lars_path(
             | StopReason::SampleLimit
             | StopReason::ExactFit
             | StopReason::Relevance
+            | StopReason::NoImprovement
     ) && last_idx != usize::MAX
     {
         let col = sd.engine.columns(&[last_idx])?.pop().expect("one column");

@@ -52,61 +52,110 @@ pub fn path_ebic(
     gamma: f64,
     rss_floor: f64,
 ) -> Vec<Option<(f64, f64)>> {
-    let floor = (rss_floor * path.y_norm).powi(2);
-    let st = &path.store;
-    let m = st.ids.len();
-    // Gram matrix of every column that was ever active (O(m^2 n) once).
-    let mut gram = vec![0.0; m * m];
-    for i in 0..m {
-        for j in 0..=i {
-            let g: f64 = st.cols[i].iter().zip(&st.cols[j]).map(|(a, b)| a * b).sum();
-            gram[i * m + j] = g;
-            gram[j * m + i] = g;
+    let mut scorer = EbicScorer::new(n, p, gamma, rss_floor);
+    (0..path.breakpoints.len())
+        .map(|b| scorer.score(path, b))
+        .collect()
+}
+
+/// Scores breakpoints one at a time as a path grows (see [`path_ebic`]), so that the path can
+/// stop once eBIC has stopped improving.
+///
+/// The Gram matrix of the stored columns grows with the store (each column's products once);
+/// a support seen before is not refitted.
+pub struct EbicScorer {
+    n: usize,
+    p: usize,
+    gamma: f64,
+    rss_floor: f64,
+    /// Lower triangle of the Gram matrix of the first `gram.len()` stored columns.
+    gram: Vec<Vec<f64>>,
+    seen: Vec<(Vec<usize>, Option<(f64, f64)>)>,
+    resid: Vec<f64>,
+    /// Best eBIC so far and the breakpoint it came from.
+    pub best: Option<(f64, usize)>,
+}
+
+impl EbicScorer {
+    pub fn new(n: usize, p: usize, gamma: f64, rss_floor: f64) -> EbicScorer {
+        EbicScorer {
+            n,
+            p,
+            gamma,
+            rss_floor,
+            gram: Vec::new(),
+            seen: Vec::new(),
+            resid: Vec::new(),
+            best: None,
         }
     }
-    let yy: f64 = path.y_tilde.iter().map(|v| v * v).sum();
-    type Scored = (Vec<usize>, Option<(f64, f64)>);
-    let mut seen: Vec<Scored> = Vec::new();
-    let mut out = Vec::with_capacity(path.breakpoints.len());
-    let mut resid = vec![0.0; path.y_tilde.len()];
-    for bp in &path.breakpoints {
-        let mut key: Vec<usize> = bp.active.clone();
-        key.sort_unstable();
-        if let Some((_, v)) = seen.iter().find(|(s, _)| *s == key) {
-            out.push(*v);
-            continue;
+
+    /// eBIC and OLS RSS of breakpoint `b`'s support (None where the refit is singular).
+    pub fn score(&mut self, path: &Path, b: usize) -> Option<(f64, f64)> {
+        let floor = (self.rss_floor * path.y_norm).powi(2);
+        let st = &path.store;
+        while self.gram.len() < st.ids.len() {
+            let i = self.gram.len();
+            let row = (0..=i)
+                .map(|j| st.cols[i].iter().zip(&st.cols[j]).map(|(a, b)| a * b).sum())
+                .collect();
+            self.gram.push(row);
         }
+        let mut key: Vec<usize> = path.breakpoints[b].active.clone();
+        key.sort_unstable();
+        let val = if let Some((_, v)) = self.seen.iter().find(|(s, _)| *s == key) {
+            *v
+        } else {
+            let val = self.refit(path, &key, floor);
+            self.seen.push((key, val));
+            val
+        };
+        if let Some((e, _)) = val {
+            if self.best.is_none_or(|(be, _)| e < be) {
+                self.best = Some((e, b));
+            }
+        }
+        val
+    }
+
+    fn refit(&mut self, path: &Path, key: &[usize], floor: f64) -> Option<(f64, f64)> {
+        let st = &path.store;
+        let (n, p, gamma) = (self.n, self.p, self.gamma);
         let pos: Vec<usize> = key
             .iter()
             .map(|id| st.position(*id).expect("active columns are stored"))
             .collect();
         let k = pos.len();
-        let val = if k == 0 {
-            Some((ebic(n, yy, 1, p, gamma, floor), yy))
-        } else {
-            let g: Vec<f64> = pos
-                .iter()
-                .flat_map(|&a| pos.iter().map(move |&b| (a, b)))
-                .map(|(a, b)| gram[a * m + b])
-                .collect();
-            Cholesky::factor(&g, k, 1e-10).map(|ch| {
-                let mut b: Vec<f64> = pos.iter().map(|&q| st.xty[q]).collect();
-                ch.solve(&mut b);
-                resid.copy_from_slice(&path.y_tilde);
-                for (&q, bq) in pos.iter().zip(&b) {
-                    resid
-                        .iter_mut()
-                        .zip(&st.cols[q])
-                        .for_each(|(r, x)| *r -= bq * x);
-                }
-                let rss: f64 = resid.iter().map(|r| r * r).sum();
-                (ebic(n, rss, k + 1, p, gamma, floor), rss)
-            })
+        if k == 0 {
+            let yy: f64 = path.y_tilde.iter().map(|v| v * v).sum();
+            return Some((ebic(n, yy, 1, p, gamma, floor), yy));
+        }
+        let gram = |a: usize, b: usize| {
+            if a >= b {
+                self.gram[a][b]
+            } else {
+                self.gram[b][a]
+            }
         };
-        seen.push((key, val));
-        out.push(val);
+        let g: Vec<f64> = pos
+            .iter()
+            .flat_map(|&a| pos.iter().map(move |&b| (a, b)))
+            .map(|(a, b)| gram(a, b))
+            .collect();
+        let ch = Cholesky::factor(&g, k, 1e-10)?;
+        let mut b: Vec<f64> = pos.iter().map(|&q| st.xty[q]).collect();
+        ch.solve(&mut b);
+        self.resid.clear();
+        self.resid.extend_from_slice(&path.y_tilde);
+        for (&q, bq) in pos.iter().zip(&b) {
+            self.resid
+                .iter_mut()
+                .zip(&st.cols[q])
+                .for_each(|(r, x)| *r -= bq * x);
+        }
+        let rss: f64 = self.resid.iter().map(|r| r * r).sum();
+        Some((ebic(n, rss, k + 1, p, gamma, floor), rss))
     }
-    out
 }
 
 /// Least squares by Householder QR on columns (each scaled to unit norm first).
