@@ -9,7 +9,9 @@
 use rayon::prelude::*;
 
 use super::expr::Expr;
-use crate::simulate::{rms_nrmse, simulate, std_dev, SampledInput, SimOptions, System};
+use crate::simulate::{
+    rms_nrmse, simulate, simulate_sensitivities, std_dev, SampledInput, SimOptions, System,
+};
 
 /// A single-output model: terms `c_j * phi_j(z)`.
 #[derive(Debug, Clone)]
@@ -152,6 +154,37 @@ fn run_residuals(m: &AugModel, r: &SimRun, x0: &[f64]) -> Option<Vec<f64>> {
     Some(s.iter().zip(&r.y).map(|(a, b)| (a - b) * w).collect())
 }
 
+/// Derivatives of [`run_residuals`] with respect to the coefficients `free` and then the
+/// initial state, one column each, from forward sensitivities of the simulation.
+fn run_sensitivities(
+    m: &AugModel,
+    r: &SimRun,
+    x0: &[f64],
+    free: &[usize],
+) -> Option<Vec<Vec<f64>>> {
+    let n = m.order;
+    let input = SampledInput::new(r.t.clone(), r.u.clone()).ok()?;
+    let pjac = |x: &[f64], u: &[f64], out: &mut [f64]| {
+        let mut z = Vec::with_capacity(x.len() + u.len());
+        z.extend_from_slice(x);
+        z.extend_from_slice(u);
+        out.iter_mut().for_each(|v| *v = 0.0);
+        for (c, &j) in free.iter().enumerate() {
+            out[(n - 1) * free.len() + c] = m.terms[j].0.eval_smooth(&z, &m.eps);
+        }
+    };
+    let opts = options(&r.id, &r.y);
+    let (_, sens) = simulate_sensitivities(m, &input, x0, &r.t, &opts, free.len(), &pjac).ok()?;
+    let q = free.len() + n;
+    let w = 1.0 / (std_dev(&r.y).max(1e-300) * (r.y.len() as f64).sqrt());
+    let cols: Vec<Vec<f64>> = (0..q)
+        .map(|c| (0..r.t.len()).map(|k| sens[k * n * q + c] * w).collect())
+        .collect();
+    cols.iter()
+        .all(|c| c.iter().all(|v| v.is_finite()))
+        .then_some(cols)
+}
+
 /// Levenberg-Marquardt on the coefficients and on each run's initial state (the structure
 /// fixed), minimising the sum over runs of the squared free-run error normalised by each run's
 /// spread. The smoother's initial states are least certain exactly at the first sample (the end
@@ -199,18 +232,6 @@ pub fn refine_runs(
     for r in runs {
         th.extend(&r.x0);
     }
-    // Finite-difference steps: relative for coefficients, relative to the state's spread on
-    // the run for initial states.
-    let mut scale = vec![0.0; np];
-    for j in 0..nc {
-        scale[j] = th[j].abs().max(1e-6);
-    }
-    for (k, r) in runs.iter().enumerate() {
-        let sd = std_dev(&r.y);
-        for i in 0..n {
-            scale[nc + k * n + i] = (th[nc + k * n + i].abs()).max(sd.max(1e-9) * 1e-2);
-        }
-    }
     let Some(mut res) = eval(&th) else {
         return (m.clone(), runs.to_vec());
     };
@@ -226,46 +247,32 @@ pub fn refine_runs(
     let total: usize = runs.iter().map(|r| r.y.len()).sum();
     let mut lambda = 1e-3;
     for _ in 0..max_iter {
-        // Columns: a coefficient touches every run; an initial state only its own run.
-        // Per parameter: (run, d residuals / d parameter) for every run it touches.
-        type Column = Option<Vec<(usize, Vec<f64>)>>;
-        let cols: Vec<Column> = active
+        // Sensitivities, one simulation per run: a coefficient's column touches every run, an
+        // initial state's only its own.
+        let free: Vec<usize> = active.iter().copied().filter(|&j| j < nc).collect();
+        let mm = m.with_coefficients(&th[..nc]);
+        let sens: Option<Vec<Vec<Vec<f64>>>> = runs
             .par_iter()
-            .map(|&j| {
-                let dj = 1e-6 * scale[j];
-                let mut tp = th.clone();
-                tp[j] += dj;
-                // Only the coefficients need a new model; an initial state only its own run.
-                let mm = if j < nc {
-                    m.with_coefficients(&tp[..nc])
-                } else {
-                    m.with_coefficients(&th[..nc])
-                };
-                let which: Vec<usize> = if j < nc {
-                    (0..nr).collect()
-                } else {
-                    vec![(j - nc) / n]
-                };
-                which
-                    .into_iter()
-                    .map(|k| {
-                        let rp = run_residuals(&mm, &runs[k], &tp[nc + k * n..nc + (k + 1) * n])?;
-                        Some((
-                            k,
-                            rp.iter().zip(&res[k]).map(|(a, b)| (a - b) / dj).collect(),
-                        ))
-                    })
-                    .collect()
-            })
+            .enumerate()
+            .map(|(k, r)| run_sensitivities(&mm, r, &th[nc + k * n..nc + (k + 1) * n], &free))
             .collect();
+        let Some(sens) = sens else {
+            return finish(&th);
+        };
         let mut jac = DMatrix::<f64>::zeros(total, na);
-        for (j, c) in cols.into_iter().enumerate() {
-            let Some(c) = c else {
-                return finish(&th);
-            };
-            for (k, d) in c {
-                for (i, v) in d.into_iter().enumerate() {
-                    jac[(offsets[k] + i, j)] = v;
+        for (k, cols) in sens.iter().enumerate() {
+            for (q, &j) in active.iter().enumerate() {
+                let col = if j < nc {
+                    free.iter().position(|&f| f == j).map(|f| &cols[f])
+                } else if (j - nc) / n == k {
+                    Some(&cols[free.len() + (j - nc) % n])
+                } else {
+                    None
+                };
+                if let Some(col) = col {
+                    for (i, v) in col.iter().enumerate() {
+                        jac[(offsets[k] + i, q)] = *v;
+                    }
                 }
             }
         }
