@@ -1,9 +1,10 @@
 //! The acceptance matrix of `ctsid discover` on the generated cases: every case for seeds
-//! 0..N (default 10) at 3 % noise, printing each verdict and the pass counts.
+//! 0..N (default 10) at 3 % noise, printing each verdict and the pass counts. The free-run
+//! shrink is judged against the plant's noise-free output and printed against the measurement too.
 //!
 //! `cargo run --release --example discover_acceptance -- [SEEDS] [ETA] [CASE ...]`
 
-use ctsid::discover::cases::{generate, judge, options, CASES};
+use ctsid::discover::cases::{generate, judge, options, truth_ratio, CASES};
 use ctsid::discover::discover;
 
 fn main() {
@@ -19,6 +20,7 @@ fn main() {
     for name in &chosen {
         let mut pass = 0;
         let mut ratios = Vec::new();
+        let mut truth_ratios = Vec::new();
         for seed in 0..seeds {
             let t = std::time::Instant::now();
             let case = match generate(name, seed, eta) {
@@ -40,6 +42,7 @@ fn main() {
                     }
                     pass += ok as usize;
                     ratios.push(d.nrmse_before / d.nrmse_after.max(1e-300));
+                    truth_ratios.push(truth_ratio(&case, &d));
                     let extra = d
                         .closest
                         .clone()
@@ -63,11 +66,17 @@ fn main() {
                 Err(e) => println!("{name} seed {seed}: FAIL error {e}"),
             }
         }
-        ratios.sort_by(|a, b| a.total_cmp(b));
-        let med = ratios.get(ratios.len() / 2).copied().unwrap_or(0.0);
-        let min = ratios.first().copied().unwrap_or(0.0);
+        let med_min = |mut v: Vec<f64>| {
+            v.sort_by(|a, b| a.total_cmp(b));
+            (
+                v.get(v.len() / 2).copied().unwrap_or(0.0),
+                v.first().copied().unwrap_or(0.0),
+            )
+        };
+        let (med, min) = med_min(ratios);
+        let (tmed, tmin) = med_min(truth_ratios);
         summary.push(format!(
-            "{name}: {pass}/{seeds} pass; test NRMSE before/after median {med:.2}x, min {min:.2}x"
+            "{name}: {pass}/{seeds} pass; test NRMSE before/after vs truth median {tmed:.2}x, min {tmin:.2}x; vs measurement median {med:.2}x, min {min:.2}x"
         ));
     }
     println!("\n== acceptance at eta = {eta} ==");

@@ -88,3 +88,22 @@ fn bad_inputs_are_typed_errors() {
     assert!(discover(&case.records, &case.nominal, &o).is_err());
     assert!(generate("nope", 0, 0.03).is_err());
 }
+
+/// The tank: the forward selection adds the outflow law and then a bump near the empty tank;
+/// the bump fails its own gates (bootstrap inclusion) and is left out, the outflow is named
+/// alone with its coefficient, the linearised terms fall away, and the free-run error against
+/// the plant's noise-free output shrinks many times (against the measurement the 3 % noise
+/// floor caps it).
+#[test]
+fn tank_outflow_is_named_alone_when_a_second_effect_fails_its_gates() {
+    let case = generate("tank", 1, 0.03).unwrap();
+    let d = discover(&case.records, &case.nominal, &options(&case, 1)).unwrap();
+    let (ok, why) = judge(&case, &d);
+    assert!(ok, "{why}\n{}", d.text());
+    assert!(!d.dropped.is_empty(), "{}", d.text());
+    assert!(
+        ctsid::discover::cases::truth_ratio(&case, &d) > 5.0,
+        "{}",
+        d.text()
+    );
+}

@@ -10,9 +10,11 @@
 //!   share of `var(r)` explained by each coordinate (binned conditional means);
 //! - (c) regress in the weak form ([`weak`]) so label and regressors see the same filter, with a
 //!   Gaussian prior on each nominal coefficient (default +-20 %) ([`fit`]);
-//! - (d) gates: block-bootstrap inclusion >= 80 %, a 95 % bootstrap interval excluding zero,
-//!   >= 10 % less weak-form residual on validation runs and >= 20 % less free-run error on
-//!   validation runs than both the nominal and the re-tuned nominal;
+//! - (d) gates: block-bootstrap inclusion >= 80 %, a 95 % bootstrap interval excluding zero
+//!   (both per effect: a selected effect that fails them is left out, reported, and the rest
+//!   judged without it), >= 10 % less weak-form residual on validation runs and >= 20 % less
+//!   free-run error on validation runs than both the nominal and the re-tuned nominal (for the
+//!   remaining effects together);
 //! - (e) names, formulas and aliases (partial correlation > 0.95 after the nominal columns);
 //! - (f) the accepted structure is refined on simulation error ([`sim::refine`]) and scored on
 //!   the test runs.
@@ -156,6 +158,9 @@ pub struct Discovery {
     pub retuned: Vec<Retuned>,
     /// Why nothing was added, with the closest candidate.
     pub closest: Option<String>,
+    /// Effects the forward selection chose that failed their own gates (inclusion or
+    /// interval), and were left out before the others were judged.
+    pub dropped: Vec<String>,
     pub gates: Option<Gates>,
     pub runs: Vec<RunScore>,
     pub shares: Vec<Share>,
@@ -631,40 +636,70 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     };
 
     // (d) block bootstrap: inclusion (of the effect or an alias) and intervals.
-    let mut rng = Rng::new(o.seed ^ 0x6469_7363_6f76_6572);
     let mut cand: Vec<usize> = set.clone();
     if cand.is_empty() {
         cand.extend(best_single);
     }
-    let aliases: Vec<Vec<usize>> = cand.iter().map(|&k| alias_of(k)).collect();
-    let mut hits = vec![0usize; cand.len()];
-    let mut samples: Vec<Vec<f64>> = vec![Vec::new(); cand.len()];
-    for _ in 0..o.bootstrap {
-        let mut g = Gram::zeros(ncol);
-        for _ in 0..blocks.len() {
-            let b = (rng.next_u64() % blocks.len() as u64) as usize;
-            g.add(&blocks[b]);
-        }
-        let s = pb.forward(&g, n_eff, o.max_effects);
-        for (i, &k) in cand.iter().enumerate() {
-            if s.contains(&k) || aliases[i].iter().any(|a| s.contains(a)) {
-                hits[i] += 1;
+    let bootstrap = |cand: &[usize]| {
+        let mut rng = Rng::new(o.seed ^ 0x6469_7363_6f76_6572);
+        let aliases: Vec<Vec<usize>> = cand.iter().map(|&k| alias_of(k)).collect();
+        let mut hits = vec![0usize; cand.len()];
+        let mut samples: Vec<Vec<f64>> = vec![Vec::new(); cand.len()];
+        for _ in 0..o.bootstrap {
+            let mut g = Gram::zeros(ncol);
+            for _ in 0..blocks.len() {
+                let b = (rng.next_u64() % blocks.len() as u64) as usize;
+                g.add(&blocks[b]);
+            }
+            let s = pb.forward(&g, n_eff, o.max_effects);
+            for (i, &k) in cand.iter().enumerate() {
+                if s.contains(&k) || aliases[i].iter().any(|a| s.contains(a)) {
+                    hits[i] += 1;
+                }
+            }
+            if let Some(sol) = pb.fit(&g, cand) {
+                for i in 0..cand.len() {
+                    samples[i].push(sol.coef[i]);
+                }
             }
         }
-        if let Some(sol) = pb.fit(&g, &cand) {
-            for i in 0..cand.len() {
-                samples[i].push(sol.coef[i]);
-            }
+        let inclusion: Vec<f64> = hits
+            .iter()
+            .map(|&h| h as f64 / o.bootstrap.max(1) as f64)
+            .collect();
+        let intervals: Vec<[f64; 2]> = samples
+            .iter()
+            .map(|s| [percentile(s, 2.5), percentile(s, 97.5)])
+            .collect();
+        (aliases, inclusion, intervals)
+    };
+    let passes = |inc: f64, iv: &[f64; 2]| inc >= 0.8 && (iv[0] > 0.0 || iv[1] < 0.0);
+    let (mut aliases, mut inclusion, mut intervals) = bootstrap(&cand);
+    // The gates are per effect: one that fails them is not named, and the others are judged
+    // without it (its share of the fit moves to them, so their intervals are taken again). In
+    // the tank case the forward selection added a bump near the empty tank after the outflow
+    // law; the bump held in 43 % of refits, and judging the two together refused the outflow.
+    let mut dropped: Vec<String> = Vec::new();
+    while !set.is_empty() && cand.len() > 1 {
+        let keep: Vec<usize> = (0..cand.len())
+            .filter(|&i| passes(inclusion[i], &intervals[i]))
+            .collect();
+        if keep.is_empty() || keep.len() == cand.len() {
+            break;
         }
+        for i in (0..cand.len()).filter(|i| !keep.contains(i)) {
+            dropped.push(format!(
+                "{} {} (inclusion {:.0} %, 95 % interval [{}, {}])",
+                p.effects[cand[i]].family,
+                p.effects[cand[i]].formula,
+                100.0 * inclusion[i],
+                num(intervals[i][0]),
+                num(intervals[i][1])
+            ));
+        }
+        cand = keep.iter().map(|&i| cand[i]).collect();
+        (aliases, inclusion, intervals) = bootstrap(&cand);
     }
-    let inclusion: Vec<f64> = hits
-        .iter()
-        .map(|&h| h as f64 / o.bootstrap.max(1) as f64)
-        .collect();
-    let intervals: Vec<[f64; 2]> = samples
-        .iter()
-        .map(|s| [percentile(s, 2.5), percentile(s, 97.5)])
-        .collect();
     let cand_sol = pb.fit(&train, &cand).ok_or_else(numerr)?;
     let idx_nom: Vec<usize> = (0..n_nom).collect();
     let idx_cand: Vec<usize> = (0..n_nom).chain(cand.iter().map(|&k| n_nom + k)).collect();
@@ -815,6 +850,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         effects,
         retuned,
         closest,
+        dropped,
         gates: Some(gates),
         runs,
         shares,
@@ -1076,6 +1112,9 @@ impl Discovery {
         if let Some(c) = &self.closest {
             s += &format!("  {c}\n");
         }
+        for d in &self.dropped {
+            s += &format!("  left out (failed its own gates): {d}\n");
+        }
         if let Some(g) = &self.gates {
             s += &format!(
                 "gates: inclusion {:?}, interval excludes 0 {:?}, validation residual ratio {:.3}, validation free-run ratio {:.3}\n",
@@ -1168,6 +1207,7 @@ impl Discovery {
             "effects": self.effects,
             "retuned": self.retuned,
             "closest": self.closest,
+            "dropped": self.dropped,
             "nrmse_before": self.nrmse_before,
             "nrmse_after": self.nrmse_after,
         });
