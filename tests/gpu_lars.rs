@@ -13,7 +13,8 @@
 //! fresh per case from their own seed, sparse truth plus noise, LAR and lasso; (b) every
 //! scikit-learn fixture in tests/data/lars, with the candidates built from the fixture's Z
 //! through the basis (as tests/regression_sklearn.rs does for the CPU engine); (c) the complete
-//! `Regression::fit_with_engine` (path, eBIC choice, pruning, f64 refit) on the random problems.
+//! `Regression::fit_with_engine` (path, eBIC choice, pruning, f64 refit) on the random problems,
+//! for LAR, the lasso and forward orthogonal least squares.
 //!
 //! Why parity is exact and not merely close: `lars_path` takes from the sweeps only *choices*
 //! (which candidate enters, which one limits the step); the numbers that make a breakpoint (the
@@ -266,6 +267,7 @@ fn whole_regression_fit_matches_the_cpu_engine() {
     for (seed, method) in [
         (0x1A55_0020u64, Method::LassoLars),
         (0x1A55_0021, Method::Lars),
+        (0x1A55_0022, Method::ForwardOls),
     ] {
         let (basis, f, y) = random_problem(seed, 3000, 6, 6);
         let Some(mut gpu) = gpu_or_skip(&f, &basis) else {

@@ -43,6 +43,9 @@ pub struct IdentifyArgs {
     /// Sweep engine: auto, cpu or gpu.
     #[arg(long, default_value = "auto")]
     pub engine: EngineChoice,
+    /// Structure search along which eBIC chooses the terms.
+    #[arg(long, value_enum, default_value_t = super::regress::MethodArg::ForwardOls)]
+    pub method: super::regress::MethodArg,
     /// Write the model file here.
     #[arg(short = 'o', long)]
     pub output_model: Option<PathBuf>,
@@ -92,6 +95,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     };
     s.eta = a.eta;
     s.engine = a.engine;
+    s.method = a.method.into();
     s.progress = super::show_progress(a.quiet);
     let id = identify(&rs, &split, &s)?;
 
@@ -173,7 +177,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             "test_nrmse": id.test_nrmse(),
             "weighting": id.weighting,
             "refinement": id.refinement,
-            "settings": {"degree": a.degree, "eta": a.eta, "engine": a.engine.to_string(), "train": split.train.iter().map(|&r| ids[r].clone()).collect::<Vec<_>>()},
+            "settings": {"degree": a.degree, "eta": a.eta, "engine": a.engine.to_string(), "method": s.method, "train": split.train.iter().map(|&r| ids[r].clone()).collect::<Vec<_>>()},
         }));
         model.write(&path.display().to_string())?;
         eprintln!("model written to {}", path.display());

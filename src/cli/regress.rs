@@ -28,6 +28,7 @@ pub struct RegressArgs {
     /// Most active terms along the path.
     #[arg(long, default_value_t = 40)]
     pub max_terms: usize,
+    /// Structure search: the LARS / lasso path (scikit-learn's) or forward orthogonal least squares.
     #[arg(long, value_enum, default_value_t = MethodArg::Lassolars)]
     pub method: MethodArg,
     #[arg(long, value_enum, default_value_t = EngineArg::Auto)]
@@ -47,6 +48,17 @@ pub struct RegressArgs {
 pub enum MethodArg {
     Lars,
     Lassolars,
+    ForwardOls,
+}
+
+impl From<MethodArg> for Method {
+    fn from(m: MethodArg) -> Method {
+        match m {
+            MethodArg::Lars => Method::Lars,
+            MethodArg::Lassolars => Method::LassoLars,
+            MethodArg::ForwardOls => Method::ForwardOls,
+        }
+    }
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -76,10 +88,7 @@ pub fn run(a: RegressArgs) -> Result<()> {
         EngineArg::Gpu => EngineChoice::Gpu,
         EngineArg::Auto => EngineChoice::Auto,
     };
-    let method = match a.method {
-        MethodArg::Lars => Method::Lars,
-        MethodArg::Lassolars => Method::LassoLars,
-    };
+    let method = Method::from(a.method);
     let reg = Regression::builder()
         .degree(a.degree)
         .max_terms(a.max_terms)

@@ -81,6 +81,9 @@ pub struct Settings {
     pub eta: f64,
     pub folds: usize,
     pub engine: EngineChoice,
+    /// Structure search along which eBIC chooses: forward orthogonal least squares (default)
+    /// or the LARS / lasso path (see [`crate::regression::forward`] for why).
+    pub method: Method,
     pub max_terms: usize,
     /// Weight samples by the confidence of their label (see the module docs).
     pub weighting: bool,
@@ -118,6 +121,7 @@ impl Settings {
             eta: 1.2,
             folds: 5,
             engine: EngineChoice::Auto,
+            method: Method::ForwardOls,
             max_terms: 40,
             weighting: true,
             same_filter: true,
@@ -374,20 +378,50 @@ impl Prepared<'_> {
         (Features::new(names, cols), label, weights, excluded)
     }
 
+    /// The label's own uncertainty relative to its spread: `sqrt(sum w sigma^2 / sum w (y -
+    /// mean)^2)` over the fit's samples, with the smoother's per-sample sigma of the label.
+    ///
+    /// A residual below what the reconstructed label is known to within is no evidence for a
+    /// further term: on noise-free data the label's error is the smoother's (largest at input
+    /// kinks), it is structured, and candidates fit it. Flooring eBIC's residual there stops the
+    /// path from buying terms with it (noise-free MIMO fits at d = 4 had taken dozens of tiny
+    /// terms and no longer simulated). On noisy data the residual is above this floor anyway.
+    fn label_floor(&self, i: usize, ord: &[usize], runs: &[usize], y: &[f64], w: &[f64]) -> f64 {
+        let sw: f64 = w.iter().sum();
+        if !(sw > 0.0) {
+            return 0.0;
+        }
+        let mean = w.iter().zip(y).map(|(a, b)| a * b).sum::<f64>() / sw;
+        let var: f64 = w.iter().zip(y).map(|(a, b)| a * (b - mean).powi(2)).sum();
+        let mut s2 = 0.0;
+        let mut k = 0;
+        for &r in runs {
+            for v in &self.eqs[i].outs[i][r].sigma[ord[i]] {
+                s2 += w[k] * v * v;
+                k += 1;
+            }
+        }
+        if var > 0.0 {
+            (s2 / var).sqrt()
+        } else {
+            0.0
+        }
+    }
+
     /// The sparse regression for equation i on `used` samples (those with a positive weight).
     ///
     /// eBIC counts independent samples: residuals of smoothed signals are correlated over about
     /// pi / h samples (h the equation's scaled smoothing step), so `used * min(1, h / pi)` of them.
-    fn regression(&self, i: usize, used: usize) -> Result<Regression> {
+    fn regression(&self, i: usize, used: usize, floor: f64) -> Result<Regression> {
         let h = self.eqs[i].outs[i].first().map_or(1.0, |d| d.h);
         Regression::builder()
             .effective_samples(used as f64 * (h / std::f64::consts::PI).min(1.0))
             // Reconstructed derivatives are never better than ~1e-4 relative (input kinks, ends):
             // below that, eBIC should treat a fit as exact rather than reward terms that fit the
             // smoother's own error.
-            .rss_floor(RSS_FLOOR)
+            .rss_floor(floor.max(RSS_FLOOR))
             .degree(self.settings.degree)
-            .method(Method::LassoLars)
+            .method(self.settings.method)
             .max_terms(self.settings.max_terms)
             .engine(self.settings.engine)
             .build()
@@ -402,7 +436,8 @@ impl Prepared<'_> {
     fn fit(&self, i: usize, ord: &[usize], fit_runs: &[usize]) -> Result<crate::regression::Model> {
         let (f, y, w0, _) = self.design(i, ord, fit_runs);
         let label = derivative_name(&self.settings.outputs[i], ord[i]);
-        let reg = self.regression(i, w0.iter().filter(|w| **w > 0.0).count())?;
+        let floor = self.label_floor(i, ord, fit_runs, &y, &w0);
+        let reg = self.regression(i, w0.iter().filter(|w| **w > 0.0).count(), floor)?;
         let mut w = w0.clone();
         let mut model = reg.fit(&f, &y, &label, Some(&w))?;
         for _ in 0..ROBUST_ITERATIONS {

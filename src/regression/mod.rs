@@ -26,6 +26,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
 pub mod cholesky;
+pub mod forward;
 pub mod path;
 pub mod select;
 

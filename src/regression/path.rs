@@ -42,6 +42,9 @@ pub enum Method {
     Lars,
     #[default]
     LassoLars,
+    /// Forward selection by orthogonal least squares ([`super::forward`]).
+    #[serde(rename = "forward_ols")]
+    ForwardOls,
 }
 
 /// Why the path ended.
@@ -191,13 +194,13 @@ fn min_pos(it: impl Iterator<Item = f64>) -> f64 {
     it.filter(|x| *x > 0.0).fold(f64::MAX, f64::min)
 }
 
-fn dot(a: &[f64], b: &[f64]) -> f64 {
+pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
 /// x~ = s * (x - m) / n with the exact weighted mean and centred norm of `col` (zeros when
 /// the column is constant).
-fn standardised(col: &[f64], w: &[f64], sw: f64, sqrt_w: &[f64]) -> Vec<f64> {
+pub(super) fn standardised(col: &[f64], w: &[f64], sw: f64, sqrt_w: &[f64]) -> Vec<f64> {
     let m = w.iter().zip(col).map(|(a, b)| a * b).sum::<f64>() / sw;
     let s = w
         .iter()
@@ -214,20 +217,20 @@ fn standardised(col: &[f64], w: &[f64], sw: f64, sqrt_w: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-struct Standardiser<'a> {
-    engine: &'a mut dyn SweepEngine,
+pub(super) struct Standardiser<'a> {
+    pub(super) engine: &'a mut dyn SweepEngine,
     mean: Vec<f64>,
     norm: Vec<f64>,
-    usable: Vec<bool>,
+    pub(super) usable: Vec<bool>,
     sqrt_w: Vec<f64>,
     raw: Vec<f64>,
     scaled: Vec<f64>,
-    sweeps: usize,
+    pub(super) sweeps: usize,
 }
 
 impl Standardiser<'_> {
     /// c_j = x~_j^T u for every candidate (0 for unusable ones).
-    fn corr(&mut self, u: &[f64], out: &mut [f64]) -> Result<()> {
+    pub(super) fn corr(&mut self, u: &[f64], out: &mut [f64]) -> Result<()> {
         for ((s, w), x) in self.scaled.iter_mut().zip(&self.sqrt_w).zip(u) {
             *s = w * x;
         }
@@ -245,27 +248,24 @@ impl Standardiser<'_> {
     }
 }
 
-/// Computes the path of `y` over every candidate of `engine` (see the module docs).
-pub fn lars_path(
-    engine: &mut dyn SweepEngine,
-    y: &[f64],
-    weights: Option<&[f64]>,
-    opts: &PathOptions,
-) -> Result<Path> {
-    lars_path_monitored(engine, y, weights, opts, &mut |_, _| false)
+/// What every path starts from: the standardiser over the engine, an empty path with the
+/// weighted, centred label, the weights and their sum.
+pub(super) struct Begun<'a> {
+    pub(super) sd: Standardiser<'a>,
+    pub(super) path: Path,
+    pub(super) w: Vec<f64>,
+    pub(super) sw: f64,
+    pub(super) y_tilde: Vec<f64>,
 }
 
-/// [`lars_path`] with a monitor called with the path and the index of each new breakpoint
-/// (its support is final when it is called); returning `true` stops the path there with
-/// [`StopReason::NoImprovement`]. Model selection uses it to stop computing breakpoints it
-/// can no longer choose.
-pub fn lars_path_monitored(
-    engine: &mut dyn SweepEngine,
+/// Checks the label, takes the column statistics and sets up the standardisation (see the
+/// module docs) for a path of `method`.
+pub(super) fn begin<'a>(
+    engine: &'a mut dyn SweepEngine,
     y: &[f64],
     weights: Option<&[f64]>,
-    opts: &PathOptions,
-    monitor: &mut dyn FnMut(&Path, usize) -> bool,
-) -> Result<Path> {
+    method: Method,
+) -> Result<Begun<'a>> {
     let n = engine.n_samples();
     let nc = engine.n_candidates();
     if y.len() != n {
@@ -302,7 +302,7 @@ pub fn lars_path_monitored(
         }
     }
     let n_usable = usable.iter().filter(|u| **u).count();
-    let mut sd = Standardiser {
+    let sd = Standardiser {
         engine,
         mean: stats.mean,
         norm: stats.norm,
@@ -313,8 +313,8 @@ pub fn lars_path_monitored(
         sweeps: 0,
     };
 
-    let mut path = Path {
-        method: opts.method,
+    let path = Path {
+        method,
         breakpoints: Vec::new(),
         events: Vec::new(),
         stop: StopReason::AlphaMin,
@@ -328,6 +328,49 @@ pub fn lars_path_monitored(
         y_tilde: y_tilde.clone(),
         n_usable,
     };
+    Ok(Begun {
+        sd,
+        path,
+        w,
+        sw,
+        y_tilde,
+    })
+}
+
+/// Computes the path of `y` over every candidate of `engine` (see the module docs).
+pub fn lars_path(
+    engine: &mut dyn SweepEngine,
+    y: &[f64],
+    weights: Option<&[f64]>,
+    opts: &PathOptions,
+) -> Result<Path> {
+    lars_path_monitored(engine, y, weights, opts, &mut |_, _| false)
+}
+
+/// [`lars_path`] with a monitor called with the path and the index of each new breakpoint
+/// (its support is final when it is called); returning `true` stops the path there with
+/// [`StopReason::NoImprovement`]. Model selection uses it to stop computing breakpoints it
+/// can no longer choose.
+pub fn lars_path_monitored(
+    engine: &mut dyn SweepEngine,
+    y: &[f64],
+    weights: Option<&[f64]>,
+    opts: &PathOptions,
+    monitor: &mut dyn FnMut(&Path, usize) -> bool,
+) -> Result<Path> {
+    if opts.method == Method::ForwardOls {
+        return super::forward::forward_path(engine, y, weights, opts, monitor);
+    }
+    let n = engine.n_samples();
+    let nc = engine.n_candidates();
+    let Begun {
+        mut sd,
+        mut path,
+        w,
+        sw,
+        y_tilde,
+    } = begin(engine, y, weights, opts.method)?;
+    let y_norm = path.y_norm;
     if !(y_norm > 0.0) {
         path.breakpoints.push(Breakpoint {
             alpha: 0.0,
