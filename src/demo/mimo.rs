@@ -99,6 +99,13 @@ pub fn run(o: &MimoOptions) -> Result<String> {
             };
             let secs = t.elapsed().as_secs_f64();
             let (mut found, mut total, mut extra, mut worst) = (0, 0, 0, 0.0f64);
+            // True terms of higher degree than d cannot be found at d: count them apart.
+            let beyond: usize = truth
+                .outputs
+                .iter()
+                .flat_map(|o| &o.terms)
+                .filter(|t| t.exponents.values().sum::<u32>() as usize > d)
+                .count();
             let _ = writeln!(out, "\n## d = {d}, engine {}\n", id.outputs[0].engine);
             for i in 0..outputs.len() {
                 let (rows, ex) = coefficient_errors(&id.model, &truth, i);
@@ -116,7 +123,11 @@ pub fn run(o: &MimoOptions) -> Result<String> {
                 crate::basis::count(11, d).unwrap_or(0).to_string(),
                 id.outputs[0].engine.clone(),
                 format!("{secs:.2}"),
-                format!("{found} / {total}"),
+                if beyond > 0 {
+                    format!("{found} / {total} ({beyond} of degree > {d})")
+                } else {
+                    format!("{found} / {total}")
+                },
                 extra.to_string(),
                 format!("{:.2} %", 100.0 * worst),
                 nr.join(", "),
