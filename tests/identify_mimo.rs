@@ -38,6 +38,9 @@ fn mimo_plant_at_degree_four_gives_exactly_the_true_equations() {
         }
         let (_, _, pooled, diverged) = nrmse_vs_truth(&id, &runs, i);
         assert_eq!(diverged, 0);
-        assert!(pooled < 1e-3, "output {i}: free-run NRMSE vs truth {pooled}");
+        assert!(
+            pooled < 1e-3,
+            "output {i}: free-run NRMSE vs truth {pooled}"
+        );
     }
 }

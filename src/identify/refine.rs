@@ -199,14 +199,20 @@ impl<'a> Problem<'a> {
         m
     }
 
-    /// Simulates segment `s` of `model` from `x0`; `None` if it diverges.
-    fn eval_segment(&self, model: &CompiledModel, s: usize, x0: &[f64]) -> Option<SegEval> {
+    /// Segment `s`, its run, sample times, inputs and simulation options.
+    fn segment_data(&self, s: usize) -> (Segment, &RunData, &[f64], Vec<Vec<f64>>, SimOptions) {
         let seg = self.segs[s];
         let run = &self.runs[seg.run];
         let t = &run.t[seg.a..=seg.b];
         let u: Vec<Vec<f64>> = run.u.iter().map(|c| c[seg.a..=seg.b].to_vec()).collect();
         let mut opts = self.opts.clone();
         opts.run = run.id.clone();
+        (seg, run, t, u, opts)
+    }
+
+    /// Simulates segment `s` of `model` from `x0`; `None` if it diverges.
+    fn eval_segment(&self, model: &CompiledModel, s: usize, x0: &[f64]) -> Option<SegEval> {
+        let (seg, run, t, u, opts) = self.segment_data(s);
         let tr = simulate_model(model, x0, t, &u, &opts).ok()?;
         let m = if seg.last { t.len() } else { t.len() - 1 };
         let n_out = run.y.len();
@@ -234,12 +240,7 @@ impl<'a> Problem<'a> {
         s: usize,
         x0: &[f64],
     ) -> Option<(SegEval, Vec<(Vec<f64>, Vec<f64>)>)> {
-        let seg = self.segs[s];
-        let run = &self.runs[seg.run];
-        let t = &run.t[seg.a..=seg.b];
-        let u: Vec<Vec<f64>> = run.u.iter().map(|c| c[seg.a..=seg.b].to_vec()).collect();
-        let mut opts = self.opts.clone();
-        opts.run = run.id.clone();
+        let (seg, run, t, u, opts) = self.segment_data(s);
         let (tr, sens) = simulate_model_sensitivities(model, x0, t, &u, &opts, &self.free).ok()?;
         let n = self.n;
         let q = self.free.len() + n;

@@ -31,7 +31,7 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
 use super::path::{
-    begin, dot, standardised, Begun, Breakpoint, Event, Path, PathOptions, StopReason,
+    begin, dot, standardised_with_stats, Begun, Breakpoint, Event, Path, PathOptions, StopReason,
 };
 use crate::engine::SweepEngine;
 use crate::error::Result;
@@ -53,18 +53,11 @@ pub fn forward_path(
         w,
         sw,
         y_tilde,
-    } = begin(engine, y, weights, opts.method)?;
+    } = match begin(engine, y, weights, opts.method)? {
+        Ok(b) => b,
+        Err(done) => return Ok(done),
+    };
     let y_norm = path.y_norm;
-    if !(y_norm > 0.0) {
-        path.breakpoints.push(Breakpoint {
-            alpha: 0.0,
-            active: vec![],
-            coefs: vec![],
-            rel_residual: 0.0,
-        });
-        path.stop = StopReason::ConstantLabel;
-        return Ok(path);
-    }
 
     let mut r = y_tilde.clone();
     let mut c = vec![0.0; nc];
@@ -138,7 +131,7 @@ pub fn forward_path(
                 break;
             }
             let col = sd.engine.columns(&[j])?.pop().expect("one column");
-            let xt = standardised(&col, &w, sw, &path.sqrt_w);
+            let (xt, m, s) = standardised_with_stats(&col, &w, sw, &path.sqrt_w);
             let mut v = xt.clone();
             let mut coef_on_q = vec![0.0; q.len()];
             for _ in 0..2 {
@@ -165,9 +158,9 @@ pub fn forward_path(
                 proj[j] = 1.0 - d2;
                 continue;
             }
-            chosen = Some((j, xt, v, coef_on_q, d2.sqrt(), col));
+            chosen = Some((j, xt, v, coef_on_q, d2.sqrt(), m, s));
         }
-        let Some((j, xt, mut v, coef_on_q, dist, col)) = chosen else {
+        let Some((j, xt, mut v, coef_on_q, dist, m, s)) = chosen else {
             // Every usable candidate is active or collinear with the active ones.
             path.stop = StopReason::AlphaMin;
             break;
@@ -179,20 +172,7 @@ pub fn forward_path(
         row.push(dist);
         rmat.push(row);
         z.push(dot(&v, &y_tilde));
-        if path.store.position(j).is_none() {
-            let m = w.iter().zip(&col).map(|(a, b)| a * b).sum::<f64>() / sw;
-            let s = w
-                .iter()
-                .zip(&col)
-                .map(|(a, b)| a * (b - m) * (b - m))
-                .sum::<f64>()
-                .sqrt();
-            path.store.ids.push(j);
-            path.store.mean.push(m);
-            path.store.norm.push(s);
-            path.store.xty.push(dot(&xt, &y_tilde));
-            path.store.cols.push(xt);
-        }
+        path.store.add(j, m, s, &xt, &y_tilde);
         // One sweep of the new direction updates every correlation and projection.
         sd.corr(&v, &mut g)?;
         for k in 0..nc {

@@ -150,6 +150,18 @@ impl ColumnStore {
     pub fn position(&self, id: usize) -> Option<usize> {
         self.ids.iter().position(|&j| j == id)
     }
+
+    /// Stores candidate `id` (exact weighted mean `m` and centred norm `s`, standardised column
+    /// `xt`) unless it is stored already.
+    pub(super) fn add(&mut self, id: usize, m: f64, s: f64, xt: &[f64], y_tilde: &[f64]) {
+        if self.position(id).is_none() {
+            self.ids.push(id);
+            self.mean.push(m);
+            self.norm.push(s);
+            self.xty.push(dot(xt, y_tilde));
+            self.cols.push(xt.to_vec());
+        }
+    }
 }
 
 /// A computed path and everything the selection needs.
@@ -201,6 +213,16 @@ pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// x~ = s * (x - m) / n with the exact weighted mean and centred norm of `col` (zeros when
 /// the column is constant).
 pub(super) fn standardised(col: &[f64], w: &[f64], sw: f64, sqrt_w: &[f64]) -> Vec<f64> {
+    standardised_with_stats(col, w, sw, sqrt_w).0
+}
+
+/// [`standardised`], with the mean and centred norm it used.
+pub(super) fn standardised_with_stats(
+    col: &[f64],
+    w: &[f64],
+    sw: f64,
+    sqrt_w: &[f64],
+) -> (Vec<f64>, f64, f64) {
     let m = w.iter().zip(col).map(|(a, b)| a * b).sum::<f64>() / sw;
     let s = w
         .iter()
@@ -209,12 +231,14 @@ pub(super) fn standardised(col: &[f64], w: &[f64], sw: f64, sqrt_w: &[f64]) -> V
         .sum::<f64>()
         .sqrt();
     if !(s > 0.0) {
-        return vec![0.0; col.len()];
+        return (vec![0.0; col.len()], m, s);
     }
-    col.iter()
+    let xt = col
+        .iter()
         .zip(sqrt_w)
         .map(|(x, q)| q * (x - m) / s)
-        .collect()
+        .collect();
+    (xt, m, s)
 }
 
 pub(super) struct Standardiser<'a> {
@@ -258,14 +282,26 @@ pub(super) struct Begun<'a> {
     pub(super) y_tilde: Vec<f64>,
 }
 
+/// The path of a constant label: one empty breakpoint, nothing to explain.
+fn constant_label(mut path: Path) -> Path {
+    path.breakpoints.push(Breakpoint {
+        alpha: 0.0,
+        active: vec![],
+        coefs: vec![],
+        rel_residual: 0.0,
+    });
+    path.stop = StopReason::ConstantLabel;
+    path
+}
+
 /// Checks the label, takes the column statistics and sets up the standardisation (see the
-/// module docs) for a path of `method`.
+/// module docs) for a path of `method`; a constant label gets its finished path instead.
 pub(super) fn begin<'a>(
     engine: &'a mut dyn SweepEngine,
     y: &[f64],
     weights: Option<&[f64]>,
     method: Method,
-) -> Result<Begun<'a>> {
+) -> Result<std::result::Result<Begun<'a>, Path>> {
     let n = engine.n_samples();
     let nc = engine.n_candidates();
     if y.len() != n {
@@ -328,13 +364,16 @@ pub(super) fn begin<'a>(
         y_tilde: y_tilde.clone(),
         n_usable,
     };
-    Ok(Begun {
+    if !(path.y_norm > 0.0) {
+        return Ok(Err(constant_label(path)));
+    }
+    Ok(Ok(Begun {
         sd,
         path,
         w,
         sw,
         y_tilde,
-    })
+    }))
 }
 
 /// Computes the path of `y` over every candidate of `engine` (see the module docs).
@@ -369,18 +408,11 @@ pub fn lars_path_monitored(
         w,
         sw,
         y_tilde,
-    } = begin(engine, y, weights, opts.method)?;
+    } = match begin(engine, y, weights, opts.method)? {
+        Ok(b) => b,
+        Err(done) => return Ok(done),
+    };
     let y_norm = path.y_norm;
-    if !(y_norm > 0.0) {
-        path.breakpoints.push(Breakpoint {
-            alpha: 0.0,
-            active: vec![],
-            coefs: vec![],
-            rel_residual: 0.0,
-        });
-        path.stop = StopReason::ConstantLabel;
-        return Ok(path);
-    }
 
     let lasso = opts.method == Method::LassoLars;
     let mut cov = vec![0.0; nc];
@@ -530,13 +562,7 @@ pub fn lars_path_monitored(
                 continue;
             }
             chol.append(wv, pivot);
-            if path.store.position(c_idx).is_none() {
-                path.store.ids.push(c_idx);
-                path.store.mean.push(m);
-                path.store.norm.push(s);
-                path.store.xty.push(dot(&xt, &y_tilde));
-                path.store.cols.push(xt.clone());
-            }
+            path.store.add(c_idx, m, s, &xt, &y_tilde);
             xa.push(xt);
             active.push(c_idx);
             in_active[c_idx] = true;

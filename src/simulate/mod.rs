@@ -382,6 +382,27 @@ impl DenseLu {
     }
 }
 
+/// LU factors of the Radau stage matrix `I - h (a_ij J_j)` (block (i, j), `J_j` the Jacobian at
+/// stage j; simplified Newton uses one Jacobian for all three), or `None` when it is singular.
+fn stage_matrix(a: &[[f64; 3]; 3], n: usize, h: f64, jacs: [&[f64]; 3]) -> Option<DenseLu> {
+    let m = 3 * n;
+    let mut mat = vec![0.0; m * m];
+    for d in 0..m {
+        mat[d * m + d] = 1.0;
+    }
+    for i in 0..3 {
+        for (j, jac) in jacs.iter().enumerate() {
+            let hij = h * a[i][j];
+            for r in 0..n {
+                for q in 0..n {
+                    mat[(i * n + r) * m + j * n + q] -= hij * jac[r * n + q];
+                }
+            }
+        }
+    }
+    DenseLu::factor(m, mat)
+}
+
 enum StepOutcome {
     Ok(Vec<f64>),
     /// Newton did not converge: retry with a smaller step.
@@ -429,24 +450,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
     /// LU factors of the simplified-Newton matrix `I - h (A x J)` for step `h` (`None` when it
     /// is singular: the caller retries with a smaller step).
     fn newton_matrix(&self, h: f64, jac: &[f64]) -> Option<DenseLu> {
-        let n = self.n;
-        let m = 3 * n;
-        let a = self.rk.a;
-        let mut mat = vec![0.0; m * m];
-        for d in 0..m {
-            mat[d * m + d] = 1.0;
-        }
-        for i in 0..3 {
-            for j in 0..3 {
-                let hij = h * a[i][j];
-                for r in 0..n {
-                    for q in 0..n {
-                        mat[(i * n + r) * m + j * n + q] -= hij * jac[r * n + q];
-                    }
-                }
-            }
-        }
-        DenseLu::factor(m, mat)
+        stage_matrix(&self.rk.a, self.n, h, [jac, jac, jac])
     }
 
     /// The factors of [`Self::newton_matrix`] for `(h, jac)`, from the cache when the step is
@@ -579,22 +583,9 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 .jacobian(&xs, &self.u, &mut jacs[j * n * n..(j + 1) * n * n]);
             (sens.pjac)(&xs, &self.u, &mut pj[j * n * np..(j + 1) * n * np]);
         }
-        let mut mat = vec![0.0; m * m];
-        for d in 0..m {
-            mat[d * m + d] = 1.0;
-        }
-        for i in 0..3 {
-            for j in 0..3 {
-                let hij = h * a[i][j];
-                let jac = &jacs[j * n * n..(j + 1) * n * n];
-                for r in 0..n {
-                    for qq in 0..n {
-                        mat[(i * n + r) * m + j * n + qq] -= hij * jac[r * n + qq];
-                    }
-                }
-            }
-        }
-        let Some(lu) = DenseLu::factor(m, mat) else {
+        let stage = |j: usize| &jacs[j * n * n..(j + 1) * n * n];
+        let lu = stage_matrix(&a, n, h, [stage(0), stage(1), stage(2)]);
+        let Some(lu) = lu else {
             self.sens = Some(sens);
             return false;
         };
