@@ -134,12 +134,20 @@ pub fn forward_path(
             let (xt, m, s) = standardised_with_stats(&col, &w, sw, &path.sqrt_w);
             let mut v = xt.clone();
             let mut coef_on_q = vec![0.0; q.len()];
+            // Gram-Schmidt, repeated once when the first pass cancelled most of the column
+            // (Kahan's "twice is enough"; otherwise one pass is already orthogonal to rounding).
+            let mut before = 1.0;
             for _ in 0..2 {
                 for (i, qi) in q.iter().enumerate() {
                     let a = dot(qi, &v);
                     coef_on_q[i] += a;
                     v.iter_mut().zip(qi).for_each(|(x, b)| *x -= a * b);
                 }
+                let after = dot(&v, &v);
+                if after > 0.5 * before {
+                    break;
+                }
+                before = after;
             }
             let d2 = dot(&v, &v);
             let cj = dot(&xt, &r);

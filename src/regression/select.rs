@@ -103,8 +103,19 @@ impl EbicScorer {
         }
         let mut key: Vec<usize> = path.breakpoints[b].active.clone();
         key.sort_unstable();
+        let bp = &path.breakpoints[b];
         let val = if let Some((_, v)) = self.seen.iter().find(|(s, _)| *s == key) {
             *v
+        } else if path.method == super::Method::ForwardOls && !key.is_empty() {
+            // Forward OLS breakpoints are the least-squares fits of their supports already: their
+            // residual is the refit's.
+            let rss = (bp.rel_residual * path.y_norm).powi(2);
+            let val = Some((
+                ebic(self.n, rss, key.len() + 1, self.p, self.gamma, floor),
+                rss,
+            ));
+            self.seen.push((key, val));
+            val
         } else {
             let val = self.refit(path, &key, floor);
             self.seen.push((key, val));

@@ -424,6 +424,8 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     scratch: Vec<f64>,
     /// Forward sensitivities, when asked for.
     sens: Option<Sens<'a>>,
+    /// Factors of exact stage matrices of constant Jacobians, by step (see `propagate`).
+    sens_lu: Vec<(f64, Vec<f64>, std::rc::Rc<DenseLu>)>,
 }
 
 /// Forward sensitivities carried along an integration (see [`simulate_sensitivities`]).
@@ -584,10 +586,31 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
             (sens.pjac)(&xs, &self.u, &mut pj[j * n * np..(j + 1) * n * np]);
         }
         let stage = |j: usize| &jacs[j * n * n..(j + 1) * n * n];
-        let lu = stage_matrix(&a, n, h, [stage(0), stage(1), stage(2)]);
-        let Some(lu) = lu else {
-            self.sens = Some(sens);
-            return false;
+        // A model linear in its states has one Jacobian everywhere, and steps recur (h, h/2):
+        // reuse the factors of an identical stage matrix (exactly identical, unlike the Newton
+        // cache, because these factors give the sensitivities themselves).
+        let constant = stage(0) == stage(1) && stage(1) == stage(2);
+        let cached = self
+            .sens_lu
+            .iter()
+            .find(|(hh, j, _)| constant && *hh == h && j.as_slice() == stage(0))
+            .map(|(_, _, lu)| lu.clone());
+        let lu = match cached {
+            Some(lu) => lu,
+            None => {
+                let Some(lu) = stage_matrix(&a, n, h, [stage(0), stage(1), stage(2)]) else {
+                    self.sens = Some(sens);
+                    return false;
+                };
+                let lu = std::rc::Rc::new(lu);
+                if constant {
+                    if self.sens_lu.len() >= 4 {
+                        self.sens_lu.remove(0);
+                    }
+                    self.sens_lu.push((h, stage(0).to_vec(), lu.clone()));
+                }
+                lu
+            }
         };
         // Right-hand sides, row-major 3n x q: S0 in every stage block, plus the parameters'
         // direct effect h sum_j a_ij f_p,j in their columns.
@@ -866,6 +889,7 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
         lu_cache: Vec::new(),
         scratch: Vec::new(),
         sens,
+        sens_lu: Vec::new(),
     };
     let mut x = x0.to_vec();
     if let Some(e) = it.diverged(times[0], &x) {
