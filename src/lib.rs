@@ -10,13 +10,15 @@
 //! | derivatives | [`derivatives`] | a smooth signal plus white measurement noise, per run |
 //! | candidate basis | [`basis`] | monomials of degree <= 12 in <= 32 variables |
 //! | sweep engines | [`engine`] | CPU (rayon) or GPU (wgpu compute shaders) |
-//! | sparse regression | [`regression`] | LARS / LassoLars written once against [`engine::SweepEngine`] |
+//! | sparse regression | [`regression`] | LARS / LassoLars and forward OLS, written once against [`engine::SweepEngine`] |
 //! | model file | [`model`] | `ctsid-model/1` JSON, chains of integrators closed by polynomials |
 //! | simulation | [`simulate`] | Radau IIA with error control, inputs with known breakpoints |
 //! | built-in plants | [`plants`] | throttle and MIMO plants with known truth, seeded excitation and noise |
 //! | identification | [`identify`] | order search (eta-rule), sigma-weighted fits, test profiles, free-run simulation |
 //! | demonstrations | [`demo`] | the paper's throttle experiment and a MIMO plant, judged against truth |
+//! | missing physics | [`discover`] | a nominal model file; one output; named effect dictionary |
 //! | reports | [`report`] | Markdown / CSV tables and SVG plots |
+//! | (shared) Levenberg-Marquardt | [`lm`] | residuals and normal equations from the caller |
 //!
 //! Errors are typed ([`Error`]); nothing in the library panics on bad input.
 
@@ -27,6 +29,7 @@ pub mod discover;
 pub mod engine;
 pub mod error;
 pub mod identify;
+pub mod lm;
 pub mod model;
 pub mod plants;
 pub mod records;

@@ -154,14 +154,15 @@ fn run_residuals(m: &AugModel, r: &SimRun, x0: &[f64]) -> Option<Vec<f64>> {
     Some(s.iter().zip(&r.y).map(|(a, b)| (a - b) * w).collect())
 }
 
-/// Derivatives of [`run_residuals`] with respect to the coefficients `free` and then the
+/// [`run_residuals`] and their derivatives with respect to the coefficients `free` and then the
 /// initial state, one column each, from forward sensitivities of the simulation.
+#[allow(clippy::type_complexity)]
 fn run_sensitivities(
     m: &AugModel,
     r: &SimRun,
     x0: &[f64],
     free: &[usize],
-) -> Option<Vec<Vec<f64>>> {
+) -> Option<(Vec<f64>, Vec<Vec<f64>>)> {
     let n = m.order;
     let input = SampledInput::new(r.t.clone(), r.u.clone()).ok()?;
     let pjac = |x: &[f64], u: &[f64], out: &mut [f64]| {
@@ -174,15 +175,22 @@ fn run_sensitivities(
         }
     };
     let opts = options(&r.id, &r.y);
-    let (_, sens) = simulate_sensitivities(m, &input, x0, &r.t, &opts, free.len(), &pjac).ok()?;
+    let (tr, sens) = simulate_sensitivities(m, &input, x0, &r.t, &opts, free.len(), &pjac).ok()?;
     let q = free.len() + n;
     let w = 1.0 / (std_dev(&r.y).max(1e-300) * (r.y.len() as f64).sqrt());
     let cols: Vec<Vec<f64>> = (0..q)
         .map(|c| (0..r.t.len()).map(|k| sens[k * n * q + c] * w).collect())
         .collect();
+    let res: Vec<f64> = tr
+        .series(0)
+        .iter()
+        .zip(&r.y)
+        .map(|(a, b)| (a - b) * w)
+        .collect();
     cols.iter()
+        .chain(std::iter::once(&res))
         .all(|c| c.iter().all(|v| v.is_finite()))
-        .then_some(cols)
+        .then_some((res, cols))
 }
 
 /// Levenberg-Marquardt on the coefficients and on each run's initial state (the structure
@@ -199,69 +207,111 @@ pub fn refine_runs(
     fixed: &[bool],
     max_iter: usize,
 ) -> (AugModel, Vec<SimRun>) {
-    use nalgebra::{DMatrix, DVector};
     let n = m.order;
     let nc = m.terms.len();
-    let nr = runs.len();
-    let np = nc + n * nr;
-    let active: Vec<usize> = (0..np)
+    let mut full: Vec<f64> = m.coefficients();
+    for r in runs {
+        full.extend(&r.x0);
+    }
+    let active: Vec<usize> = (0..full.len())
         .filter(|&j| j >= nc || !fixed.get(j).copied().unwrap_or(false))
         .collect();
-    let na = active.len();
-    // Parameters: the coefficients, then each run's initial state.
-    let x0_of = |th: &'_ [f64], k: usize| th[nc + k * n..nc + (k + 1) * n].to_vec();
-    let finish = |th: &[f64]| -> (AugModel, Vec<SimRun>) {
-        let rr = runs
+    let p = RunsProblem {
+        m,
+        runs,
+        full: full.clone(),
+        active: active.clone(),
+        offsets: runs
             .iter()
-            .enumerate()
-            .map(|(k, r)| SimRun {
-                x0: x0_of(th, k),
-                ..r.clone()
+            .scan(0, |a, r| {
+                let o = *a;
+                *a += r.y.len();
+                Some(o)
             })
-            .collect();
-        (m.with_coefficients(&th[..nc]), rr)
+            .collect(),
     };
-    let eval = |th: &[f64]| -> Option<Vec<Vec<f64>>> {
-        let mm = m.with_coefficients(&th[..nc]);
-        runs.par_iter()
-            .enumerate()
-            .map(|(k, r)| run_residuals(&mm, r, &th[nc + k * n..nc + (k + 1) * n]))
-            .collect()
+    let o = crate::lm::LmOptions {
+        max_iter,
+        lambda0: 1e-3,
+        shrink: 0.3,
+        lambda_min: 1e-9,
+        max_tries: 10,
+        lambda_max: f64::MAX,
+        tol: 1e-7,
     };
-    let mut th: Vec<f64> = m.coefficients();
-    for r in runs {
-        th.extend(&r.x0);
-    }
-    let Some(mut res) = eval(&th) else {
+    let start: Vec<f64> = active.iter().map(|&j| full[j]).collect();
+    let mut stats = crate::lm::LmStats::default();
+    let Some((theta, _)) = crate::lm::minimize(&p, start, &o, &mut stats) else {
         return (m.clone(), runs.to_vec());
     };
-    let cost = |r: &[Vec<f64>]| r.iter().flatten().map(|v| v * v).sum::<f64>();
-    let offsets: Vec<usize> = runs
+    let th = p.expand(&theta);
+    let rr = runs
         .iter()
-        .scan(0, |a, r| {
-            let o = *a;
-            *a += r.y.len();
-            Some(o)
+        .enumerate()
+        .map(|(k, r)| SimRun {
+            x0: th[nc + k * n..nc + (k + 1) * n].to_vec(),
+            ..r.clone()
         })
         .collect();
-    let total: usize = runs.iter().map(|r| r.y.len()).sum();
-    let mut lambda = 1e-3;
-    for _ in 0..max_iter {
+    (m.with_coefficients(&th[..nc]), rr)
+}
+
+/// The least-squares problem of [`refine_runs`]: parameters are the coefficients, then each
+/// run's initial state; only the `active` ones are free.
+struct RunsProblem<'a> {
+    m: &'a AugModel,
+    runs: &'a [SimRun],
+    full: Vec<f64>,
+    active: Vec<usize>,
+    /// First residual row of each run.
+    offsets: Vec<usize>,
+}
+
+impl RunsProblem<'_> {
+    fn expand(&self, theta: &[f64]) -> Vec<f64> {
+        let mut th = self.full.clone();
+        for (&j, &v) in self.active.iter().zip(theta) {
+            th[j] = v;
+        }
+        th
+    }
+}
+
+impl crate::lm::LeastSquares for RunsProblem<'_> {
+    fn residuals(&self, theta: &[f64]) -> Option<Vec<f64>> {
+        let (n, nc) = (self.m.order, self.m.terms.len());
+        let th = self.expand(theta);
+        let mm = self.m.with_coefficients(&th[..nc]);
+        let per: Option<Vec<Vec<f64>>> = self
+            .runs
+            .par_iter()
+            .enumerate()
+            .map(|(k, r)| run_residuals(&mm, r, &th[nc + k * n..nc + (k + 1) * n]))
+            .collect();
+        Some(per?.concat())
+    }
+
+    fn normal_equations(
+        &self,
+        theta: &[f64],
+    ) -> Option<(nalgebra::DMatrix<f64>, nalgebra::DVector<f64>)> {
+        use nalgebra::{DMatrix, DVector};
+        let (n, nc) = (self.m.order, self.m.terms.len());
+        let th = self.expand(theta);
+        let mm = self.m.with_coefficients(&th[..nc]);
         // Sensitivities, one simulation per run: a coefficient's column touches every run, an
         // initial state's only its own.
-        let free: Vec<usize> = active.iter().copied().filter(|&j| j < nc).collect();
-        let mm = m.with_coefficients(&th[..nc]);
-        let sens: Option<Vec<Vec<Vec<f64>>>> = runs
+        let free: Vec<usize> = self.active.iter().copied().filter(|&j| j < nc).collect();
+        let sens: Vec<(Vec<f64>, Vec<Vec<f64>>)> = self
+            .runs
             .par_iter()
             .enumerate()
             .map(|(k, r)| run_sensitivities(&mm, r, &th[nc + k * n..nc + (k + 1) * n], &free))
-            .collect();
-        let Some(sens) = sens else {
-            return finish(&th);
-        };
-        let mut jac = DMatrix::<f64>::zeros(total, na);
-        for (k, cols) in sens.iter().enumerate() {
-            for (q, &j) in active.iter().enumerate() {
+            .collect::<Option<_>>()?;
+        let total: usize = self.runs.iter().map(|r| r.y.len()).sum();
+        let mut jac = DMatrix::<f64>::zeros(total, self.active.len());
+        for (k, (_, cols)) in sens.iter().enumerate() {
+            for (q, &j) in self.active.iter().enumerate() {
                 let col = if j < nc {
                     free.iter().position(|&f| f == j).map(|f| &cols[f])
                 } else if (j - nc) / n == k {
@@ -271,44 +321,14 @@ pub fn refine_runs(
                 };
                 if let Some(col) = col {
                     for (i, v) in col.iter().enumerate() {
-                        jac[(offsets[k] + i, q)] = *v;
+                        jac[(self.offsets[k] + i, q)] = *v;
                     }
                 }
             }
         }
-        let rv = DVector::from_iterator(total, res.iter().flatten().copied());
-        let jtj = jac.transpose() * &jac;
-        let jtr = jac.transpose() * rv;
-        let c0 = cost(&res);
-        let mut improved = false;
-        for _ in 0..10 {
-            let mut a = jtj.clone();
-            for j in 0..na {
-                a[(j, j)] += lambda * jtj[(j, j)].max(1e-300);
-            }
-            let Some(step) = a.lu().solve(&(-&jtr)) else {
-                break;
-            };
-            let mut tn = th.clone();
-            for (q, &j) in active.iter().enumerate() {
-                tn[j] += step[q];
-            }
-            if let Some(rn) = eval(&tn) {
-                if cost(&rn) < c0 {
-                    th = tn;
-                    res = rn;
-                    lambda = (lambda * 0.3).max(1e-9);
-                    improved = true;
-                    break;
-                }
-            }
-            lambda *= 10.0;
-        }
-        if !improved || c0 - cost(&res) <= 1e-7 * c0 {
-            break;
-        }
+        let r = DVector::from_iterator(total, sens.iter().flat_map(|(res, _)| res.iter().copied()));
+        Some((jac.transpose() * &jac, jac.transpose() * r))
     }
-    finish(&th)
 }
 
 /// [`refine_runs`] without the refined initial states.

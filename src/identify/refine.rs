@@ -374,65 +374,36 @@ fn cost(r: &[f64]) -> f64 {
     r.iter().map(|v| v * v).sum()
 }
 
-/// Levenberg-Marquardt on a problem from `theta`; returns the final parameters and cost.
+impl crate::lm::LeastSquares for Problem<'_> {
+    fn residuals(&self, theta: &[f64]) -> Option<Vec<f64>> {
+        Problem::residuals(self, theta)
+    }
+    fn normal_equations(&self, theta: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)> {
+        let (jtj, jtr, _) = Problem::normal_equations(self, theta);
+        Some((jtj, jtr))
+    }
+}
+
+/// Levenberg-Marquardt ([`crate::lm`]) on a problem from `theta`, counting into `stats`.
 fn levenberg_marquardt(
     p: &Problem,
-    mut theta: Vec<f64>,
+    theta: Vec<f64>,
     max_iter: usize,
     tol: f64,
     stats: &mut Refined,
 ) -> Option<(Vec<f64>, f64)> {
-    let mut c = cost(&p.residuals(&theta)?);
-    let mut lambda = 1e-3;
-    for _ in 0..max_iter {
-        stats.iterations += 1;
-        let (jtj, jtr, _) = p.normal_equations(&theta);
-        let np = theta.len();
-        let mut improved = None;
-        while lambda <= 1e10 {
-            let mut a = jtj.clone();
-            for j in 0..np {
-                // Marquardt scaling; a floor keeps parameters the data do not see well-posed.
-                let d = jtj[(j, j)].max(1e-12 * (1.0 + jtj.diagonal().max()));
-                a[(j, j)] += lambda * d;
-            }
-            let step = a.lu().solve(&(-&jtr));
-            let Some(step) = step.filter(|s| s.iter().all(|v| v.is_finite())) else {
-                stats.rejected += 1;
-                lambda *= 10.0;
-                continue;
-            };
-            let trial: Vec<f64> = theta.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
-            match p.residuals(&trial) {
-                Some(r) if cost(&r) < c => {
-                    stats.accepted += 1;
-                    improved = Some((trial, cost(&r)));
-                    lambda = (lambda / 3.0).max(1e-9);
-                    break;
-                }
-                // Diverged, or not lower: shorter, more gradient-like step.
-                r => {
-                    stats.rejected += 1;
-                    if r.is_none() {
-                        stats.diverged += 1;
-                    }
-                    lambda *= 10.0;
-                }
-            }
-        }
-        match improved {
-            Some((th, cn)) => {
-                let gain = (c - cn) / c.max(f64::MIN_POSITIVE);
-                theta = th;
-                c = cn;
-                if gain < tol {
-                    break;
-                }
-            }
-            None => break,
-        }
-    }
-    Some((theta, c))
+    let mut s = crate::lm::LmStats::default();
+    let o = crate::lm::LmOptions {
+        max_iter,
+        tol,
+        ..Default::default()
+    };
+    let out = crate::lm::minimize(p, theta, &o, &mut s);
+    stats.iterations += s.iterations;
+    stats.accepted += s.accepted;
+    stats.rejected += s.rejected;
+    stats.diverged += s.diverged;
+    out
 }
 
 /// Standard deviation (population) of a pooled set of samples.

@@ -1063,72 +1063,69 @@ pub fn fit_initial_state(
         }
         Some(r)
     };
-    let cost = |r: &[f64]| r.iter().map(|v| v * v).sum::<f64>();
     let mut x = guess.to_vec();
-    let mut r = match residuals(&x) {
-        Some(r) => r,
-        None => {
-            // Start from the measured values with zero derivatives instead.
-            let mut x2 = vec![0.0; n];
-            for i in 0..n_out {
-                x2[model.offset(i)] = ys[i][0];
-            }
-            match residuals(&x2) {
-                Some(r) => {
-                    x = x2;
-                    r
-                }
-                None => return guess.to_vec(),
-            }
+    if residuals(&x).is_none() {
+        // Start from the measured values with zero derivatives instead.
+        let mut x2 = vec![0.0; n];
+        for i in 0..n_out {
+            x2[model.offset(i)] = ys[i][0];
         }
-    };
-    let mut lambda = 1e-6;
-    for _ in 0..8 {
-        // Sensitivities of the residuals to each initial state.
-        let Ok((_, sens)) = simulate_model_sensitivities(model, &x, tw, &uw, opts, &[]) else {
-            return x;
-        };
-        let mut jac = DMatrix::<f64>::zeros(r.len(), n);
+        if residuals(&x2).is_none() {
+            return guess.to_vec();
+        }
+        x = x2;
+    }
+    type Eval<'a> = &'a dyn Fn(&[f64]) -> Option<(Vec<f64>, DMatrix<f64>)>;
+    struct Head<'a, F: Fn(&[f64]) -> Option<Vec<f64>>> {
+        residuals: F,
+        sens: Eval<'a>,
+    }
+    impl<F: Fn(&[f64]) -> Option<Vec<f64>>> crate::lm::LeastSquares for Head<'_, F> {
+        fn residuals(&self, x: &[f64]) -> Option<Vec<f64>> {
+            (self.residuals)(x)
+        }
+        fn normal_equations(&self, x: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)> {
+            let (r, jac) = (self.sens)(x)?;
+            Some((
+                jac.transpose() * &jac,
+                jac.transpose() * DVector::from_vec(r),
+            ))
+        }
+    }
+    // The residuals and their sensitivities to each initial state, from one simulation.
+    let sens = |x: &[f64]| -> Option<(Vec<f64>, DMatrix<f64>)> {
+        let (tr, sens) = simulate_model_sensitivities(model, x, tw, &uw, opts, &[]).ok()?;
+        let rows = w * n_out;
+        let mut jac = DMatrix::<f64>::zeros(rows, n);
+        let mut r = Vec::with_capacity(rows);
         let mut row = 0;
         for (i, s) in scale.iter().enumerate() {
             let o = model.offset(i);
             for k in 0..w {
+                r.push((tr.state(k)[o] - ys[i][k]) / s);
                 for j in 0..n {
                     jac[(row, j)] = sens[(k * n + o) * n + j] / s;
                 }
                 row += 1;
             }
         }
-        let rv = DVector::from_column_slice(&r);
-        let jtj = jac.transpose() * &jac;
-        let jtr = jac.transpose() * rv;
-        let c0 = cost(&r);
-        let mut improved = false;
-        for _ in 0..6 {
-            let mut a = jtj.clone();
-            for j in 0..n {
-                a[(j, j)] += lambda * jtj[(j, j)].max(1e-300);
-            }
-            let Some(step) = a.lu().solve(&(-&jtr)) else {
-                break;
-            };
-            let xn: Vec<f64> = x.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
-            if let Some(rn) = residuals(&xn) {
-                if cost(&rn) < c0 {
-                    x = xn;
-                    r = rn;
-                    lambda = (lambda * 0.1).max(1e-12);
-                    improved = true;
-                    break;
-                }
-            }
-            lambda *= 10.0;
-        }
-        if !improved || (c0 - cost(&r)) <= 1e-10 * c0 {
-            break;
-        }
-    }
-    x
+        Some((r, jac))
+    };
+    let o = crate::lm::LmOptions {
+        max_iter: 8,
+        lambda0: 1e-6,
+        shrink: 0.1,
+        lambda_min: 1e-12,
+        max_tries: 6,
+        lambda_max: f64::MAX,
+        tol: 1e-10,
+    };
+    let p = Head {
+        residuals,
+        sens: &sens,
+    };
+    let mut stats = crate::lm::LmStats::default();
+    crate::lm::minimize(&p, x.clone(), &o, &mut stats).map_or(x, |(x, _)| x)
 }
 
 /// Population standard deviation (0 for an empty slice).
