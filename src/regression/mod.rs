@@ -54,7 +54,7 @@ pub struct RegressionBuilder {
     alpha_min: f64,
     epsilon: f64,
     ebic_gamma: f64,
-    ebic_patience: usize,
+    ebic_patience: Option<usize>,
     effective_samples: Option<f64>,
     prune: bool,
     fit_intercept: bool,
@@ -77,7 +77,7 @@ impl Default for RegressionBuilder {
             alpha_min: p.alpha_min,
             epsilon: p.epsilon,
             ebic_gamma: 1.0,
-            ebic_patience: 40,
+            ebic_patience: None,
             effective_samples: None,
             prune: true,
             fit_intercept: true,
@@ -121,11 +121,16 @@ impl RegressionBuilder {
     }
     setter!(/// eBIC's gamma in [0, 1] (default 1).
         ebic_gamma: f64);
-    setter!(/// Stop the path once this many breakpoints in a row have not lowered eBIC below the
-        /// best so far (default 40; 0 computes the whole path). Late breakpoints add terms that
-        /// eBIC charges for, so past a long run without improvement the choice is settled; on
-        /// noisy data the path after the chosen support is most of the path.
-        ebic_patience: usize);
+    /// Stop the path once this many breakpoints in a row have not lowered eBIC below the best
+    /// so far (0 computes the whole path). Late breakpoints add terms that eBIC charges for, so
+    /// past a long run without improvement the choice is settled; on noisy data the path after
+    /// the chosen support is most of the path. Default: 40 for LARS and the lasso (their
+    /// breakpoints include drops and re-entries), 10 for forward OLS (one new term per
+    /// breakpoint, the residual only falls).
+    pub fn ebic_patience(mut self, v: usize) -> Self {
+        self.ebic_patience = Some(v);
+        self
+    }
     setter!(/// Backward pruning after the eBIC choice (default on).
         prune: bool);
     setter!(/// Fit an intercept (the constant monomial, reported as a term; default on).
@@ -228,7 +233,10 @@ impl RegressionBuilder {
             degree: self.degree,
             path,
             ebic_gamma: self.ebic_gamma,
-            ebic_patience: self.ebic_patience,
+            ebic_patience: self.ebic_patience.unwrap_or(match self.method {
+                Method::ForwardOls => 10,
+                Method::Lars | Method::LassoLars => 40,
+            }),
             effective_samples: self.effective_samples,
             prune: self.prune,
             fit_intercept: self.fit_intercept,
