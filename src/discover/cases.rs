@@ -10,6 +10,11 @@
 //! at velocities of order 1 it is a sign function).
 
 use super::sim;
+
+/// Upper end of the random input phases. Not `TAU`: the published acceptance matrix was drawn
+/// with this value, and changing it would redraw every case.
+#[allow(clippy::approx_constant)]
+const PHASE_MAX: f64 = 6.283;
 use crate::error::Result;
 use crate::model::{Model, OutputEquation, Term};
 use crate::plants::noise::add_noise;
@@ -274,7 +279,7 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
             Multisine {
                 a: vec![amp],
                 w: vec![2.0 * std::f64::consts::PI * rng.uniform_in(0.2, 0.4)],
-                phi: vec![rng.uniform_in(0.0, 6.283)],
+                phi: vec![rng.uniform_in(0.0, PHASE_MAX)],
                 offset,
                 floor: f64::NEG_INFINITY,
             }
@@ -294,7 +299,7 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
                         2.0 * std::f64::consts::PI * rng.uniform_in(band(i), band(i + 1))
                     })
                     .collect(),
-                phi: (0..k).map(|_| rng.uniform_in(0.0, 6.283)).collect(),
+                phi: (0..k).map(|_| rng.uniform_in(0.0, PHASE_MAX)).collect(),
                 offset,
                 floor: if name == "tank" {
                     0.05
@@ -420,7 +425,7 @@ pub fn truth_ratio(case: &Case, d: &super::Discovery) -> f64 {
 pub fn judge(case: &Case, d: &super::Discovery) -> (bool, String) {
     let named: Vec<&str> = d.effects.iter().map(|e| e.family.as_str()).collect();
     let measured = d.nrmse_before / d.nrmse_after.max(1e-300);
-    let ratio = truth_ratio(case, d);
+    let ratio = || truth_ratio(case, d);
     let check_added = |family: &str, coef: f64, min_ratio: f64| -> (bool, String) {
         if d.verdict != "added" || named.len() != 1 || named[0] != family {
             return (false, format!("verdict {} named {:?}", d.verdict, named));
@@ -429,6 +434,10 @@ pub fn judge(case: &Case, d: &super::Discovery) -> (bool, String) {
         if ((c - coef) / coef).abs() > 0.1 {
             return (false, format!("coefficient {c} vs {coef}"));
         }
+        if min_ratio <= 0.0 {
+            return (true, format!("coef {c:.4}"));
+        }
+        let ratio = ratio();
         // Written so that a NaN ratio fails.
         #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if !(ratio >= min_ratio) {

@@ -57,6 +57,19 @@ pub const SCORE_RUNS: usize = 10;
 /// Reweighting passes of the robust fit.
 pub const ROBUST_ITERATIONS: usize = 3;
 
+/// eBIC's relative residual floor in units of the label's own uncertainty (see
+/// `Prepared::label_floor`): a residual sum of squares below `sum w sigma^2` counts as exact, so
+/// no term is bought with less than what the reconstructed label is known to within.
+///
+/// The trade-off, measured: at 1.0 the noise-free throttle's n = 3 fit is its 5 true terms
+/// (21 without a floor) and the noise-free MIMO plant at d = 4 on 12 runs gives exactly its 18
+/// terms (at 0.5 and below a junk-laden fit no longer simulates). On noisy data the floor also
+/// withholds terms whose effect is below one sample's uncertainty but significant over many
+/// samples: the MIMO plant at 1 % noise and d = 3 keeps 16 of 18 true terms either way, with no
+/// extra term and free-run test NRMSE 11 / 1.6 / 3.4 % at 1.0, against 19 extra terms and
+/// 5.4 / 0.9 / 1.2 % at 0.7. A sparse, exact equation is what a control engineer asked for.
+pub const LABEL_FLOOR: f64 = 1.0;
+
 /// Samples used to refine each simulated run's initial state.
 pub const INIT_WINDOW: usize = 200;
 use profile::{eta_rule, Profile};
@@ -381,11 +394,10 @@ impl Prepared<'_> {
     /// The label's own uncertainty relative to its spread: `sqrt(sum w sigma^2 / sum w (y -
     /// mean)^2)` over the fit's samples, with the smoother's per-sample sigma of the label.
     ///
-    /// A residual below what the reconstructed label is known to within is no evidence for a
-    /// further term: on noise-free data the label's error is the smoother's (largest at input
-    /// kinks), it is structured, and candidates fit it. Flooring eBIC's residual there stops the
-    /// path from buying terms with it (noise-free MIMO fits at d = 4 had taken dozens of tiny
-    /// terms and no longer simulated). On noisy data the residual is above this floor anyway.
+    /// On noise-free data the label's error is the smoother's (largest at input kinks), it is
+    /// structured, and candidates fit it: eBIC's residual is floored at [`LABEL_FLOOR`] times
+    /// this (see there), so the path stops buying terms with it. Only with confidence weighting
+    /// (without it the ends of the runs, where sigma is largest, would dominate the floor).
     fn label_floor(&self, i: usize, ord: &[usize], runs: &[usize], y: &[f64], w: &[f64]) -> f64 {
         let sw: f64 = w.iter().sum();
         if !(sw > 0.0) {
@@ -436,7 +448,11 @@ impl Prepared<'_> {
     fn fit(&self, i: usize, ord: &[usize], fit_runs: &[usize]) -> Result<crate::regression::Model> {
         let (f, y, w0, _) = self.design(i, ord, fit_runs);
         let label = derivative_name(&self.settings.outputs[i], ord[i]);
-        let floor = self.label_floor(i, ord, fit_runs, &y, &w0);
+        let floor = if self.settings.weighting {
+            LABEL_FLOOR * self.label_floor(i, ord, fit_runs, &y, &w0)
+        } else {
+            0.0
+        };
         let reg = self.regression(i, w0.iter().filter(|w| **w > 0.0).count(), floor)?;
         let mut w = w0.clone();
         let mut model = reg.fit(&f, &y, &label, Some(&w))?;

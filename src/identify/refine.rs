@@ -305,7 +305,7 @@ impl<'a> Problem<'a> {
         Some(r)
     }
 
-    /// Normal equations `J^T J`, `J^T r` by forward differences, assembled per segment.
+    /// Normal equations `J^T J`, `J^T r` from forward sensitivities, assembled per segment.
     fn normal_equations(&self, theta: &[f64]) -> (DMatrix<f64>, DVector<f64>, Vec<f64>) {
         let nc = self.n_coef();
         let n = self.n;
@@ -327,8 +327,9 @@ impl<'a> Problem<'a> {
         let mut jtr = DVector::<f64>::zeros(np);
         let mut r_all = Vec::new();
         for (s, l) in locals.into_iter().enumerate() {
-            // The base point was simulated successfully before, so this only fails if the
-            // simulation is not repeatable; treat it as no information for this segment.
+            // The base point simulated before, so this fails only where the sensitivities do
+            // (a singular stage matrix, non-finite values): no information from this segment
+            // for this step; the trial's cost check still sees every segment.
             let Some(l) = l else { continue };
             let idx: Vec<usize> = (0..nc).chain((0..n).map(|j| nc + s * n + j)).collect();
             let q = idx.len();

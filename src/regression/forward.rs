@@ -26,6 +26,11 @@
 //!
 //! Breakpoints carry the least-squares coefficients of their support (standardised units), so
 //! the eBIC selection, the refit and the pruning that follow are the ones of the LARS path.
+//! `alpha` is the largest |correlation| / n among the inactive candidates, as for LARS;
+//! `alpha_min` and the relevance threshold `epsilon` (a new term lowering ||r|| / ||y~|| by
+//! less) stop the path as they do there. The swept projections are not refreshed: with an f32
+//! engine a candidate within about 1e-3 of the active span may be judged differently than in
+//! f64 (the exact check only corrects gains that sweeps overstate).
 
 // `!(x > t)` is deliberate throughout: NaN must fail these checks.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
@@ -74,6 +79,7 @@ pub fn forward_path(
     let mut skipped = vec![false; nc];
     let tol2 = opts.collinearity_tol * opts.collinearity_tol;
     let mut step = 0usize;
+    let mut prev_rel = 1.0;
     loop {
         // Breakpoint `step`: the least-squares fit of the current support.
         let coefs = back_substitute(&rmat, &z);
@@ -109,6 +115,15 @@ pub fn forward_path(
             path.stop = StopReason::ExactFit;
             break;
         }
+        if alpha <= opts.alpha_min {
+            path.stop = StopReason::AlphaMin;
+            break;
+        }
+        if opts.epsilon > 0.0 && step > 0 && prev_rel - rel < opts.epsilon {
+            path.stop = StopReason::Relevance;
+            break;
+        }
+        prev_rel = rel;
         // The candidate with the largest gain; exact values replace inflated swept ones.
         let mut chosen = None;
         while chosen.is_none() {
@@ -194,7 +209,7 @@ pub fn forward_path(
         step += 1;
         // The incremental correlations carry the engine's rounding: refresh them exactly
         // (one sweep of the residual) every few steps.
-        if step % 8 == 0 {
+        if step.is_multiple_of(8) {
             sd.corr(&r, &mut c)?;
             path.refreshes += 1;
         }
@@ -203,7 +218,7 @@ pub fn forward_path(
     Ok(path)
 }
 
-/// Solves `R^T b = z` where row k of `rmat` holds the coefficients of active column k on
+/// Solves `R b = z` where row k of `rmat` holds the coefficients of active column k on
 /// `q_0..q_k` (so `X~_A = Q R` with `R[i][k] = rmat[k][i]`): the least-squares coefficients.
 fn back_substitute(rmat: &[Vec<f64>], z: &[f64]) -> Vec<f64> {
     let k = z.len();

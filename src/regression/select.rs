@@ -12,7 +12,8 @@
 //!
 //! # Steps
 //! 1. Every distinct support along the path gets an OLS refit (in the standardised, centred
-//!    coordinates, so with the intercept) and its eBIC; the lowest wins.
+//!    coordinates, so with the intercept) and its eBIC; the lowest wins. Forward-OLS
+//!    breakpoints are such refits already: their own residual is used.
 //! 2. That support is refitted by least squares in original units (Householder QR on the exact
 //!    f64 columns, the constant monomial as an ordinary column when the intercept is fitted).
 //! 3. Backward pruning: the term whose removal lowers eBIC the most is removed, until no removal
@@ -58,6 +59,9 @@ pub fn path_ebic(
         .collect()
 }
 
+/// eBIC and OLS RSS of a support (None where the refit is singular).
+type Scored = Option<(f64, f64)>;
+
 /// Scores breakpoints one at a time as a path grows (see [`path_ebic`]), so that the path can
 /// stop once eBIC has stopped improving.
 ///
@@ -70,7 +74,7 @@ pub struct EbicScorer {
     rss_floor: f64,
     /// Lower triangle of the Gram matrix of the first `gram.len()` stored columns.
     gram: Vec<Vec<f64>>,
-    seen: Vec<(Vec<usize>, Option<(f64, f64)>)>,
+    seen: Vec<(Vec<usize>, Scored)>,
     resid: Vec<f64>,
     /// Best eBIC so far and the breakpoint it came from.
     pub best: Option<(f64, usize)>,

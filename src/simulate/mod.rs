@@ -428,13 +428,17 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     sens_lu: Vec<(f64, Vec<f64>, std::rc::Rc<DenseLu>)>,
 }
 
+/// `pjac(x, u, out)`: the right-hand side's derivatives with respect to the parameters,
+/// row-major `dim x n_params` (see [`simulate_sensitivities`]).
+pub type ParamJacobian<'a> = &'a dyn Fn(&[f64], &[f64], &mut [f64]);
+
 /// Forward sensitivities carried along an integration (see [`simulate_sensitivities`]).
 struct Sens<'a> {
     /// Parameters acting on the right-hand side: the first `np` columns.
     np: usize,
     /// Columns: the `np` parameters, then the `n` initial states.
     q: usize,
-    pjac: &'a dyn Fn(&[f64], &[f64], &mut [f64]),
+    pjac: ParamJacobian<'a>,
     /// `dx/dp` at the current time, row-major `n x q`.
     s: Vec<f64>,
 }
@@ -697,21 +701,26 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 Some(lu) => self.radau_step(t, x, 0.5 * hh, lu),
                 None => StepOutcome::NoConvergence,
             };
-            // Stage increments of the two half steps, which the sensitivities follow.
+            // Stage increments of the two half steps (left in the scratch by each converged
+            // step), which the sensitivities follow.
             let m = 3 * n;
-            let z1 = self.sens.as_ref().map(|_| self.scratch[..m].to_vec());
+            let stages = |it: &Self| it.sens.as_ref().map(|_| it.scratch[..m].to_vec());
+            let (mut z1, mut z2) = (None, None);
             let result = match (full, half1) {
                 (StepOutcome::Ok(xf), StepOutcome::Ok(xm)) => {
+                    z1 = stages(self);
                     // The second half step reuses the first one's Newton matrix.
                     let lu = lu_half.as_ref().expect("factored above");
                     match self.radau_step(t + 0.5 * hh, &xm, 0.5 * hh, lu) {
-                        StepOutcome::Ok(xh) => Some((xf, xm, xh)),
+                        StepOutcome::Ok(xh) => {
+                            z2 = stages(self);
+                            Some((xf, xm, xh))
+                        }
                         StepOutcome::NoConvergence => None,
                     }
                 }
                 _ => None,
             };
-            let z2 = self.sens.as_ref().map(|_| self.scratch[..m].to_vec());
             match result {
                 None => {
                     stats.1 += 1;
@@ -740,7 +749,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                                 return Err(Error::Diverged {
                                     run: self.opts.run.clone(),
                                     time: t,
-                                    state: "the sensitivities (singular step matrix)".into(),
+                                    state: "the sensitivities (singular stage matrix or non-finite values)".into(),
                                 });
                             }
                         }
@@ -814,7 +823,9 @@ pub fn simulate<S: System + ?Sized, I: Input + ?Sized>(
 /// `[time][state][column]` with `n_params + dim` columns.
 ///
 /// They are the exact derivatives of the discrete solution (the same accepted steps, each
-/// differentiated through its stage equations), so a Jacobian built from them is consistent
+/// differentiated through its stage equations) when [`System::jacobian`] is exact, as it is for
+/// compiled models (the trait's default uses forward differences, and so then do the stage
+/// Jacobians here), so a Jacobian built from them is consistent
 /// with the simulation the cost is measured on: what forward differences of whole simulations
 /// approximate, at the price of one small linear solve per column and step instead of one
 /// simulation per column.
@@ -825,7 +836,7 @@ pub fn simulate_sensitivities<S: System + ?Sized, I: Input + ?Sized>(
     times: &[f64],
     opts: &SimOptions,
     n_params: usize,
-    pjac: &dyn Fn(&[f64], &[f64], &mut [f64]),
+    pjac: ParamJacobian<'_>,
 ) -> Result<(Trajectory, Vec<f64>)> {
     let n = sys.dim();
     let q = n_params + n;
@@ -959,6 +970,13 @@ pub fn simulate_model_sensitivities(
     opts: &SimOptions,
     coefs: &[usize],
 ) -> Result<(Trajectory, Vec<f64>)> {
+    let n_coef = model.coefficients().len();
+    if let Some(&k) = coefs.iter().find(|&&k| k >= n_coef) {
+        return Err(Error::param(
+            "coefficients",
+            format!("index {k} for a model of {n_coef} terms"),
+        ));
+    }
     let input = SampledInput::new(times.to_vec(), inputs.to_vec())?;
     let pjac = |x: &[f64], u: &[f64], out: &mut [f64]| model.coefficient_jacobian(x, u, coefs, out);
     simulate_sensitivities(model, &input, x0, times, opts, coefs.len(), &pjac)
@@ -1016,7 +1034,8 @@ pub fn estimate_initial_derivatives(
         .collect())
 }
 
-/// Refines an initial state of a model by Gauss-Newton on the simulated outputs over the first
+/// Refines an initial state of a model by Levenberg-Marquardt ([`crate::lm`], Jacobian from
+/// forward sensitivities) on the simulated outputs over the first
 /// `window` samples of a run (the model's own dynamics fix the derivatives that a local fit
 /// estimates poorly: fast modes, noise).
 ///
@@ -1213,8 +1232,15 @@ mod tests {
             ..Default::default()
         };
         let coefs = [0usize, 2, 3, 5, 7];
-        let (tr, sens) =
-            simulate_model_sensitivities(&model, &x0, &times, &[u.clone()], &opts, &coefs).unwrap();
+        let (tr, sens) = simulate_model_sensitivities(
+            &model,
+            &x0,
+            &times,
+            std::slice::from_ref(&u),
+            &opts,
+            &coefs,
+        )
+        .unwrap();
         let q = coefs.len() + 3;
         assert_eq!(sens.len(), times.len() * 3 * q);
         let base = model.coefficients();
@@ -1233,9 +1259,9 @@ mod tests {
                 xm[col - coefs.len()] -= h;
             }
             model.set_coefficients(&cp).unwrap();
-            let a = simulate_model(&model, &xp, &times, &[u.clone()], &opts).unwrap();
+            let a = simulate_model(&model, &xp, &times, std::slice::from_ref(&u), &opts).unwrap();
             model.set_coefficients(&cm).unwrap();
-            let b = simulate_model(&model, &xm, &times, &[u.clone()], &opts).unwrap();
+            let b = simulate_model(&model, &xm, &times, std::slice::from_ref(&u), &opts).unwrap();
             model.set_coefficients(&base).unwrap();
             for k in 0..times.len() {
                 for r in 0..3 {
