@@ -1277,6 +1277,26 @@ mod tests {
     }
 
     #[test]
+    fn sensitivities_of_a_failing_start_or_a_bad_index_are_errors_not_panics() {
+        let text = r#"{"format": "ctsid-model/1", "inputs": ["u"], "outputs": [
+            {"name": "y", "order": 1, "terms": [
+                {"exponents": {"y": 1, "u": 1}, "coefficient": -1.0}]}]}"#;
+        let model = crate::model::Model::from_json_str(text, "test")
+            .unwrap()
+            .compile()
+            .unwrap();
+        let times: Vec<f64> = (0..10).map(|k| 0.1 * k as f64).collect();
+        // A non-finite input makes the very first Jacobian non-finite: no step ever converges.
+        let mut u = vec![1.0; 10];
+        u[0] = f64::NAN;
+        let opts = SimOptions::default();
+        let r = simulate_model_sensitivities(&model, &[1.0], &times, &[u], &opts, &[0]);
+        assert!(r.is_err());
+        let r = simulate_model_sensitivities(&model, &[1.0], &times, &[vec![1.0; 10]], &opts, &[3]);
+        assert!(matches!(r, Err(Error::InvalidParameter { .. })), "{r:?}");
+    }
+
+    #[test]
     fn radau_coefficients_satisfy_order_conditions() {
         let r = Radau::new();
         // Quadrature weights (last row) integrate polynomials up to degree 4 exactly: order 5.
