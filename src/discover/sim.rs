@@ -46,6 +46,31 @@ impl System for AugModel {
             .map(|(e, c)| c * e.eval_smooth(&z, &self.eps))
             .sum();
     }
+    /// Forward differences with a step scaled to each state's spread (a thousandth of the
+    /// smoothing width of `sign`, itself a thousandth of the spread), not the trait's
+    /// `1.5e-8 max(|x|, 1)`, which is coarse for states much smaller than one. The sensitivities
+    /// of the refit follow these Jacobians.
+    fn jacobian(&self, x: &[f64], u: &[f64], jac: &mut [f64]) {
+        let n = self.order;
+        let mut f0 = vec![0.0; n];
+        let mut f1 = vec![0.0; n];
+        let mut xp = x.to_vec();
+        self.rhs(x, u, &mut f0);
+        for k in 0..n {
+            let scaled = 1e-3 * self.eps.get(k).copied().unwrap_or(0.0);
+            let dk = if scaled > 0.0 {
+                scaled.max(1e-12 * x[k].abs())
+            } else {
+                1.5e-8 * x[k].abs().max(1.0)
+            };
+            xp[k] = x[k] + dk;
+            self.rhs(&xp, u, &mut f1);
+            xp[k] = x[k];
+            for r in 0..n {
+                jac[r * n + k] = (f1[r] - f0[r]) / dk;
+            }
+        }
+    }
 }
 
 impl AugModel {
