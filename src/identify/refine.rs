@@ -780,8 +780,8 @@ pub fn refine_gated(
     };
     // A start that diverges in free run on the fit runs, or does not follow the output at all
     // (NRMSE above 1: worse than its mean), is not refined in full: its shooting segments blow
-    // up too, or dozens of spurious terms must be walked back one finite difference at a time
-    // (90 s for one 35-term candidate of the noise-free throttle search). Its linear part is
+    // up too, or dozens of spurious terms must be walked back (with finite-difference Jacobians
+    // one 35-term candidate of the noise-free throttle search took 90 s). Its linear part is
     // the start instead.
     let first = if tb <= 1.0 || linear_part.is_none() {
         refine(model, fit, opts)
