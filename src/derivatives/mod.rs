@@ -78,9 +78,9 @@ impl Default for DerivativeOptions {
 #[derive(Debug, Clone)]
 pub struct Derivatives {
     pub tau: f64,
-    /// values[k][i]: estimate of the k-th derivative at sample i (k = 0 is the smoothed signal).
+    /// `values[k][i]`: estimate of the k-th derivative at sample i (k = 0 is the smoothed signal).
     pub values: Vec<Vec<f64>>,
-    /// sigma[k][i]: standard deviation of values[k][i].
+    /// `sigma[k][i]`: standard deviation of `values[k][i]`.
     pub sigma: Vec<Vec<f64>>,
     /// Estimated measurement noise standard deviation.
     pub noise_sd: f64,

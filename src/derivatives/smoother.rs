@@ -97,7 +97,7 @@ pub struct Covariances<const M: usize> {
     /// RTS gains, same indexing as `gain`.
     pub rts: Vec<Mat<M>>,
     /// Smoothed variances (diagonal): the first `head.len()` samples, the last `tail.len()`
-    /// samples (tail[0] is sample n-1), and the steady value in between.
+    /// samples (`tail[0]` is sample n-1), and the steady value in between.
     pub head: Vec<Vct<M>>,
     pub tail: Vec<Vct<M>>,
     pub steady: Vct<M>,

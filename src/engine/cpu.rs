@@ -8,7 +8,7 @@
 //! `B` samples at a time. For every internal node p with values `x_p` it uses `v * z_k`
 //! (formed once per block) so that the correlation of each child `c = p * z_k` is
 //! `sum_i x_p,i (v z_k)_i`: one multiply-add per sample-candidate pair, computed for up to eight
-//! children at a time with register accumulators ([`kernel`]). At degree >= 3 the two bottom
+//! children at a time with register accumulators (module `kernel`). At degree >= 3 the two bottom
 //! levels, where most candidates are, go together: with `v z_a z_b` formed once per block, a
 //! node of degree d-2 gives all its children and grandchildren as dot products, so nodes of
 //! degree d-1 are never formed and one load of `x_p` feeds eight multiply-adds. Only internal

@@ -101,7 +101,7 @@ pub struct Settings {
     /// Weight samples by the confidence of their label (see the module docs).
     pub weighting: bool,
     /// Pass every signal of an output's equation (its label, the other outputs' derivatives and
-    /// the inputs) through one and the same linear smoother (see [`equation_data`]).
+    /// the inputs) through one and the same linear smoother (see `equation_data`).
     pub same_filter: bool,
     /// Print progress lines to standard error.
     pub progress: bool,
@@ -288,7 +288,7 @@ pub struct Identification {
     pub model: ModelFile,
     pub outputs: Vec<OutputReport>,
     pub simulations: Vec<RunSimulation>,
-    /// Derivatives of every output on every run: derivatives[output][run].
+    /// Derivatives of every output on every run: `derivatives[output][run]`.
     pub derivatives: Vec<Vec<Derivatives>>,
     pub weighting: String,
     /// `None` when refinement was switched off.

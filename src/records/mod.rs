@@ -17,7 +17,7 @@ pub const TAU_RTOL: f64 = 1e-6;
 #[derive(Debug, Clone)]
 pub struct Run {
     pub id: String,
-    /// channels[c][i]: sample i of channel c (channel order of the record set).
+    /// `channels[c][i]`: sample i of channel c (channel order of the record set).
     pub channels: Vec<Vec<f64>>,
     /// Time of the first sample (0 when no time column was given).
     pub t0: f64,
