@@ -115,7 +115,13 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         ]);
         for c in &rep.candidates {
             let mut row = vec![c.order.to_string(), c.n_terms.to_string()];
-            row.extend(c.validation.0.iter().map(|v| format!("{v:.4}")));
+            row.extend(c.validation.0.iter().map(|v| {
+                if v.is_finite() {
+                    format!("{v:.4}")
+                } else {
+                    "-".into()
+                }
+            }));
             row.push(if c.order == rep.order {
                 "<-".into()
             } else {
@@ -124,6 +130,13 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             t.row(row);
         }
         text += &format!("## Output '{}': order {} ({} samples, {} left out for uncertain labels; engine {})\n\n{}\n    {}\n\n", rep.name, rep.order, rep.samples_used, rep.samples_excluded, rep.engine, t.markdown(), rep.equation);
+        if rep
+            .candidates
+            .iter()
+            .any(|c| !c.validation.p50().is_finite())
+        {
+            text += "No derivative validation profile: without --validation runs it is 5-fold over the training runs, and one training run gives no folds (the free-run refinement gate then uses the training runs themselves).\n\n";
+        }
         if let Some(p) = &rep.test {
             text += &format!(
                 "Test runs, against our labels: p50/80/90/95/98/99/100 = {}\n\n",
