@@ -36,32 +36,26 @@
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
 use super::path::{
-    begin, dot, standardised_with_stats, Begun, Breakpoint, Event, Path, PathOptions, StopReason,
+    dot, standardised_with_stats, Begun, Breakpoint, Event, Path, PathOptions, StopReason,
 };
-use crate::engine::SweepEngine;
 use crate::error::Result;
 
-/// The forward-OLS path of `y` over every candidate of `engine` (see the module docs); the
-/// monitor is called as in [`super::lars_path_monitored`].
-pub fn forward_path(
-    engine: &mut dyn SweepEngine,
-    y: &[f64],
-    weights: Option<&[f64]>,
+/// The forward-OLS steps of a started path (see the module docs); the monitor is called as in
+/// [`super::lars_path_monitored`], which starts the path and dispatches here.
+pub(super) fn forward_path(
+    begun: Begun,
     opts: &PathOptions,
     monitor: &mut dyn FnMut(&Path, usize) -> bool,
 ) -> Result<Path> {
-    let n = engine.n_samples();
-    let nc = engine.n_candidates();
     let Begun {
+        n,
+        nc,
         mut sd,
         mut path,
         w,
         sw,
         y_tilde,
-    } = match begin(engine, y, weights, opts.method)? {
-        Ok(b) => b,
-        Err(done) => return Ok(done),
-    };
+    } = begun;
     let y_norm = path.y_norm;
 
     let mut r = y_tilde.clone();

@@ -275,6 +275,9 @@ impl Standardiser<'_> {
 /// What every path starts from: the standardiser over the engine, an empty path with the
 /// weighted, centred label, the weights and their sum.
 pub(super) struct Begun<'a> {
+    /// Samples and candidates of the engine.
+    pub(super) n: usize,
+    pub(super) nc: usize,
     pub(super) sd: Standardiser<'a>,
     pub(super) path: Path,
     pub(super) w: Vec<f64>,
@@ -296,7 +299,7 @@ fn constant_label(mut path: Path) -> Path {
 
 /// Checks the label, takes the column statistics and sets up the standardisation (see the
 /// module docs) for a path of `method`; a constant label gets its finished path instead.
-pub(super) fn begin<'a>(
+fn begin<'a>(
     engine: &'a mut dyn SweepEngine,
     y: &[f64],
     weights: Option<&[f64]>,
@@ -368,6 +371,8 @@ pub(super) fn begin<'a>(
         return Ok(Err(constant_label(path)));
     }
     Ok(Ok(Begun {
+        n,
+        nc,
         sd,
         path,
         w,
@@ -397,21 +402,31 @@ pub fn lars_path_monitored(
     opts: &PathOptions,
     monitor: &mut dyn FnMut(&Path, usize) -> bool,
 ) -> Result<Path> {
-    if opts.method == Method::ForwardOls {
-        return super::forward::forward_path(engine, y, weights, opts, monitor);
+    let begun = match begin(engine, y, weights, opts.method)? {
+        Ok(b) => b,
+        Err(done) => return Ok(done),
+    };
+    match opts.method {
+        Method::ForwardOls => super::forward::forward_path(begun, opts, monitor),
+        Method::Lars | Method::LassoLars => lars_steps(begun, opts, monitor),
     }
-    let n = engine.n_samples();
-    let nc = engine.n_candidates();
+}
+
+/// The LARS / LassoLars steps from a started path (see the module docs).
+fn lars_steps(
+    begun: Begun,
+    opts: &PathOptions,
+    monitor: &mut dyn FnMut(&Path, usize) -> bool,
+) -> Result<Path> {
     let Begun {
+        n,
+        nc,
         mut sd,
         mut path,
         w,
         sw,
         y_tilde,
-    } = match begin(engine, y, weights, opts.method)? {
-        Ok(b) => b,
-        Err(done) => return Ok(done),
-    };
+    } = begun;
     let y_norm = path.y_norm;
 
     let lasso = opts.method == Method::LassoLars;
