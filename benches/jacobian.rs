@@ -15,17 +15,9 @@ const THROTTLE: &str = r#"{"format": "ctsid-model/1", "inputs": ["u"], "outputs"
         {"exponents": {"y_d2": 1}, "coefficient": -675.7},
         {"exponents": {"u": 1}, "coefficient": 1.222e6}]}]}"#;
 
-const NONLINEAR: &str = r#"{"format": "ctsid-model/1", "inputs": ["u"], "outputs": [
-    {"name": "y", "order": 2, "terms": [
-        {"exponents": {"y": 1}, "coefficient": -40.0},
-        {"exponents": {"y_d1": 1}, "coefficient": -3.0},
-        {"exponents": {"y": 3}, "coefficient": -8.0},
-        {"exponents": {"u": 1}, "coefficient": 25.0},
-        {"exponents": {"w": 1}, "coefficient": 5.0}]},
-    {"name": "w", "order": 1, "terms": [
-        {"exponents": {"w": 1}, "coefficient": -300.0},
-        {"exponents": {"y": 1, "y_d1": 1}, "coefficient": 2.0},
-        {"exponents": {}, "coefficient": 1.5}]}]}"#;
+/// Two outputs, nonlinear (Duffing-like with a cross term); shared with the simulator's
+/// sensitivity test.
+const NONLINEAR: &str = include_str!("../tests/data/models/coupled_oscillator.json");
 
 fn bench_model(c: &mut Criterion, name: &str, text: &str, tau: f64, x0: &[f64]) {
     let mut model = Model::from_json_str(text, name).unwrap().compile().unwrap();

@@ -1205,17 +1205,7 @@ mod tests {
     #[test]
     fn sensitivities_match_central_differences_of_whole_simulations() {
         // Two outputs, nonlinear (Duffing-like with a cross term), one input with kinks.
-        let text = r#"{"format": "ctsid-model/1", "inputs": ["u"], "outputs": [
-            {"name": "y", "order": 2, "terms": [
-                {"exponents": {"y": 1}, "coefficient": -40.0},
-                {"exponents": {"y_d1": 1}, "coefficient": -3.0},
-                {"exponents": {"y": 3}, "coefficient": -8.0},
-                {"exponents": {"u": 1}, "coefficient": 25.0},
-                {"exponents": {"w": 1}, "coefficient": 5.0}]},
-            {"name": "w", "order": 1, "terms": [
-                {"exponents": {"w": 1}, "coefficient": -300.0},
-                {"exponents": {"y": 1, "y_d1": 1}, "coefficient": 2.0},
-                {"exponents": {}, "coefficient": 1.5}]}]}"#;
+        let text = include_str!("../../tests/data/models/coupled_oscillator.json");
         let mut model = crate::model::Model::from_json_str(text, "test")
             .unwrap()
             .compile()
