@@ -47,6 +47,7 @@ use crate::error::{Error, Result};
 use crate::model::{CompiledModel, Model};
 use crate::simulate::{
     fit_initial_state, rms_nrmse, simulate_model, simulate_model_sensitivities, SimOptions,
+    Trajectory,
 };
 
 /// Settings of [`refine`].
@@ -210,25 +211,29 @@ impl<'a> Problem<'a> {
         (seg, run, t, u, opts)
     }
 
-    /// Simulates segment `s` of `model` from `x0`; `None` if it diverges.
-    fn eval_segment(&self, model: &CompiledModel, s: usize, x0: &[f64]) -> Option<SegEval> {
-        let (seg, run, t, u, opts) = self.segment_data(s);
-        let tr = simulate_model(model, x0, t, &u, &opts).ok()?;
-        let m = if seg.last { t.len() } else { t.len() - 1 };
-        let n_out = run.y.len();
-        let mut rows = Vec::with_capacity(m * n_out);
+    /// The residual rows of segment `seg` (samples `a..b`, or `a..=b` for a run's last
+    /// segment) and its end state, from its simulated trajectory; `None` if not finite.
+    fn seg_eval(&self, model: &CompiledModel, seg: Segment, tr: &Trajectory) -> Option<SegEval> {
+        let run = &self.runs[seg.run];
+        let len = seg.b - seg.a + 1;
+        let m = if seg.last { len } else { len - 1 };
+        let mut rows = Vec::with_capacity(m * run.y.len());
         for (i, y) in run.y.iter().enumerate() {
             let o = model.offset(i);
             let w = self.norm / self.out_scale[i];
-            for k in 0..m {
-                rows.push((tr.state(k)[o] - y[seg.a + k]) * w);
-            }
+            rows.extend((0..m).map(|k| (tr.state(k)[o] - y[seg.a + k]) * w));
         }
-        let end = tr.state(t.len() - 1).to_vec();
-        if rows.iter().any(|v| !v.is_finite()) {
-            return None;
-        }
-        Some(SegEval { rows, end })
+        let end = tr.state(len - 1).to_vec();
+        rows.iter()
+            .all(|v| v.is_finite())
+            .then_some(SegEval { rows, end })
+    }
+
+    /// Simulates segment `s` of `model` from `x0`; `None` if it diverges.
+    fn eval_segment(&self, model: &CompiledModel, s: usize, x0: &[f64]) -> Option<SegEval> {
+        let (seg, _, t, u, opts) = self.segment_data(s);
+        let tr = simulate_model(model, x0, t, &u, &opts).ok()?;
+        self.seg_eval(model, seg, &tr)
     }
 
     /// [`Self::eval_segment`] with the derivatives of its rows and end state with respect to
@@ -242,36 +247,25 @@ impl<'a> Problem<'a> {
     ) -> Option<(SegEval, Vec<(Vec<f64>, Vec<f64>)>)> {
         let (seg, run, t, u, opts) = self.segment_data(s);
         let (tr, sens) = simulate_model_sensitivities(model, x0, t, &u, &opts, &self.free).ok()?;
+        let ev = self.seg_eval(model, seg, &tr)?;
         let n = self.n;
         let q = self.free.len() + n;
-        let m = if seg.last { t.len() } else { t.len() - 1 };
-        let n_out = run.y.len();
-        let mut rows = Vec::with_capacity(m * n_out);
-        let mut cols: Vec<(Vec<f64>, Vec<f64>)> = (0..q)
-            .map(|_| (Vec::with_capacity(m * n_out), vec![0.0; n]))
-            .collect();
-        for (i, y) in run.y.iter().enumerate() {
-            let o = model.offset(i);
-            let w = self.norm / self.out_scale[i];
-            for k in 0..m {
-                rows.push((tr.state(k)[o] - y[seg.a + k]) * w);
-                let srow = &sens[(k * n + o) * q..(k * n + o + 1) * q];
-                for (c, v) in cols.iter_mut().zip(srow) {
-                    c.0.push(v * w);
-                }
-            }
-        }
         let last = t.len() - 1;
-        for (c, col) in cols.iter_mut().enumerate() {
-            for j in 0..n {
-                col.1[j] = sens[(last * n + j) * q + c];
-            }
-        }
-        let end = tr.state(last).to_vec();
-        if rows.iter().chain(&sens).any(|v| !v.is_finite()) {
-            return None;
-        }
-        Some((SegEval { rows, end }, cols))
+        let m = if seg.last { t.len() } else { last };
+        // Column c: the rows' derivatives (weighted like the rows), then the end state's.
+        let cols = (0..q)
+            .map(|c| {
+                let mut d = Vec::with_capacity(ev.rows.len());
+                for i in 0..run.y.len() {
+                    let o = model.offset(i);
+                    let w = self.norm / self.out_scale[i];
+                    d.extend((0..m).map(|k| sens[(k * n + o) * q + c] * w));
+                }
+                let end = (0..n).map(|j| sens[(last * n + j) * q + c]).collect();
+                (d, end)
+            })
+            .collect();
+        sens.iter().all(|v| v.is_finite()).then_some((ev, cols))
     }
 
     fn x0_of<'t>(&self, theta: &'t [f64], s: usize) -> &'t [f64] {
@@ -306,7 +300,7 @@ impl<'a> Problem<'a> {
     }
 
     /// Normal equations `J^T J`, `J^T r` from forward sensitivities, assembled per segment.
-    fn normal_equations(&self, theta: &[f64]) -> (DMatrix<f64>, DVector<f64>, Vec<f64>) {
+    fn normal_equations(&self, theta: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
         let nc = self.n_coef();
         let n = self.n;
         let np = self.n_params();
@@ -325,7 +319,6 @@ impl<'a> Problem<'a> {
             .collect();
         let mut jtj = DMatrix::<f64>::zeros(np, np);
         let mut jtr = DVector::<f64>::zeros(np);
-        let mut r_all = Vec::new();
         for (s, l) in locals.into_iter().enumerate() {
             // The base point simulated before, so this fails only where the sensitivities do
             // (a singular stage matrix, non-finite values): no information from this segment
@@ -344,7 +337,6 @@ impl<'a> Problem<'a> {
                     }
                 }
             }
-            r_all.extend_from_slice(&l.r0.rows);
             if !self.segs[s].last {
                 // Defect rows: d/dp of (end - next) / scale * weight, over [local params, next state].
                 let d = self.defect(theta, s, &l.r0.end);
@@ -364,10 +356,9 @@ impl<'a> Problem<'a> {
                         }
                     }
                 }
-                r_all.extend(d);
             }
         }
-        (jtj, jtr, r_all)
+        (jtj, jtr)
     }
 }
 
@@ -380,8 +371,7 @@ impl crate::lm::LeastSquares for Problem<'_> {
         Problem::residuals(self, theta)
     }
     fn normal_equations(&self, theta: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)> {
-        let (jtj, jtr, _) = Problem::normal_equations(self, theta);
-        Some((jtj, jtr))
+        Some(Problem::normal_equations(self, theta))
     }
 }
 
