@@ -1054,81 +1054,25 @@ pub fn fit_initial_state(
 ) -> Vec<f64> {
     let w = window.min(t.len());
     let n = model.n_state();
-    let n_out = model.n_outputs();
     if w < 2 || guess.len() != n {
         return guess.to_vec();
     }
-    let tw = &t[..w];
-    let uw: Vec<Vec<f64>> = us.iter().map(|u| u[..w].to_vec()).collect();
-    let scale: Vec<f64> = (0..n_out)
-        .map(|i| {
-            let y = &ys[i][..w];
+    let scale: Vec<f64> = ys
+        .iter()
+        .map(|y| {
+            let y = &y[..w];
             let mean = y.iter().sum::<f64>() / w as f64;
             let sd = (y.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / w as f64).sqrt();
             sd.max(1e-9 * mean.abs()).max(1e-300)
         })
         .collect();
-    let residuals = |x0: &[f64]| -> Option<Vec<f64>> {
-        let tr = simulate_model(model, x0, tw, &uw, opts).ok()?;
-        let mut r = Vec::with_capacity(w * n_out);
-        for (i, (y, s)) in ys.iter().zip(&scale).enumerate() {
-            let o = model.offset(i);
-            r.extend(
-                y[..w]
-                    .iter()
-                    .enumerate()
-                    .map(|(k, v)| (tr.state(k)[o] - v) / s),
-            );
-        }
-        Some(r)
-    };
-    let mut x = guess.to_vec();
-    if residuals(&x).is_none() {
-        // Start from the measured values with zero derivatives instead.
-        let mut x2 = vec![0.0; n];
-        for i in 0..n_out {
-            x2[model.offset(i)] = ys[i][0];
-        }
-        if residuals(&x2).is_none() {
-            return guess.to_vec();
-        }
-        x = x2;
-    }
-    type Eval<'a> = &'a dyn Fn(&[f64]) -> Option<(Vec<f64>, DMatrix<f64>)>;
-    struct Head<'a, F: Fn(&[f64]) -> Option<Vec<f64>>> {
-        residuals: F,
-        sens: Eval<'a>,
-    }
-    impl<F: Fn(&[f64]) -> Option<Vec<f64>>> crate::lm::LeastSquares for Head<'_, F> {
-        fn residuals(&self, x: &[f64]) -> Option<Vec<f64>> {
-            (self.residuals)(x)
-        }
-        fn normal_equations(&self, x: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)> {
-            let (r, jac) = (self.sens)(x)?;
-            Some((
-                jac.transpose() * &jac,
-                jac.transpose() * DVector::from_vec(r),
-            ))
-        }
-    }
-    // The residuals and their sensitivities to each initial state, from one simulation.
-    let sens = |x: &[f64]| -> Option<(Vec<f64>, DMatrix<f64>)> {
-        let (tr, sens) = simulate_model_sensitivities(model, x, tw, &uw, opts, &[]).ok()?;
-        let rows = w * n_out;
-        let mut jac = DMatrix::<f64>::zeros(rows, n);
-        let mut r = Vec::with_capacity(rows);
-        let mut row = 0;
-        for (i, s) in scale.iter().enumerate() {
-            let o = model.offset(i);
-            for k in 0..w {
-                r.push((tr.state(k)[o] - ys[i][k]) / s);
-                for j in 0..n {
-                    jac[(row, j)] = sens[(k * n + o) * n + j] / s;
-                }
-                row += 1;
-            }
-        }
-        Some((r, jac))
+    let p = InitialState {
+        model,
+        t: &t[..w],
+        u: us.iter().map(|u| u[..w].to_vec()).collect(),
+        ys,
+        scale,
+        opts,
     };
     let o = crate::lm::LmOptions {
         max_iter: 8,
@@ -1139,12 +1083,62 @@ pub fn fit_initial_state(
         lambda_max: f64::MAX,
         tol: 1e-10,
     };
-    let p = Head {
-        residuals,
-        sens: &sens,
-    };
+    // When the guess cannot be simulated, start from the measured values with zero derivatives.
+    let mut measured = vec![0.0; n];
+    for (i, y) in ys.iter().enumerate() {
+        measured[model.offset(i)] = y[0];
+    }
     let mut stats = crate::lm::LmStats::default();
-    crate::lm::minimize(&p, x.clone(), &o, &mut stats).map_or(x, |(x, _)| x)
+    [guess.to_vec(), measured]
+        .into_iter()
+        .find_map(|x| crate::lm::minimize(&p, x, &o, &mut stats))
+        .map_or_else(|| guess.to_vec(), |(x, _)| x)
+}
+
+/// The least-squares problem of [`fit_initial_state`]: the outputs over the first samples, each
+/// scaled by its spread there, as functions of the initial state.
+struct InitialState<'a> {
+    model: &'a CompiledModel,
+    t: &'a [f64],
+    u: Vec<Vec<f64>>,
+    ys: &'a [Vec<f64>],
+    scale: Vec<f64>,
+    opts: &'a SimOptions,
+}
+
+impl InitialState<'_> {
+    fn rows(&self, tr: &Trajectory) -> Vec<f64> {
+        let mut r = Vec::with_capacity(self.t.len() * self.ys.len());
+        for (i, (y, s)) in self.ys.iter().zip(&self.scale).enumerate() {
+            let o = self.model.offset(i);
+            r.extend((0..self.t.len()).map(|k| (tr.state(k)[o] - y[k]) / s));
+        }
+        r
+    }
+}
+
+impl crate::lm::LeastSquares for InitialState<'_> {
+    fn residuals(&self, x0: &[f64]) -> Option<Vec<f64>> {
+        let tr = simulate_model(self.model, x0, self.t, &self.u, self.opts).ok()?;
+        Some(self.rows(&tr))
+    }
+
+    /// From one simulation with the sensitivities to each initial state.
+    fn normal_equations(&self, x0: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)> {
+        let (tr, sens) =
+            simulate_model_sensitivities(self.model, x0, self.t, &self.u, self.opts, &[]).ok()?;
+        let n = self.model.n_state();
+        let w = self.t.len();
+        let r = self.rows(&tr);
+        let jac = DMatrix::from_fn(r.len(), n, |row, j| {
+            let (i, k) = (row / w, row % w);
+            sens[(k * n + self.model.offset(i)) * n + j] / self.scale[i]
+        });
+        Some((
+            jac.transpose() * &jac,
+            jac.transpose() * DVector::from_vec(r),
+        ))
+    }
 }
 
 /// Population standard deviation (0 for an empty slice).
