@@ -46,29 +46,15 @@ impl System for AugModel {
             .map(|(e, c)| c * e.eval_smooth(&z, &self.eps))
             .sum();
     }
-    /// Forward differences with a step scaled to each state's spread (a thousandth of the
-    /// smoothing width of `sign`, itself a thousandth of the spread), not the trait's
-    /// `1.5e-8 max(|x|, 1)`, which is coarse for states much smaller than one. The sensitivities
-    /// of the refit follow these Jacobians.
-    fn jacobian(&self, x: &[f64], u: &[f64], jac: &mut [f64]) {
-        let n = self.order;
-        let mut f0 = vec![0.0; n];
-        let mut f1 = vec![0.0; n];
-        let mut xp = x.to_vec();
-        self.rhs(x, u, &mut f0);
-        for k in 0..n {
-            let scaled = 1e-3 * self.eps.get(k).copied().unwrap_or(0.0);
-            let dk = if scaled > 0.0 {
-                scaled.max(1e-12 * x[k].abs())
-            } else {
-                1.5e-8 * x[k].abs().max(1.0)
-            };
-            xp[k] = x[k] + dk;
-            self.rhs(&xp, u, &mut f1);
-            xp[k] = x[k];
-            for r in 0..n {
-                jac[r * n + k] = (f1[r] - f0[r]) / dk;
-            }
+    /// A thousandth of the smoothing width of `sign`, itself a thousandth of the state's spread:
+    /// the default `1.5e-8 max(|x|, 1)` is coarse for states much smaller than one, and the
+    /// sensitivities of the refit follow these Jacobians.
+    fn fd_step(&self, k: usize, x: &[f64]) -> f64 {
+        let scaled = 1e-3 * self.eps.get(k).copied().unwrap_or(0.0);
+        if scaled > 0.0 {
+            scaled.max(1e-12 * x[k].abs())
+        } else {
+            1.5e-8 * x[k].abs().max(1.0)
         }
     }
 }
@@ -172,10 +158,16 @@ pub fn mean_nrmse(m: &AugModel, runs: &[SimRun]) -> f64 {
     v.iter().sum::<f64>() / v.len().max(1) as f64
 }
 
+/// The weight `1 / (sd(y) sqrt(len))` of a run's residuals: runs count by their error relative
+/// to their spread, whatever their length.
+fn residual_weight(r: &SimRun) -> f64 {
+    1.0 / (std_dev(&r.y).max(1e-300) * (r.y.len() as f64).sqrt())
+}
+
 /// Normalised free-run residuals of one run from `x0`, `(sim - y) / (sd(y) sqrt(len))`.
 fn run_residuals(m: &AugModel, r: &SimRun, x0: &[f64]) -> Option<Vec<f64>> {
     let s = free_run_from(m, r, x0)?;
-    let w = 1.0 / (std_dev(&r.y).max(1e-300) * (r.y.len() as f64).sqrt());
+    let w = residual_weight(r);
     Some(s.iter().zip(&r.y).map(|(a, b)| (a - b) * w).collect())
 }
 
@@ -202,7 +194,7 @@ fn run_sensitivities(
     let opts = options(&r.id, &r.y);
     let (tr, sens) = simulate_sensitivities(m, &input, x0, &r.t, &opts, free.len(), &pjac).ok()?;
     let q = free.len() + n;
-    let w = 1.0 / (std_dev(&r.y).max(1e-300) * (r.y.len() as f64).sqrt());
+    let w = residual_weight(r);
     let cols: Vec<Vec<f64>> = (0..q)
         .map(|c| (0..r.t.len()).map(|k| sens[k * n * q + c] * w).collect())
         .collect();

@@ -41,7 +41,14 @@ pub trait System {
     }
     /// Writes `f(x, u)` into `dx`.
     fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]);
-    /// Writes `df/dx` (row-major `dim x dim`) into `jac`; the default uses forward differences.
+    /// The step of the default [`System::jacobian`] in state `k` at `x`: `sqrt(eps)` relative,
+    /// the usual balance of truncation and rounding for states of order one. Systems whose
+    /// states are far from that scale say so here.
+    fn fd_step(&self, k: usize, x: &[f64]) -> f64 {
+        1.5e-8 * x[k].abs().max(1.0)
+    }
+    /// Writes `df/dx` (row-major `dim x dim`) into `jac`; the default uses forward differences
+    /// with steps [`System::fd_step`].
     fn jacobian(&self, x: &[f64], u: &[f64], jac: &mut [f64]) {
         let n = self.dim();
         let mut f0 = vec![0.0; n];
@@ -49,8 +56,7 @@ pub trait System {
         let mut xp = x.to_vec();
         self.rhs(x, u, &mut f0);
         for k in 0..n {
-            // sqrt(eps) relative perturbation: the usual balance of truncation and rounding.
-            let dk = 1.5e-8 * x[k].abs().max(1.0);
+            let dk = self.fd_step(k, x);
             xp[k] = x[k] + dk;
             self.rhs(&xp, u, &mut f1);
             xp[k] = x[k];
