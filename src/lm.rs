@@ -161,6 +161,7 @@ mod tests {
             "{t:?}"
         );
         assert!(c < 1e-12);
-        assert!(stats.accepted > 5 && stats.iterations <= 200);
+        // Stopped by itself (no trial lowers the cost any more), not by the iteration cap.
+        assert!(stats.accepted > 5 && stats.iterations < 200, "{stats:?}");
     }
 }
