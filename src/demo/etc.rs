@@ -126,23 +126,24 @@ pub fn run(o: &EtcOptions) -> Result<String> {
     let mut noisy: Option<(Identification, Vec<crate::plants::Run>)> = None;
     // The noise-free and the noisy searches are independent: run them side by side (each one's
     // candidate scoring is uneven, one order often taking most of the time).
+    // One identification of the demo: degree d, the order searched (None) or fixed.
+    let run_identify = |runs: &[crate::plants::Run], d: usize, order: Option<usize>| {
+        let rs = records(runs, &inputs, &outputs, o.tau)?;
+        let mut s = Settings::new(outputs.clone(), inputs.clone(), d);
+        s.engine = o.engine;
+        match order {
+            Some(n) => s.orders = Orders::Fixed(vec![n]),
+            None => s.progress = o.progress,
+        }
+        identify(&rs, &split, &s)
+    };
     let search = |eta: f64| -> Result<(Identification, Vec<crate::plants::Run>)> {
         let runs = dataset(&plant, o.runs, o.samples, o.tau, eta, o.seed)?;
-        let rs = records(&runs, &inputs, &outputs, o.tau)?;
-        let mut s = Settings::new(outputs.clone(), inputs.clone(), o.degree);
-        s.engine = o.engine;
-        s.progress = o.progress;
-        Ok((identify(&rs, &split, &s)?, runs))
+        Ok((run_identify(&runs, o.degree, None)?, runs))
     };
     // The fixed n = 3, d = 1 identification on the noisy runs is independent of both searches:
     // it follows the noisy one, which finishes well before the noise-free one.
-    let fixed = |d: usize, runs: &[crate::plants::Run]| -> Result<Identification> {
-        let rs = records(runs, &inputs, &outputs, o.tau)?;
-        let mut s = Settings::new(outputs.clone(), inputs.clone(), d);
-        s.orders = Orders::Fixed(vec![3]);
-        s.engine = o.engine;
-        identify(&rs, &split, &s)
-    };
+    let fixed = |d: usize, runs: &[crate::plants::Run]| run_identify(runs, d, Some(3));
     let (clean, (noisy_search, mut d1)) = rayon::join(
         || search(0.0),
         || {
