@@ -447,6 +447,13 @@ struct Sens<'a> {
     pjac: ParamJacobian<'a>,
     /// `dx/dp` at the current time, row-major `n x q`.
     s: Vec<f64>,
+    /// Scratch of `propagate`, reused across steps: stage Jacobians, stage parameter
+    /// Jacobians, a stage state, the right-hand sides and the solver's work space.
+    jacs: Vec<f64>,
+    pj: Vec<f64>,
+    xs: Vec<f64>,
+    rhs: Vec<f64>,
+    work: Vec<f64>,
 }
 
 impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
@@ -575,26 +582,40 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
     /// stages themselves (not the simplified-Newton one), and `S1 = dY_3` (stiffly accurate).
     /// One 3n x 3n factorisation serves every column.
     fn propagate(&mut self, t: f64, x0: &[f64], h: f64, z: &[f64]) -> bool {
-        let Some(sens) = self.sens.take() else {
+        let Some(mut sens) = self.sens.take() else {
             return true;
         };
+        let ok = self.propagate_with(&mut sens, t, x0, h, z);
+        self.sens = Some(sens);
+        ok
+    }
+
+    fn propagate_with(&mut self, sens: &mut Sens, t: f64, x0: &[f64], h: f64, z: &[f64]) -> bool {
         let n = self.n;
         let m = 3 * n;
         let (np, q) = (sens.np, sens.q);
         let a = self.rk.a;
         let c = self.rk.c;
-        let mut jacs = vec![0.0; 3 * n * n];
-        let mut pj = vec![0.0; 3 * n * np];
-        let mut xs = vec![0.0; n];
+        sens.jacs.resize(3 * n * n, 0.0);
+        sens.pj.resize(3 * n * np, 0.0);
+        sens.xs.resize(n, 0.0);
         for j in 0..3 {
             for k in 0..n {
-                xs[k] = x0[k] + z[j * n + k];
+                sens.xs[k] = x0[k] + z[j * n + k];
             }
             self.input.eval(t + c[j] * h, &mut self.u);
-            self.sys
-                .jacobian(&xs, &self.u, &mut jacs[j * n * n..(j + 1) * n * n]);
-            (sens.pjac)(&xs, &self.u, &mut pj[j * n * np..(j + 1) * n * np]);
+            self.sys.jacobian(
+                &sens.xs,
+                &self.u,
+                &mut sens.jacs[j * n * n..(j + 1) * n * n],
+            );
+            (sens.pjac)(
+                &sens.xs,
+                &self.u,
+                &mut sens.pj[j * n * np..(j + 1) * n * np],
+            );
         }
+        let jacs = &sens.jacs;
         let stage = |j: usize| &jacs[j * n * n..(j + 1) * n * n];
         // A model linear in its states has one Jacobian everywhere, and steps recur (h, h/2):
         // reuse the factors of an identical stage matrix (exactly identical, unlike the Newton
@@ -609,7 +630,6 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
             Some(lu) => lu,
             None => {
                 let Some(lu) = stage_matrix(&a, n, h, [stage(0), stage(1), stage(2)]) else {
-                    self.sens = Some(sens);
                     return false;
                 };
                 let lu = std::rc::Rc::new(lu);
@@ -624,24 +644,21 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         };
         // Right-hand sides, row-major 3n x q: S0 in every stage block, plus the parameters'
         // direct effect h sum_j a_ij f_p,j in their columns.
-        let mut b = vec![0.0; m * q];
+        sens.rhs.resize(m * q, 0.0);
         for i in 0..3 {
             for r in 0..n {
-                let row = &mut b[(i * n + r) * q..(i * n + r + 1) * q];
+                let row = &mut sens.rhs[(i * n + r) * q..(i * n + r + 1) * q];
                 row.copy_from_slice(&sens.s[r * q..(r + 1) * q]);
                 for j in 0..3 {
                     let f = h * a[i][j];
-                    let pr = &pj[j * n * np + r * np..j * n * np + (r + 1) * np];
+                    let pr = &sens.pj[j * n * np + r * np..j * n * np + (r + 1) * np];
                     row[..np].iter_mut().zip(pr).for_each(|(v, p)| *v += f * p);
                 }
             }
         }
-        let mut scratch = Vec::with_capacity(m * q);
-        lu.solve_many(&mut b, q, &mut scratch);
-        let out = b[2 * n * q..3 * n * q].to_vec();
-        let ok = out.iter().all(|v| v.is_finite());
-        self.sens = Some(Sens { s: out, ..sens });
-        ok
+        lu.solve_many(&mut sens.rhs, q, &mut sens.work);
+        sens.s.copy_from_slice(&sens.rhs[2 * n * q..3 * n * q]);
+        sens.s.iter().all(|v| v.is_finite())
     }
 
     fn diverged(&self, t: f64, x: &[f64]) -> Option<Error> {
@@ -855,6 +872,11 @@ pub fn simulate_sensitivities<S: System + ?Sized, I: Input + ?Sized>(
         q,
         pjac,
         s,
+        jacs: Vec::new(),
+        pj: Vec::new(),
+        xs: Vec::new(),
+        rhs: Vec::new(),
+        work: Vec::new(),
     };
     integrate(sys, input, x0, times, opts, Some(sens)).map(|(tr, s)| (tr, s.unwrap_or_default()))
 }
