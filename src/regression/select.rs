@@ -97,14 +97,6 @@ impl EbicScorer {
     /// eBIC and OLS RSS of breakpoint `b`'s support (None where the refit is singular).
     pub fn score(&mut self, path: &Path, b: usize) -> Option<(f64, f64)> {
         let floor = (self.rss_floor * path.y_norm).powi(2);
-        let st = &path.store;
-        while self.gram.len() < st.ids.len() {
-            let i = self.gram.len();
-            let row = (0..=i)
-                .map(|j| st.cols[i].iter().zip(&st.cols[j]).map(|(a, b)| a * b).sum())
-                .collect();
-            self.gram.push(row);
-        }
         let mut key: Vec<usize> = path.breakpoints[b].active.clone();
         key.sort_unstable();
         let bp = &path.breakpoints[b];
@@ -135,6 +127,15 @@ impl EbicScorer {
 
     fn refit(&mut self, path: &Path, key: &[usize], floor: f64) -> Option<(f64, f64)> {
         let st = &path.store;
+        // Only refits need the Gram matrix (forward-OLS paths never do): grown here, each new
+        // stored column's products once.
+        while self.gram.len() < st.ids.len() {
+            let i = self.gram.len();
+            let row = (0..=i)
+                .map(|j| st.cols[i].iter().zip(&st.cols[j]).map(|(a, b)| a * b).sum())
+                .collect();
+            self.gram.push(row);
+        }
         let (n, p, gamma) = (self.n, self.p, self.gamma);
         let pos: Vec<usize> = key
             .iter()
