@@ -2,9 +2,10 @@
 //! 0..N (default 10) at 3 % noise, printing each verdict and the pass counts. The free-run
 //! shrink is judged against the plant's noise-free output and printed against the measurement too.
 //!
-//! `cargo run --release --example discover_acceptance -- [SEEDS] [ETA] [CASE ...]`
+//! `cargo run --release --example discover_acceptance -- [SEEDS] [ETA] [CASE ...]`; `SCALE=s`
+//! multiplies every case's excitation amplitude (default 1).
 
-use ctsid::discover::cases::{generate, judge, options, truth_ratio, CASES};
+use ctsid::discover::cases::{generate_scaled, judge, options, truth_ratio, CASES};
 use ctsid::discover::discover;
 
 fn main() {
@@ -16,6 +17,10 @@ fn main() {
     } else {
         CASES.iter().map(|s| s.to_string()).collect()
     };
+    let scale: f64 = std::env::var("SCALE")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1.0);
     let mut summary = Vec::new();
     for name in &chosen {
         let mut pass = 0;
@@ -23,7 +28,7 @@ fn main() {
         let mut truth_ratios = Vec::new();
         for seed in 0..seeds {
             let t = std::time::Instant::now();
-            let case = match generate(name, seed, eta) {
+            let case = match generate_scaled(name, seed, eta, scale) {
                 Ok(c) => c,
                 Err(e) => {
                     println!("{name} seed {seed}: generation failed: {e}");

@@ -107,3 +107,39 @@ fn tank_outflow_is_named_alone_when_a_second_effect_fails_its_gates() {
         d.text()
     );
 }
+
+/// A tank driven harder (level swings near empty): the regression also takes a friction-like
+/// bump in the level that passes the bootstrap gates; refitted without it the model simulates
+/// the validation runs just as well, so it is left out and the outflow law is named alone.
+#[test]
+fn tank_bump_that_does_not_help_simulation_is_left_out() {
+    let case = ctsid::discover::cases::generate_scaled("tank", 0, 0.03, 1.0 / 0.6).unwrap();
+    let d = discover(&case.records, &case.nominal, &options(&case, 0)).unwrap();
+    let (ok, why) = judge(&case, &d);
+    assert!(ok, "{why}\n{}", d.text());
+    assert!(
+        d.dropped
+            .iter()
+            .any(|s| s.contains("validation free-run NRMSE only")),
+        "{}",
+        d.text()
+    );
+}
+
+/// At 10 % noise a Stribeck hump beside the Coulomb law passes the bootstrap gates, but
+/// refined on simulation error its coefficient takes the sign its interval excludes: it is
+/// left out and only Coulomb friction is named.
+#[test]
+fn effect_whose_refined_sign_contradicts_its_interval_is_left_out() {
+    let case = generate("coulomb", 5, 0.10).unwrap();
+    let d = discover(&case.records, &case.nominal, &options(&case, 5)).unwrap();
+    let named: Vec<&str> = d.effects.iter().map(|e| e.family.as_str()).collect();
+    assert_eq!(named, vec!["coulomb_friction"], "{}", d.text());
+    assert!(
+        d.dropped
+            .iter()
+            .any(|s| s.contains("refined on simulation error")),
+        "{}",
+        d.text()
+    );
+}

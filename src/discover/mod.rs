@@ -530,6 +530,12 @@ impl Prepared {
     }
 }
 
+/// Least share of validation free-run error one of several effects must remove: the simulation
+/// has to notice it at all. Effects the refined simulation does not use remove none (a bump near
+/// the empty tank: 0.0 %); Silverbox's small even stiffness y^2, a known second-order effect of
+/// that circuit, removes 1.9 %.
+const MARGINAL_GAIN: f64 = 0.01;
+
 /// Runs the workflow.
 pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discovery> {
     let p = prepare(rs, nominal, o)?;
@@ -708,15 +714,9 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         cand = keep.iter().map(|&i| cand[i]).collect();
         (aliases, inclusion, intervals) = bootstrap(&cand);
     }
-    let cand_sol = pb.fit(&train, &cand).ok_or_else(numerr)?;
     let idx_nom: Vec<usize> = (0..n_nom).collect();
-    let idx_cand: Vec<usize> = (0..n_nom).chain(cand.iter().map(|&k| n_nom + k)).collect();
     let val_nominal = val.rr;
     let val_retuned = rss_at(&val, &idx_nom, &retune.delta);
-    let mut xc = cand_sol.delta.clone();
-    xc.extend(&cand_sol.coef);
-    let val_cand = rss_at(&val, &idx_cand, &xc);
-    let residual_ratio = val_cand / val_nominal.min(val_retuned).max(1e-300);
 
     // The simulation gate compares structures at their best: each one refined on free-run error
     // of the training runs (coefficients and initial states) before it is scored on validation.
@@ -729,17 +729,86 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         &fixed,
         o.refine_iterations,
     );
-    let eff_pairs: Vec<(usize, f64)> = cand
-        .iter()
-        .copied()
-        .zip(cand_sol.coef.iter().copied())
-        .collect();
-    let cand_model = sim::refine(
-        &p.model(&cand_sol.delta, &eff_pairs),
-        &truns,
-        &fixed,
-        o.refine_iterations,
-    );
+    let nt = p.theta0.len();
+    // A candidate set fitted on the weak form, then refined on free-run error.
+    let fit_refined = |set: &[usize]| -> Result<(_, AugModel)> {
+        let sol = pb.fit(&train, set).ok_or_else(numerr)?;
+        let pairs: Vec<(usize, f64)> = set.iter().copied().zip(sol.coef.iter().copied()).collect();
+        let m = sim::refine(
+            &p.model(&sol.delta, &pairs),
+            &truns,
+            &fixed,
+            o.refine_iterations,
+        );
+        Ok((sol, m))
+    };
+    let (cand_sol, cand_model) = loop {
+        let (cand_sol, cand_model) = fit_refined(&cand)?;
+        // The refit on simulation error must tell the same story as the regression: an effect
+        // whose refined coefficient takes the sign its interval excludes is traded against
+        // the others (at 10 % noise a Stribeck hump beside Coulomb friction went from
+        // [0.27, 0.52] to -0.10), so it is not named and the rest are judged without it.
+        let c = cand_model.coefficients();
+        let flipped: Vec<usize> = (0..cand.len())
+            .filter(|&i| {
+                let iv = intervals[i];
+                (iv[0] > 0.0 && c[nt + i] < 0.0) || (iv[1] < 0.0 && c[nt + i] > 0.0)
+            })
+            .collect();
+        if !flipped.is_empty() && flipped.len() < cand.len() {
+            for &i in &flipped {
+                dropped.push(format!(
+                    "{} {} (95 % interval [{}, {}], refined on simulation error to {})",
+                    p.effects[cand[i]].family,
+                    p.effects[cand[i]].formula,
+                    num(intervals[i][0]),
+                    num(intervals[i][1]),
+                    num(c[nt + i])
+                ));
+            }
+            cand = (0..cand.len())
+                .filter(|i| !flipped.contains(i))
+                .map(|i| cand[i])
+                .collect();
+            (aliases, inclusion, intervals) = bootstrap(&cand);
+            continue;
+        }
+        if cand.len() > 1 {
+            // Each of several effects must earn its place in simulation: refitted and refined
+            // without it, the model must be clearly worse on validation runs. Near an empty
+            // tank the smoother's bias looked like a friction bump to the regression and
+            // passed every other gate; without the bump the validation error was the same.
+            let with = sim::mean_nrmse(&cand_model, &vruns);
+            let mut weakest: Option<(usize, f64)> = None;
+            for i in 0..cand.len() {
+                let mut rest = cand.clone();
+                rest.remove(i);
+                let without = sim::mean_nrmse(&fit_refined(&rest)?.1, &vruns);
+                let gain = 1.0 - with / without;
+                if gain < MARGINAL_GAIN && weakest.is_none_or(|(_, g)| gain < g) {
+                    weakest = Some((i, gain));
+                }
+            }
+            if let Some((i, gain)) = weakest {
+                dropped.push(format!(
+                    "{} {} (without it, validation free-run NRMSE only {:.1} % higher; < {:.0} %)",
+                    p.effects[cand[i]].family,
+                    p.effects[cand[i]].formula,
+                    100.0 * gain,
+                    100.0 * MARGINAL_GAIN
+                ));
+                cand.remove(i);
+                (aliases, inclusion, intervals) = bootstrap(&cand);
+                continue;
+            }
+        }
+        break (cand_sol, cand_model);
+    };
+    let idx_cand: Vec<usize> = (0..n_nom).chain(cand.iter().map(|&k| n_nom + k)).collect();
+    let mut xc = cand_sol.delta.clone();
+    xc.extend(&cand_sol.coef);
+    let val_cand = rss_at(&val, &idx_cand, &xc);
+    let residual_ratio = val_cand / val_nominal.min(val_retuned).max(1e-300);
     let sim_nom = sim::mean_nrmse(&nominal_model, &vruns);
     let sim_ret = sim::mean_nrmse(&retuned_model, &vruns);
     let sim_cand = sim::mean_nrmse(&cand_model, &vruns);
@@ -811,7 +880,6 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         verdict = "added";
         let refined = cand_model.clone();
         let c = refined.coefficients();
-        let nt = p.theta0.len();
         for (i, &k) in cand.iter().enumerate() {
             let e = &p.effects[k];
             effects.push(FoundEffect {
