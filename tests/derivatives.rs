@@ -110,12 +110,19 @@ fn shared_signals_meet_the_regression_gates() {
                 ml[k]
             );
         }
-        if r.signal == "etc_s1" {
+        // Rows that meet every gate of the issue today must keep meeting them.
+        let full = matches!(
+            (r.signal.as_str(), r.noise),
+            ("etc_s1", _) | ("chirp", _) | ("sys3_multisine", 5)
+        );
+        if full {
             assert!(
                 benchmark::gates_pass(r),
-                "etc_s1 {}%: {:?}",
+                "{} {}%: trimmed p95 {:?}, full p100 {:?}",
+                r.signal,
                 r.noise,
-                r.trimmed_p95
+                r.trimmed_p95,
+                r.full_p100
             );
         }
     }
