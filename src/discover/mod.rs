@@ -536,6 +536,11 @@ impl Prepared {
 /// that circuit, removes 1.9 %.
 const MARGINAL_GAIN: f64 = 0.01;
 
+/// Whether a coefficient refined on simulation error takes the sign its interval excludes.
+fn contradicts(interval: &[f64; 2], refined: f64) -> bool {
+    (interval[0] > 0.0 && refined < 0.0) || (interval[1] < 0.0 && refined > 0.0)
+}
+
 /// Runs the workflow.
 pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discovery> {
     let p = prepare(rs, nominal, o)?;
@@ -750,10 +755,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         // [0.27, 0.52] to -0.10), so it is not named and the rest are judged without it.
         let c = cand_model.coefficients();
         let flipped: Vec<usize> = (0..cand.len())
-            .filter(|&i| {
-                let iv = intervals[i];
-                (iv[0] > 0.0 && c[nt + i] < 0.0) || (iv[1] < 0.0 && c[nt + i] > 0.0)
-            })
+            .filter(|&i| contradicts(&intervals[i], c[nt + i]))
             .collect();
         if !flipped.is_empty() && flipped.len() < cand.len() {
             for &i in &flipped {
@@ -1290,5 +1292,21 @@ impl Discovery {
         m.extra.insert("discovery".into(), section);
         m.validate()?;
         Ok(m)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::contradicts;
+
+    #[test]
+    fn refined_sign_against_the_interval() {
+        // Stribeck beside Coulomb at 10 % noise: [0.27, 0.52] refined to -0.10.
+        assert!(contradicts(&[0.27, 0.52], -0.10));
+        assert!(contradicts(&[-0.5, -0.2], 0.01));
+        // Outside the interval but on its side, or an interval that holds zero: no contradiction.
+        assert!(!contradicts(&[0.27, 0.52], 0.9));
+        assert!(!contradicts(&[-0.46, -0.33], -0.51));
+        assert!(!contradicts(&[-0.1, 0.2], -5.0));
     }
 }
