@@ -111,3 +111,57 @@ fn derive_bad_input_is_one_line_and_non_zero() {
         assert!(err.contains(want), "case {i}: '{want}' not in {err}");
     }
 }
+
+#[test]
+fn no_end_chains_keeps_the_full_chain_at_the_ends() {
+    use ctsid::derivatives::{differentiate_runs, DerivativeOptions};
+    // A noisy sine (fixed pseudo-random noise): the option changes only the end samples.
+    let n = 400;
+    let tau = 0.01;
+    let mut state = 12345u64;
+    let y: Vec<f64> = (0..n)
+        .map(|i| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let u = (state >> 11) as f64 / (1u64 << 53) as f64 - 0.5;
+            (2.0 * i as f64 * tau).sin() + 0.02 * u
+        })
+        .collect();
+    let mut text = String::from("t,y\n");
+    for (i, v) in y.iter().enumerate() {
+        text += &format!("{},{v:.17e}\n", i as f64 * tau);
+    }
+    let input = temp("noisy_sine.csv", &text);
+    let d1_of = |extra: &[&str]| -> Vec<f64> {
+        let mut args = vec!["derive", input.as_str(), "--column", "y", "--order", "2"];
+        args.extend(["--time-column", "t"]);
+        args.extend(extra);
+        let (ok, out, err) = ctsid(&args);
+        assert!(ok, "{err}");
+        out.lines()
+            .skip(1)
+            .map(|l| l.split(',').nth(3).unwrap().parse().unwrap())
+            .collect()
+    };
+    let with = d1_of(&[]);
+    let without = d1_of(&["--no-end-chains"]);
+    let lib = differentiate_runs(
+        &[&y],
+        tau,
+        2,
+        &DerivativeOptions {
+            end_orders: false,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    for i in 0..n {
+        assert!(
+            (without[i] - lib[0].values[1][i]).abs() < 1e-9,
+            "sample {i}"
+        );
+    }
+    assert!((with[0] - without[0]).abs() > 1e-9);
+    assert!((with[n / 2] - without[n / 2]).abs() < 1e-9);
+}
