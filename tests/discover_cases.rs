@@ -120,7 +120,7 @@ fn tank_bump_that_does_not_help_simulation_is_left_out() {
     assert!(
         d.dropped
             .iter()
-            .any(|s| s.contains("validation free-run NRMSE only")),
+            .any(|s| s.contains("validation free-run NRMSE changes by only")),
         "{}",
         d.text()
     );

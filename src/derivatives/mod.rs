@@ -72,7 +72,8 @@ pub struct DerivativeOptions {
     pub window: f64,
     /// Blend into the stationary-prior estimate near the ends.
     pub end_blend: bool,
-    /// Near the ends, take order k from a shorter chain (k + 2 states).
+    /// Near the ends, blend each order k >= 1 with the estimate of a shorter chain (k + 2 states,
+    /// where that is fewer than the main chain's): less variance, a little more bias.
     pub end_orders: bool,
 }
 

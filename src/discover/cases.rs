@@ -2,7 +2,7 @@
 //! through the [`System`] trait), a nominal model file that omits or mistunes something, and what
 //! a correct answer is.
 //!
-//! Every case: 8 runs of 10 s at tau = 0.01 s (train 0-3, validation 4-5, test 6-7), driven by a
+//! Every case: 10 runs of 10 s at tau = 0.01 s (train 0-3, validation 4, 5, 8, test 6, 7, 9), driven by a
 //! seeded multisine (5 sines, one in each of 5 log-spaced bands over 0.05-1.2 Hz,
 //! 0.05-0.3 Hz for the tank, random phases) unless the case says otherwise; only `y`
 //! and `u` recorded; 3 % noise with the paper's definition ([`crate::plants::noise::add_noise`]).
