@@ -912,12 +912,21 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
                 }
             }
             if let Some((i, gain)) = weakest {
+                let what = if gain < 0.0 {
+                    format!(
+                        "makes the validation free-run NRMSE {:.1} % worse",
+                        -100.0 * gain
+                    )
+                } else {
+                    format!(
+                        "removes only {:.1} % of the validation free-run NRMSE (< {:.0} %)",
+                        100.0 * gain,
+                        100.0 * MARGINAL_GAIN
+                    )
+                };
                 dropped.push(format!(
-                    "{} {} (without it, validation free-run NRMSE changes by only {:+.1} %; < {:.0} %)",
-                    p.effects[cand[i]].family,
-                    p.effects[cand[i]].formula,
-                    100.0 * gain,
-                    100.0 * MARGINAL_GAIN
+                    "{} {} (in simulation it {what})",
+                    p.effects[cand[i]].family, p.effects[cand[i]].formula,
                 ));
                 cand.remove(i);
                 (aliases, inclusion, intervals) = bootstrap(&cand);
