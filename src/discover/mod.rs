@@ -570,6 +570,8 @@ const MARGINAL_GAIN: f64 = 0.01;
 /// one third against two thirds); Silverbox and EMPS effects at most z = 1.3.
 const DRIFT_Z: f64 = 3.5;
 const DRIFT_REL: f64 = 0.5;
+/// Fewest blocks in each half of the training runs for the time-invariance check to speak.
+const MIN_HALF_BLOCKS: usize = 4;
 
 /// Whether coefficients `early` and `late` of one effect, `z` standard deviations apart, say it
 /// is not constant in time.
@@ -756,15 +758,19 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             })
         })
         .collect();
+    let half_sums: [Gram; 2] = [0, 1].map(|h| {
+        let gs: Vec<Gram> = halves[h].iter().map(|&b| blocks[b].clone()).collect();
+        sum_grams(&gs, ncol)
+    });
+    // (early, late, z); z is NaN where the halves cannot be compared (too few blocks in one,
+    // a failed fit, no spread), and a NaN z never says "drifts".
     let drift_z = |cand: &[usize]| -> Vec<(f64, f64, f64)> {
-        let point: Vec<Option<Vec<f64>>> = (0..2)
-            .map(|h| {
-                let idx: Vec<Gram> = halves[h].iter().map(|&b| blocks[b].clone()).collect();
-                pb.fit(&sum_grams(&idx, ncol), cand).map(|s| s.coef)
-            })
-            .collect();
-        let (Some(e), Some(l)) = (&point[0], &point[1]) else {
-            return vec![(f64::NAN, f64::NAN, 0.0); cand.len()];
+        let none = vec![(f64::NAN, f64::NAN, f64::NAN); cand.len()];
+        if halves.iter().any(|h| h.len() < MIN_HALF_BLOCKS) {
+            return none;
+        }
+        let (Some(e), Some(l)) = (pb.fit(&half_sums[0], cand), pb.fit(&half_sums[1], cand)) else {
+            return none;
         };
         let mut samples: [Vec<Vec<f64>>; 2] =
             [vec![Vec::new(); cand.len()], vec![Vec::new(); cand.len()]];
@@ -777,14 +783,22 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
                 }
             }
         }
+        let var = |v: &[f64]| {
+            if v.len() < 2 {
+                return f64::NAN;
+            }
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64
+        };
         (0..cand.len())
             .map(|i| {
-                let var = |v: &[f64]| {
-                    let m = v.iter().sum::<f64>() / v.len().max(1) as f64;
-                    v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len().max(2) - 1) as f64
-                };
                 let sd = (var(&samples[0][i]) + var(&samples[1][i])).sqrt();
-                (e[i], l[i], (e[i] - l[i]).abs() / sd.max(1e-300))
+                let z = if sd > 0.0 {
+                    (e.coef[i] - l.coef[i]).abs() / sd
+                } else {
+                    f64::NAN
+                };
+                (e.coef[i], l.coef[i], z)
             })
             .collect()
     };
@@ -853,7 +867,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             if !keep.is_empty() && keep.len() < cand.len() {
                 for i in (0..cand.len()).filter(|i| !keep.contains(i)) {
                     dropped.push(format!(
-                        "{} {} (first half of the runs {}, second half {}: not constant in time)",
+                        "{} {} (first half of each training run {}, second half {}: not constant in time)",
                         p.effects[cand[i]].family,
                         p.effects[cand[i]].formula,
                         num(z[i].0),
@@ -972,11 +986,15 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             ));
         }
     }
-    let dz = drift_z(&cand);
-    for (i, &k) in cand.iter().enumerate() {
-        if failed.is_none() && !set.is_empty() && drifts(dz[i].0, dz[i].1, dz[i].2) {
+    let dz = if failed.is_none() && !set.is_empty() {
+        drift_z(&cand)
+    } else {
+        Vec::new()
+    };
+    for (i, &k) in cand.iter().enumerate().take(dz.len()) {
+        if failed.is_none() && drifts(dz[i].0, dz[i].1, dz[i].2) {
             failed = Some(format!(
-                "{}: {} on the first half of the training runs, {} on the second ({:.1} standard deviations apart): not constant in time (a sensor drift or a slowly changing condition?)",
+                "{}: {} on the first half of each training run, {} on the second ({:.1} standard deviations apart): not constant in time (a sensor drift or a slowly changing condition?)",
                 name_of(k),
                 num(dz[i].0),
                 num(dz[i].1),
@@ -1461,6 +1479,7 @@ mod tests {
         // Large but not significant.
         assert!(!drifts(0.03, 0.09, 2.0));
         assert!(!drifts(f64::NAN, f64::NAN, f64::NAN));
+        assert!(!drifts(0.03, 0.09, f64::NAN));
     }
 
     #[test]
