@@ -1,5 +1,5 @@
 //! Forward selection by orthogonal least squares (OLS-FROLS, the classic structure selection of
-//! NARX identification), written against the same [`SweepEngine`] as the LARS path.
+//! NARX identification), written against the same [`SweepEngine`](crate::engine::SweepEngine) as the LARS path.
 //!
 //! # Why a second path
 //! LARS and the lasso move every active coefficient at once and shrink them; when candidates are
