@@ -27,10 +27,6 @@ pub struct DeriveArgs {
     /// Tune each run on its own instead of jointly over the record set.
     #[arg(long)]
     pub per_run_tuning: bool,
-    /// Near the ends keep the full chain's estimate instead of blending in shorter chains:
-    /// less bias in the first samples after a start faster than the smoothing, more variance.
-    #[arg(long)]
-    pub no_end_chains: bool,
 }
 
 pub fn run(a: DeriveArgs) -> Result<()> {
@@ -46,10 +42,7 @@ pub fn run(a: DeriveArgs) -> Result<()> {
         &format!("derivatives up to order {}", a.order),
     )?;
     let runs: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[0].as_slice()).collect();
-    let opts = DerivativeOptions {
-        end_orders: !a.no_end_chains,
-        ..Default::default()
-    };
+    let opts = DerivativeOptions::default();
     let ders = if a.per_run_tuning {
         runs.iter()
             .map(|y| differentiate_runs(&[y], rs.tau, a.order, &opts).map(|mut v| v.remove(0)))

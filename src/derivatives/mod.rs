@@ -18,13 +18,7 @@
 //!    sigma grows where the levels disagree (transients shorter than tau among them).
 //! 5. *Ends.* Near the first and last samples the integrator chain extrapolates high derivatives
 //!    with a large variance; there the estimate is blended into that of a stationary
-//!    (Matern-type) prior with the same h, which shrinks towards zero instead, and then each
-//!    order k into the estimate of a chain of only k + 2 states (itself blended the same way),
-//!    whose extrapolation has far less variance and a little more bias. That lowers the worst
-//!    end error on smooth signals (sines at 1 %, orders 1/2: 0.27/0.81 -> 0.07/0.48) but biases
-//!    the first samples after a start faster than the bandwidth (the throttle from rest: median
-//!    end error at order 1 0.05 -> 0.18), so identification, whose labels those samples are,
-//!    turns it off ([`DerivativeOptions::end_orders`]).
+//!    (Matern-type) prior with the same h, which shrinks towards zero instead.
 //!
 //! # Assumptions
 //! Uniform sampling, white measurement noise, and a signal that is smooth at the scale of a few
@@ -72,9 +66,6 @@ pub struct DerivativeOptions {
     pub window: f64,
     /// Blend into the stationary-prior estimate near the ends.
     pub end_blend: bool,
-    /// Near the ends, blend each order k >= 1 with the estimate of a shorter chain (k + 2 states,
-    /// where that is fewer than the main chain's): less variance, a little more bias.
-    pub end_orders: bool,
 }
 
 impl Default for DerivativeOptions {
@@ -86,7 +77,6 @@ impl Default for DerivativeOptions {
             adaptive: true,
             window: 2.0,
             end_blend: true,
-            end_orders: true,
         }
     }
 }
@@ -250,69 +240,6 @@ pub fn differentiate_runs(
         .end_blend
         .then(|| tune::evaluate(m, h, opts.end_lambda, &live_y).sigma2);
 
-    // Near the ends a chain longer than order k + 2 extrapolates y^(k) with more variance than
-    // it removes bias; each such order is also estimated there from a (k + 2)-state chain at
-    // the same level (the tuned level barely moves with the chain length: 0.087 / 0.084 / 0.082
-    // for 5 / 6 / 7 states on sys3 at 1 %). Only the end weights' reach is used, so the chains
-    // run on end segments of about thirty bandwidths (their noise level is estimated there).
-    let width = (1.0 / h).max(2.0);
-    let seg = ((2.0 * width + 30.0 / h).ceil() as usize).max(min_samples(max_order));
-    let ends: Vec<(usize, usize)> = live_y
-        .iter()
-        .map(|y| {
-            let n = y.len();
-            if 2 * seg >= n {
-                (n, 0)
-            } else {
-                (seg, n - seg)
-            }
-        })
-        .collect();
-    let short_chains: Vec<Option<Vec<Derivatives>>> = if opts.end_orders {
-        let inner = DerivativeOptions {
-            states: None,
-            h: Some(h),
-            adaptive: false,
-            end_orders: false,
-            ..opts.clone()
-        };
-        // Head and tail segment of every run (one whole run where they would overlap).
-        let mut pieces: Vec<&[f64]> = Vec::new();
-        for (y, &(a, b)) in live_y.iter().zip(&ends) {
-            pieces.push(&y[..a]);
-            if b > 0 {
-                pieces.push(&y[b..]);
-            }
-        }
-        (0..=max_order)
-            .map(|k| {
-                let mk = (k + 2).max(kernel::MIN_STATES);
-                (k >= 1 && mk < m).then(|| {
-                    differentiate_runs(
-                        &pieces,
-                        tau,
-                        k,
-                        &DerivativeOptions {
-                            states: Some(mk),
-                            ..inner.clone()
-                        },
-                    )
-                })
-            })
-            .map(|r| r.transpose())
-            .collect::<Result<Vec<_>>>()?
-    } else {
-        vec![None; max_order + 1]
-    };
-    // Index of each live run's head piece in `pieces`.
-    let head_of: Vec<usize> = ends
-        .iter()
-        .scan(0, |next, &(_, b)| {
-            let at = *next;
-            *next += if b > 0 { 2 } else { 1 };
-            Some(at)
-        })
-        .collect();
     for (li, &r) in live.iter().enumerate() {
         let y = live_y[li];
         let n = y.len();
@@ -347,6 +274,7 @@ pub fn differentiate_runs(
         if let (Some(covs), Some(s2)) = (&end_covs, end_sigma2) {
             let cov = &covs[pick(covs, n)].1;
             let scale: Vec<f64> = (0..=max_order).map(|k| (h / tau).powi(k as i32)).collect();
+            let width = (1.0 / h).max(2.0);
             smooth_two_way(cov, y, |i, x, var| {
                 let b = end_weight(i.min(n - 1 - i) as f64, width);
                 if b == 0.0 {
@@ -363,28 +291,6 @@ pub fn differentiate_runs(
                     second[k][i] = (1.0 - bk) * second[k][i] + bk * (vm + v * v);
                 }
             });
-        }
-        for (k, dk) in short_chains.iter().enumerate() {
-            let Some(dk) = dk else { continue };
-            let (a, b) = ends[li];
-            let head = &dk[head_of[li]];
-            for i in 0..n {
-                let w = end_weight(i.min(n - 1 - i) as f64, width);
-                if w == 0.0 {
-                    continue;
-                }
-                let (piece, j) = if i < a {
-                    (head, i)
-                } else if b > 0 && i >= b {
-                    (&dk[head_of[li] + 1], i - b)
-                } else {
-                    continue;
-                };
-                let v = piece.values[k][j];
-                let vm = piece.sigma[k][j] * piece.sigma[k][j];
-                mean[k][i] = (1.0 - w) * mean[k][i] + w * v;
-                second[k][i] = (1.0 - w) * second[k][i] + w * (vm + v * v);
-            }
         }
         let d = &mut out[r];
         for k in 0..=max_order {

@@ -268,17 +268,7 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
     let _ = conf;
 
     let ys: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[yc].as_slice()).collect();
-    // As in identification, no shorter chains at the ends: their bias after a fast start would
-    // enter the weak-form labels.
-    let der = differentiate_runs(
-        &ys,
-        rs.tau,
-        n,
-        &DerivativeOptions {
-            end_orders: false,
-            ..Default::default()
-        },
-    )?;
+    let der = differentiate_runs(&ys, rs.tau, n, &DerivativeOptions::default())?;
     let nz = vars.len();
     let zhat: Vec<Vec<Vec<f64>>> = rs
         .runs

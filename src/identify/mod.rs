@@ -568,14 +568,7 @@ fn prepare<'a>(
             &runs,
             rs.tau,
             max_order,
-            // No shorter chains at the ends: they trade bias for variance there, which lowers
-            // the worst end error on smooth signals but biases the first samples after a fast
-            // start (throttle runs from rest), and those samples are labels here, weighted by a
-            // sigma that does not see the bias (demo etc: n = 2 chosen, free-run 31 % vs 0.7 %).
-            &DerivativeOptions {
-                end_orders: false,
-                ..Default::default()
-            },
+            &DerivativeOptions::default(),
         )?);
         say(format!(
             "derivatives of '{}' up to order {max_order} on {} runs ({:.2} s)",
@@ -1022,7 +1015,6 @@ fn equation_data(
         h: Some(d0.h),
         adaptive: false,
         end_blend: false,
-        end_orders: false,
         ..Default::default()
     };
     let smooth = |c: usize, order: usize| -> Result<Vec<Derivatives>> {
