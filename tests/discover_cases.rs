@@ -1,16 +1,25 @@
 //! `discover` on generated cases (one seed each, to keep CI time modest; the 10-seed matrix is
 //! `cargo run --release --example discover_acceptance`).
 
-use ctsid::discover::cases::{generate, judge, options, split};
-use ctsid::discover::{discover, Options};
+use ctsid::discover::cases::{generate, generate_scaled, judge, options, split, Case};
+use ctsid::discover::{discover, Discovery, Options};
 
-fn run(name: &str, seed: u64) -> (bool, String, ctsid::discover::Discovery) {
-    let case = generate(name, seed, 0.03).unwrap();
-    let o = options(&case, seed);
-    let d = discover(&case.records, &case.nominal, &o).unwrap();
+/// Case `name` for `seed` at noise `eta`, excitation scaled by `scale`, run with the standard
+/// options: the case, the judgement and the discovery.
+fn run_case(name: &str, seed: u64, eta: f64, scale: f64) -> (Case, bool, String, Discovery) {
+    let case = generate_scaled(name, seed, eta, scale).unwrap();
+    let d = discover(&case.records, &case.nominal, &options(&case, seed)).unwrap();
     let (ok, why) = judge(&case, &d);
+    (case, ok, why, d)
+}
+
+fn run(name: &str, seed: u64) -> (bool, String, Discovery) {
+    let (_, ok, why, d) = run_case(name, seed, 0.03, 1.0);
     (ok, why, d)
 }
+
+/// A tank driven harder than the standard case: its level swings near empty.
+const DRIVEN_TANK: f64 = 1.0 / 0.6;
 
 #[test]
 fn coulomb_friction_is_named_with_its_coefficient_and_the_error_shrinks() {
@@ -96,11 +105,14 @@ fn bad_inputs_are_typed_errors() {
 /// floor caps it).
 #[test]
 fn tank_outflow_is_named_alone_when_a_second_effect_fails_its_gates() {
-    let case = generate("tank", 1, 0.03).unwrap();
-    let d = discover(&case.records, &case.nominal, &options(&case, 1)).unwrap();
-    let (ok, why) = judge(&case, &d);
+    let (case, ok, why, d) = run_case("tank", 1, 0.03, 1.0);
     assert!(ok, "{why}\n{}", d.text());
     assert!(!d.dropped.is_empty(), "{}", d.text());
+    assert!(
+        d.dropped.iter().any(|s| s.contains("inclusion")),
+        "{}",
+        d.text()
+    );
     assert!(
         ctsid::discover::cases::truth_ratio(&case, &d) > 5.0,
         "{}",
@@ -113,9 +125,7 @@ fn tank_outflow_is_named_alone_when_a_second_effect_fails_its_gates() {
 /// the validation runs just as well, so it is left out and the outflow law is named alone.
 #[test]
 fn tank_bump_that_does_not_help_simulation_is_left_out() {
-    let case = ctsid::discover::cases::generate_scaled("tank", 3, 0.03, 1.0 / 0.6).unwrap();
-    let d = discover(&case.records, &case.nominal, &options(&case, 3)).unwrap();
-    let (ok, why) = judge(&case, &d);
+    let (_, ok, why, d) = run_case("tank", 3, 0.03, DRIVEN_TANK);
     assert!(ok, "{why}\n{}", d.text());
     assert!(
         d.dropped.iter().any(|s| s.contains("in simulation it")),
@@ -130,8 +140,7 @@ fn tank_bump_that_does_not_help_simulation_is_left_out() {
 /// friction is named.
 #[test]
 fn stribeck_hump_beside_coulomb_at_high_noise_is_left_out() {
-    let case = generate("coulomb", 5, 0.10).unwrap();
-    let d = discover(&case.records, &case.nominal, &options(&case, 5)).unwrap();
+    let (_, _, _, d) = run_case("coulomb", 5, 0.10, 1.0);
     let named: Vec<&str> = d.effects.iter().map(|e| e.family.as_str()).collect();
     assert_eq!(named, vec!["coulomb_friction"], "{}", d.text());
     assert!(
@@ -146,9 +155,7 @@ fn stribeck_hump_beside_coulomb_at_high_noise_is_left_out() {
 /// half of the runs differs from the second by several standard deviations: nothing is added.
 #[test]
 fn sensor_drift_at_low_noise_is_not_named_an_offset() {
-    let case = generate("negative_drift", 0, 0.01).unwrap();
-    let d = discover(&case.records, &case.nominal, &options(&case, 0)).unwrap();
-    let (ok, why) = judge(&case, &d);
+    let (_, ok, why, d) = run_case("negative_drift", 0, 0.01, 1.0);
     assert!(ok, "{why}\n{}", d.text());
     assert!(
         d.closest
@@ -164,9 +171,7 @@ fn sensor_drift_at_low_noise_is_not_named_an_offset() {
 /// different times); it is left out as not constant in time and the outflow law is named alone.
 #[test]
 fn effect_that_changes_along_the_runs_is_left_out_beside_a_constant_one() {
-    let case = ctsid::discover::cases::generate_scaled("tank", 0, 0.03, 1.0 / 0.6).unwrap();
-    let d = discover(&case.records, &case.nominal, &options(&case, 0)).unwrap();
-    let (ok, why) = judge(&case, &d);
+    let (_, ok, why, d) = run_case("tank", 0, 0.03, DRIVEN_TANK);
     assert!(ok, "{why}\n{}", d.text());
     assert!(
         d.dropped.iter().any(|s| s.contains("not constant in time")),
