@@ -6,21 +6,8 @@
 //! `cargo run --release --example derive_holdout`
 use ctsid::derivatives::differentiate;
 use ctsid::derivatives::score::{normalised_percentile, trimmed_range};
-
-struct Lcg(u64);
-impl Lcg {
-    fn u(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn n(&mut self) -> f64 {
-        let (a, b) = (self.u().max(1e-300), self.u());
-        (-2.0 * a.ln()).sqrt() * (2.0 * std::f64::consts::PI * b).cos()
-    }
-}
+use ctsid::plants::noise::add_noise;
+use ctsid::plants::rng::Rng;
 
 fn main() {
     let n = 1000;
@@ -70,35 +57,25 @@ fn main() {
                     .collect()
             })
             .collect();
-        let mut abs: Vec<f64> = truth[0].iter().map(|v| v.abs()).collect();
-        abs.sort_by(|a, b| a.partial_cmp(b).unwrap());
-        let p99 = abs[(0.99 * (n - 1) as f64) as usize];
         for (si, eta) in [0.01, 0.03, 0.05].iter().enumerate() {
-            let mut rng = Lcg(1000 + si as u64 * 7 + name.len() as u64);
-            let y: Vec<f64> = truth[0].iter().map(|v| v + eta * p99 * rng.n()).collect();
+            let mut rng = Rng::new(1000 + si as u64 * 7 + name.len() as u64);
+            let y = add_noise(&truth[0], *eta, &mut rng);
             let d = differentiate(&y, tau, 4).unwrap();
             let (a, b) = trimmed_range(n);
-            let tp: Vec<String> = (1..=4)
-                .map(|k| {
-                    format!(
-                        "{:.3}",
-                        normalised_percentile(&d.values[k], &truth[k], 95.0, a, b)
-                    )
-                })
-                .collect();
-            let fp: Vec<String> = (1..=4)
-                .map(|k| {
-                    format!(
-                        "{:.3}",
-                        normalised_percentile(&d.values[k], &truth[k], 100.0, 0, n)
-                    )
-                })
-                .collect();
+            let row = |q: f64, from: usize, to: usize| -> String {
+                (1..=4)
+                    .map(|k| {
+                        let p = normalised_percentile(&d.values[k], &truth[k], q, from, to);
+                        format!("{p:.3}")
+                    })
+                    .collect::<Vec<_>>()
+                    .join("/")
+            };
             println!(
                 "{name:12} {:.0}% trimmed p95 {} full p100 {}",
                 eta * 100.0,
-                tp.join("/"),
-                fp.join("/")
+                row(95.0, a, b),
+                row(100.0, 0, n)
             );
         }
     }
