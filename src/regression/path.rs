@@ -523,13 +523,7 @@ fn lars_steps(
         let mut added = false;
         if !drop {
             let col = sd.engine.columns(&[c_idx])?.pop().expect("one column");
-            let m = w.iter().zip(&col).map(|(a, b)| a * b).sum::<f64>() / sw;
-            let s = w
-                .iter()
-                .zip(&col)
-                .map(|(a, b)| a * (b - m) * (b - m))
-                .sum::<f64>()
-                .sqrt();
+            let (xt, m, s) = standardised_with_stats(&col, &w, sw, &path.sqrt_w);
             if !(s > 0.0) || !s.is_finite() {
                 skipped[c_idx] = true;
                 path.events.push(Event::SkippedCollinear {
@@ -539,11 +533,6 @@ fn lars_steps(
                 });
                 continue;
             }
-            let xt: Vec<f64> = col
-                .iter()
-                .zip(&path.sqrt_w)
-                .map(|(x, q)| q * (x - m) / s)
-                .collect();
             // Drift check: the exact correlation of the entering candidate against the incremental one.
             let exact = dot(&xt, &r);
             let drift = (exact - cov[c_idx]).abs() / cov[c_idx].abs().max(f64::MIN_POSITIVE);
