@@ -16,9 +16,9 @@
 //! and an orthonormal basis `q_1..q_k` of the active columns, the residual `r` is orthogonal to
 //! every `q_i`, so candidate j would lower the residual sum of squares by
 //! `(x~_j^T r)^2 / (1 - sum_i (x~_j^T q_i)^2)`: the squared correlation over the squared distance
-//! of `x~_j` from the active span. Both come from sweeps: one of `r` for the correlations and one
-//! of each new `q` for the projections (accumulated), so a step costs two sweeps, like a LARS
-//! step. Sweeps decide, exact columns measure: the chosen candidate's correlation and distance
+//! of `x~_j` from the active span. Both come from one sweep per step: the sweep of the new
+//! direction `q` updates every correlation (`c -= gamma g`) and every projection (`+= g^2`),
+//! and a sweep of `r` refreshes the correlations exactly every 8 steps. Sweeps decide, exact columns measure: the chosen candidate's correlation and distance
 //! are recomputed from its f64 column (Gram-Schmidt, twice for orthogonality); when the exact
 //! gain is less than half the swept one (an f32 engine's rounding on a nearly collinear
 //! candidate), the exact values replace the swept ones and the choice is made again. A candidate
