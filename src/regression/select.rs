@@ -52,7 +52,7 @@ pub fn path_ebic(
     p: usize,
     gamma: f64,
     rss_floor: f64,
-) -> Vec<Option<(f64, f64)>> {
+) -> Vec<Scored> {
     let mut scorer = EbicScorer::new(n, p, gamma, rss_floor);
     (0..path.breakpoints.len())
         .map(|b| scorer.score(path, b))
@@ -60,7 +60,7 @@ pub fn path_ebic(
 }
 
 /// eBIC and OLS RSS of a support (None where the refit is singular).
-type Scored = Option<(f64, f64)>;
+pub type Scored = Option<(f64, f64)>;
 
 /// Scores breakpoints one at a time as a path grows (see [`path_ebic`]), so that the path can
 /// stop once eBIC has stopped improving.
@@ -95,23 +95,21 @@ impl EbicScorer {
     }
 
     /// eBIC and OLS RSS of breakpoint `b`'s support (None where the refit is singular).
-    pub fn score(&mut self, path: &Path, b: usize) -> Option<(f64, f64)> {
+    pub fn score(&mut self, path: &Path, b: usize) -> Scored {
         let floor = (self.rss_floor * path.y_norm).powi(2);
         let mut key: Vec<usize> = path.breakpoints[b].active.clone();
         key.sort_unstable();
         let bp = &path.breakpoints[b];
-        let val = if let Some((_, v)) = self.seen.iter().find(|(s, _)| *s == key) {
-            *v
-        } else if path.method == super::Method::ForwardOls && !key.is_empty() {
-            // Forward OLS breakpoints are the least-squares fits of their supports already: their
-            // residual is the refit's.
+        let val = if path.method == super::Method::ForwardOls && !key.is_empty() {
+            // Forward OLS breakpoints are the least-squares fits of their supports already (their
+            // residual is the refit's), and a forward path never returns to a support.
             let rss = (bp.rel_residual * path.y_norm).powi(2);
-            let val = Some((
+            Some((
                 ebic(self.n, rss, key.len() + 1, self.p, self.gamma, floor),
                 rss,
-            ));
-            self.seen.push((key, val));
-            val
+            ))
+        } else if let Some((_, v)) = self.seen.iter().find(|(s, _)| *s == key) {
+            *v
         } else {
             let val = self.refit(path, &key, floor);
             self.seen.push((key, val));
@@ -125,7 +123,7 @@ impl EbicScorer {
         val
     }
 
-    fn refit(&mut self, path: &Path, key: &[usize], floor: f64) -> Option<(f64, f64)> {
+    fn refit(&mut self, path: &Path, key: &[usize], floor: f64) -> Scored {
         let st = &path.store;
         // Only refits need the Gram matrix (forward-OLS paths never do): grown here, each new
         // stored column's products once.
