@@ -5,7 +5,7 @@
 //! `cargo run --release --example discover_acceptance -- [SEEDS] [ETA] [CASE ...]`; `SCALE=s`
 //! multiplies every case's excitation amplitude (default 1).
 
-use ctsid::discover::cases::{generate_scaled, judge, options, truth_ratio, CASES};
+use ctsid::discover::cases::{generate_scaled, judge, options, CASES};
 use ctsid::discover::discover;
 
 fn main() {
@@ -41,13 +41,14 @@ fn main() {
             }
             match discover(&case.records, &case.nominal, &o) {
                 Ok(d) => {
-                    let (ok, why) = judge(&case, &d);
+                    let j = judge(&case, &d);
+                    let (ok, why) = (j.pass, j.why);
                     if std::env::var("SHOW").is_ok() {
                         println!("{}", d.text());
                     }
                     pass += ok as usize;
                     ratios.push(d.nrmse_before / d.nrmse_after.max(1e-300));
-                    truth_ratios.push(truth_ratio(&case, &d));
+                    truth_ratios.push(j.truth_ratio);
                     let extra = d
                         .closest
                         .clone()

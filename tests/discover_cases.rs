@@ -1,21 +1,20 @@
 //! `discover` on generated cases (one seed each, to keep CI time modest; the 10-seed matrix is
 //! `cargo run --release --example discover_acceptance`).
 
-use ctsid::discover::cases::{generate, generate_scaled, judge, options, split, Case};
+use ctsid::discover::cases::{generate, generate_scaled, judge, options, split, Judgement};
 use ctsid::discover::{discover, Discovery, Options};
 
 /// Case `name` for `seed` at noise `eta`, excitation scaled by `scale`, run with the standard
-/// options: the case, the judgement and the discovery.
-fn run_case(name: &str, seed: u64, eta: f64, scale: f64) -> (Case, bool, String, Discovery) {
+/// options: the judgement and the discovery.
+fn run_case(name: &str, seed: u64, eta: f64, scale: f64) -> (Judgement, Discovery) {
     let case = generate_scaled(name, seed, eta, scale).unwrap();
     let d = discover(&case.records, &case.nominal, &options(&case, seed)).unwrap();
-    let (ok, why) = judge(&case, &d);
-    (case, ok, why, d)
+    (judge(&case, &d), d)
 }
 
 fn run(name: &str, seed: u64) -> (bool, String, Discovery) {
-    let (_, ok, why, d) = run_case(name, seed, 0.03, 1.0);
-    (ok, why, d)
+    let (j, d) = run_case(name, seed, 0.03, 1.0);
+    (j.pass, j.why, d)
 }
 
 /// A tank driven harder than the standard case: its level swings near empty.
@@ -105,19 +104,15 @@ fn bad_inputs_are_typed_errors() {
 /// floor caps it).
 #[test]
 fn tank_outflow_is_named_alone_when_a_second_effect_fails_its_gates() {
-    let (case, ok, why, d) = run_case("tank", 1, 0.03, 1.0);
-    assert!(ok, "{why}\n{}", d.text());
+    let (j, d) = run_case("tank", 1, 0.03, 1.0);
+    assert!(j.pass, "{}\n{}", j.why, d.text());
     assert!(!d.dropped.is_empty(), "{}", d.text());
     assert!(
         d.dropped.iter().any(|s| s.contains("inclusion")),
         "{}",
         d.text()
     );
-    assert!(
-        ctsid::discover::cases::truth_ratio(&case, &d) > 5.0,
-        "{}",
-        d.text()
-    );
+    assert!(j.truth_ratio > 5.0, "{}", d.text());
 }
 
 /// A tank driven harder (level swings near empty): the regression also takes a friction-like
@@ -125,8 +120,8 @@ fn tank_outflow_is_named_alone_when_a_second_effect_fails_its_gates() {
 /// the validation runs just as well, so it is left out and the outflow law is named alone.
 #[test]
 fn tank_bump_that_does_not_help_simulation_is_left_out() {
-    let (_, ok, why, d) = run_case("tank", 3, 0.03, DRIVEN_TANK);
-    assert!(ok, "{why}\n{}", d.text());
+    let (j, d) = run_case("tank", 3, 0.03, DRIVEN_TANK);
+    assert!(j.pass, "{}\n{}", j.why, d.text());
     assert!(
         d.dropped.iter().any(|s| s.contains("in simulation it")),
         "{}",
@@ -140,7 +135,7 @@ fn tank_bump_that_does_not_help_simulation_is_left_out() {
 /// friction is named.
 #[test]
 fn stribeck_hump_beside_coulomb_at_high_noise_is_left_out() {
-    let (_, _, _, d) = run_case("coulomb", 5, 0.10, 1.0);
+    let (_, d) = run_case("coulomb", 5, 0.10, 1.0);
     let named: Vec<&str> = d.effects.iter().map(|e| e.family.as_str()).collect();
     assert_eq!(named, vec!["coulomb_friction"], "{}", d.text());
     assert!(
@@ -155,8 +150,8 @@ fn stribeck_hump_beside_coulomb_at_high_noise_is_left_out() {
 /// half of the runs differs from the second by several standard deviations: nothing is added.
 #[test]
 fn sensor_drift_at_low_noise_is_not_named_an_offset() {
-    let (_, ok, why, d) = run_case("negative_drift", 0, 0.01, 1.0);
-    assert!(ok, "{why}\n{}", d.text());
+    let (j, d) = run_case("negative_drift", 0, 0.01, 1.0);
+    assert!(j.pass, "{}\n{}", j.why, d.text());
     assert!(
         d.closest
             .as_deref()
@@ -171,8 +166,8 @@ fn sensor_drift_at_low_noise_is_not_named_an_offset() {
 /// different times); it is left out as not constant in time and the outflow law is named alone.
 #[test]
 fn effect_that_changes_along_the_runs_is_left_out_beside_a_constant_one() {
-    let (_, ok, why, d) = run_case("tank", 0, 0.03, DRIVEN_TANK);
-    assert!(ok, "{why}\n{}", d.text());
+    let (j, d) = run_case("tank", 0, 0.03, DRIVEN_TANK);
+    assert!(j.pass, "{}\n{}", j.why, d.text());
     assert!(
         d.dropped.iter().any(|s| s.contains("not constant in time")),
         "{}",

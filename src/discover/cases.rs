@@ -10,17 +10,18 @@
 //! at velocities of order 1 it is a sign function).
 
 use super::sim;
-
-/// Upper end of the random input phases. Not `TAU`: the published acceptance matrix was drawn
-/// with this value, and changing it would redraw every case.
-#[allow(clippy::approx_constant)]
-const PHASE_MAX: f64 = 6.283;
 use crate::error::Result;
 use crate::model::{Model, OutputEquation, Term};
 use crate::plants::noise::add_noise;
 use crate::plants::rng::{stream_seed, Rng};
 use crate::records::{RecordSet, Run};
 use crate::simulate::{simulate, Input, SimOptions, System};
+use rayon::prelude::*;
+
+/// Upper end of the random input phases. Not `TAU`: the published acceptance matrix was drawn
+/// with this value, and changing it would redraw every case.
+#[allow(clippy::approx_constant)]
+const PHASE_MAX: f64 = 6.283;
 
 /// What a correct answer is.
 #[derive(Debug, Clone, PartialEq)]
@@ -391,19 +392,12 @@ pub fn split() -> (Vec<usize>, Vec<usize>, Vec<usize>) {
 /// from the initial state the workflow itself estimates from the measurement ([`sim::fit_x0`]).
 pub fn nrmse_vs_truth(case: &Case, m: &sim::AugModel, runs: &[sim::SimRun]) -> f64 {
     let v: Vec<f64> = runs
-        .iter()
+        .par_iter()
         .map(|r| {
             let k = case.records.runs.iter().position(|x| x.id == r.id);
-            let Some(clean) = k.and_then(|k| case.truth.get(k)) else {
-                return f64::NAN;
-            };
-            let start = sim::SimRun {
-                x0: sim::fit_x0(m, r),
-                ..r.clone()
-            };
-            match sim::free_run(m, &start) {
-                Some(s) => crate::simulate::rms_nrmse(&s, clean).1,
-                None => f64::INFINITY,
+            match k.and_then(|k| case.truth.get(k)) {
+                Some(clean) => sim::nrmse_against(m, r, clean),
+                None => f64::NAN,
             }
         })
         .collect();
@@ -427,12 +421,31 @@ pub fn truth_ratio(case: &Case, d: &super::Discovery) -> f64 {
     }
 }
 
-/// Judges a discovery against the case's expectation: (pass, reason). The free-run shrink is
-/// judged against the noise-free output ([`truth_ratio`]); the measured one is printed beside it.
-pub fn judge(case: &Case, d: &super::Discovery) -> (bool, String) {
+/// A discovery judged against its case's expectation.
+#[derive(Debug, Clone)]
+pub struct Judgement {
+    pub pass: bool,
+    /// Why, in words.
+    pub why: String,
+    /// [`truth_ratio`] of the discovery.
+    pub truth_ratio: f64,
+}
+
+/// Judges a discovery against the case's expectation. The free-run shrink is judged against the
+/// noise-free output ([`truth_ratio`]); the measured one is printed beside it.
+pub fn judge(case: &Case, d: &super::Discovery) -> Judgement {
+    let truth_ratio = truth_ratio(case, d);
+    let (pass, why) = judge_with(case, d, truth_ratio);
+    Judgement {
+        pass,
+        why,
+        truth_ratio,
+    }
+}
+
+fn judge_with(case: &Case, d: &super::Discovery, ratio: f64) -> (bool, String) {
     let named: Vec<&str> = d.effects.iter().map(|e| e.family.as_str()).collect();
     let measured = d.nrmse_before / d.nrmse_after.max(1e-300);
-    let ratio = || truth_ratio(case, d);
     let check_added = |family: &str, coef: f64, min_ratio: f64| -> (bool, String) {
         if d.verdict != "added" || named.len() != 1 || named[0] != family {
             return (false, format!("verdict {} named {:?}", d.verdict, named));
@@ -444,7 +457,6 @@ pub fn judge(case: &Case, d: &super::Discovery) -> (bool, String) {
         if min_ratio <= 0.0 {
             return (true, format!("coef {c:.4}"));
         }
-        let ratio = ratio();
         // Written so that a NaN ratio fails.
         #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if !(ratio >= min_ratio) {

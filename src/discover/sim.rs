@@ -142,12 +142,18 @@ pub fn fit_x0_on(m: &AugModel, run: &SimRun, w: usize) -> Vec<f64> {
 
 /// NRMSE of the free run from the initial state of [`fit_x0`] (infinite when it diverges).
 pub fn nrmse(m: &AugModel, run: &SimRun) -> f64 {
+    nrmse_against(m, run, &run.y)
+}
+
+/// As [`nrmse`], scored against `reference` instead of the run's measurement (the initial state
+/// is still fitted on the measurement).
+pub fn nrmse_against(m: &AugModel, run: &SimRun, reference: &[f64]) -> f64 {
     let r = SimRun {
         x0: fit_x0(m, run),
         ..run.clone()
     };
     match free_run(m, &r) {
-        Some(s) => rms_nrmse(&s, &r.y).1,
+        Some(s) => rms_nrmse(&s, reference).1,
         None => f64::INFINITY,
     }
 }
