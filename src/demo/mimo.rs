@@ -75,6 +75,13 @@ pub fn run(o: &MimoOptions) -> Result<String> {
         "test NRMSE vs truth (pooled)",
     ]);
     for &d in &o.degrees {
+        // True terms of higher degree than d cannot be found at d: count them apart.
+        let beyond: usize = truth
+            .outputs
+            .iter()
+            .flat_map(|o| &o.terms)
+            .filter(|t| t.degree() as usize > d)
+            .count();
         for &engine in &o.engines {
             let mut s = Settings::new(outputs.clone(), inputs.clone(), d);
             s.orders = Orders::Fixed(vec![3; outputs.len()]);
@@ -99,13 +106,6 @@ pub fn run(o: &MimoOptions) -> Result<String> {
             };
             let secs = t.elapsed().as_secs_f64();
             let (mut found, mut total, mut extra, mut worst) = (0, 0, 0, 0.0f64);
-            // True terms of higher degree than d cannot be found at d: count them apart.
-            let beyond: usize = truth
-                .outputs
-                .iter()
-                .flat_map(|o| &o.terms)
-                .filter(|t| t.exponents.values().sum::<u32>() as usize > d)
-                .count();
             let _ = writeln!(out, "\n## d = {d}, engine {}\n", id.outputs[0].engine);
             for i in 0..outputs.len() {
                 let (rows, ex) = coefficient_errors(&id.model, &truth, i);
