@@ -425,13 +425,41 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     /// Newton factors by (step, Jacobian): a model linear in its states has one Jacobian, and
     /// with one step per sample interval the same two steps (h and h/2) recur, so the factors
     /// are computed once per run instead of twice per step.
-    lu_cache: Vec<(f64, Vec<f64>, std::rc::Rc<DenseLu>)>,
+    lu_cache: LuCache,
     /// Scratch of [`Self::radau_step`] (stage values, residuals), reused across steps.
     scratch: Vec<f64>,
     /// Forward sensitivities, when asked for.
     sens: Option<Sens<'a>>,
     /// Factors of exact stage matrices of constant Jacobians, by step (see `propagate`).
-    sens_lu: Vec<(f64, Vec<f64>, std::rc::Rc<DenseLu>)>,
+    sens_lu: LuCache,
+}
+
+/// The last few LU factors by (step, Jacobian), oldest dropped first.
+#[derive(Default)]
+struct LuCache(Vec<(f64, Vec<f64>, std::rc::Rc<DenseLu>)>);
+
+impl LuCache {
+    const CAPACITY: usize = 4;
+
+    /// The cached factors for step `h` whose Jacobian `same` accepts, or those of `factor()`,
+    /// cached under `jac` (`None` when `factor` finds the matrix singular).
+    fn get_or_factor(
+        &mut self,
+        h: f64,
+        jac: &[f64],
+        same: impl Fn(&[f64]) -> bool,
+        factor: impl FnOnce() -> Option<DenseLu>,
+    ) -> Option<std::rc::Rc<DenseLu>> {
+        if let Some((_, _, lu)) = self.0.iter().find(|(hh, j, _)| *hh == h && same(j)) {
+            return Some(lu.clone());
+        }
+        let lu = std::rc::Rc::new(factor()?);
+        if self.0.len() >= Self::CAPACITY {
+            self.0.remove(0);
+        }
+        self.0.push((h, jac.to_vec(), lu.clone()));
+        Some(lu)
+    }
 }
 
 /// `pjac(x, u, out)`: the right-hand side's derivatives with respect to the parameters,
@@ -447,6 +475,9 @@ struct Sens<'a> {
     pjac: ParamJacobian<'a>,
     /// `dx/dp` at the current time, row-major `n x q`.
     s: Vec<f64>,
+    /// Stage increments of the two half steps of the step being taken (3n each), which the
+    /// sensitivities follow.
+    zs: Vec<f64>,
     /// Scratch of `propagate`, reused across steps: stage Jacobians, stage parameter
     /// Jacobians, a stage state, the right-hand sides and the solver's work space.
     jacs: Vec<f64>,
@@ -467,12 +498,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
     }
 
     /// LU factors of the simplified-Newton matrix `I - h (A x J)` for step `h` (`None` when it
-    /// is singular: the caller retries with a smaller step).
-    fn newton_matrix(&self, h: f64, jac: &[f64]) -> Option<DenseLu> {
-        stage_matrix(&self.rk.a, self.n, h, [jac, jac, jac])
-    }
-
-    /// The factors of [`Self::newton_matrix`] for `(h, jac)`, from the cache when the step is
+    /// is singular: the caller retries with a smaller step), from the cache when the step is
     /// the same and the cached Jacobian differs from `jac` by at most 1e-3 of its largest entry.
     /// Simplified Newton only needs an approximate Jacobian (the residuals use the exact right-
     /// hand side, so the accuracy does not change, only how fast Newton converges), and
@@ -484,18 +510,12 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 .zip(jac)
                 .all(|(a, b)| (a - b).abs() <= 1e-3 * scale)
         };
-        if let Some((_, _, lu)) = self.lu_cache.iter().find(|(hh, j, _)| *hh == h && close(j)) {
-            return Some(lu.clone());
-        }
-        let lu = std::rc::Rc::new(self.newton_matrix(h, jac)?);
-        if self.lu_cache.len() >= 4 {
-            self.lu_cache.remove(0);
-        }
-        self.lu_cache.push((h, jac.to_vec(), lu.clone()));
-        Some(lu)
+        let (rk_a, n) = (&self.rk.a, self.n);
+        self.lu_cache
+            .get_or_factor(h, jac, close, || stage_matrix(rk_a, n, h, [jac, jac, jac]))
     }
 
-    /// One Radau IIA step from (t, x0) with step h, given the factors of [`Self::newton_matrix`]
+    /// One Radau IIA step from (t, x0) with step h, given the factors of [`Self::factors`]
     /// for that h (from a Jacobian at or near x0: simplified Newton tolerates a slightly old one).
     fn radau_step(&mut self, t: f64, x0: &[f64], h: f64, lu: &DenseLu) -> StepOutcome {
         let n = self.n;
@@ -580,12 +600,16 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
     /// Differentiating the stage equations `Y_i = x0 + h sum_j a_ij f(Y_j, p)` gives the linear
     /// system `dY_i - h sum_j a_ij J_j dY_j = S0 + h sum_j a_ij f_p,j` with the Jacobians at the
     /// stages themselves (not the simplified-Newton one), and `S1 = dY_3` (stiffly accurate).
-    /// One 3n x 3n factorisation serves every column.
-    fn propagate(&mut self, t: f64, x0: &[f64], h: f64, z: &[f64]) -> bool {
+    /// One 3n x 3n factorisation serves every column. `half` (0 or 1) picks the stage
+    /// increments kept in `zs`.
+    fn propagate(&mut self, t: f64, x0: &[f64], h: f64, half: usize) -> bool {
         let Some(mut sens) = self.sens.take() else {
             return true;
         };
-        let ok = self.propagate_with(&mut sens, t, x0, h, z);
+        let m = 3 * self.n;
+        let zs = std::mem::take(&mut sens.zs);
+        let ok = self.propagate_with(&mut sens, t, x0, h, &zs[half * m..(half + 1) * m]);
+        sens.zs = zs;
         self.sens = Some(sens);
         ok
     }
@@ -620,27 +644,15 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         // A model linear in its states has one Jacobian everywhere, and steps recur (h, h/2):
         // reuse the factors of an identical stage matrix (exactly identical, unlike the Newton
         // cache, because these factors give the sensitivities themselves).
-        let constant = stage(0) == stage(1) && stage(1) == stage(2);
-        let cached = self
-            .sens_lu
-            .iter()
-            .find(|(hh, j, _)| constant && *hh == h && j.as_slice() == stage(0))
-            .map(|(_, _, lu)| lu.clone());
-        let lu = match cached {
-            Some(lu) => lu,
-            None => {
-                let Some(lu) = stage_matrix(&a, n, h, [stage(0), stage(1), stage(2)]) else {
-                    return false;
-                };
-                let lu = std::rc::Rc::new(lu);
-                if constant {
-                    if self.sens_lu.len() >= 4 {
-                        self.sens_lu.remove(0);
-                    }
-                    self.sens_lu.push((h, stage(0).to_vec(), lu.clone()));
-                }
-                lu
-            }
+        let factor = || stage_matrix(&a, n, h, [stage(0), stage(1), stage(2)]);
+        let lu = if stage(0) == stage(1) && stage(1) == stage(2) {
+            self.sens_lu
+                .get_or_factor(h, stage(0), |j| j == stage(0), factor)
+        } else {
+            factor().map(std::rc::Rc::new)
+        };
+        let Some(lu) = lu else {
+            return false;
         };
         // Right-hand sides, row-major 3n x q: S0 in every stage block, plus the parameters'
         // direct effect h sum_j a_ij f_p,j in their columns.
@@ -725,18 +737,22 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 None => StepOutcome::NoConvergence,
             };
             // Stage increments of the two half steps (left in the scratch by each converged
-            // step), which the sensitivities follow.
+            // step), kept for the sensitivities.
             let m = 3 * n;
-            let stages = |it: &Self| it.sens.as_ref().map(|_| it.scratch[..m].to_vec());
-            let (mut z1, mut z2) = (None, None);
+            let keep_stages = |it: &mut Self, half: usize| {
+                if let Some(sens) = it.sens.as_mut() {
+                    sens.zs.resize(2 * m, 0.0);
+                    sens.zs[half * m..(half + 1) * m].copy_from_slice(&it.scratch[..m]);
+                }
+            };
             let result = match (full, half1) {
                 (StepOutcome::Ok(xf), StepOutcome::Ok(xm)) => {
-                    z1 = stages(self);
+                    keep_stages(self, 0);
                     // The second half step reuses the first one's Newton matrix.
                     let lu = lu_half.as_ref().expect("factored above");
                     match self.radau_step(t + 0.5 * hh, &xm, 0.5 * hh, lu) {
                         StepOutcome::Ok(xh) => {
-                            z2 = stages(self);
+                            keep_stages(self, 1);
                             Some((xf, xm, xh))
                         }
                         StepOutcome::NoConvergence => None,
@@ -765,9 +781,9 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                     };
                     if err <= 1.0 {
                         stats.0 += 1;
-                        if let (Some(z1), Some(z2)) = (&z1, &z2) {
-                            let ok = self.propagate(t, x, 0.5 * hh, z1)
-                                && self.propagate(t + 0.5 * hh, &xm, 0.5 * hh, z2);
+                        if self.sens.is_some() {
+                            let ok = self.propagate(t, x, 0.5 * hh, 0)
+                                && self.propagate(t + 0.5 * hh, &xm, 0.5 * hh, 1);
                             if !ok {
                                 return Err(Error::Diverged {
                                     run: self.opts.run.clone(),
@@ -872,6 +888,7 @@ pub fn simulate_sensitivities<S: System + ?Sized, I: Input + ?Sized>(
         q,
         pjac,
         s,
+        zs: Vec::new(),
         jacs: Vec::new(),
         pj: Vec::new(),
         xs: Vec::new(),
@@ -925,10 +942,10 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
         opts,
         n,
         u: vec![0.0; sys.n_inputs()],
-        lu_cache: Vec::new(),
+        lu_cache: LuCache::default(),
         scratch: Vec::new(),
         sens,
-        sens_lu: Vec::new(),
+        sens_lu: LuCache::default(),
     };
     let mut x = x0.to_vec();
     if let Some(e) = it.diverged(times[0], &x) {
