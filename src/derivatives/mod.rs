@@ -245,7 +245,6 @@ pub fn differentiate_runs(
         let n = y.len();
         let weights = level_weights(
             &levels,
-            h,
             &level_covs,
             y,
             fit.sigma2,
@@ -318,11 +317,12 @@ fn end_weight(dist: f64, width: f64) -> f64 {
     }
 }
 
-/// Soft weights of the smoothing levels at every sample: softmax of windowed sums of the
-/// innovation log-likelihood, then averaged over half a window so that switches are gradual.
+/// Soft weights of the smoothing levels at every sample (`levels[0]` is the tuned one): softmax
+/// of windowed sums of the innovation log-likelihood, over `half` samples each side for the
+/// rougher levels and [`SMOOTH_WINDOW`] times that for the smoother one, then averaged over half
+/// a window so that switches are gradual.
 fn level_weights(
     levels: &[f64],
-    h: f64,
     covs: &[Vec<(usize, Cov)>],
     y: &[f64],
     sigma2: f64,
@@ -335,12 +335,12 @@ fn level_weights(
     }
     let half = half.clamp(2, (n / 2).max(2));
     let long = ((SMOOTH_WINDOW * half as f64) as usize).clamp(2, (n / 2).max(2));
-    let mut ll = vec![0.0; n];
     let lls: Vec<Vec<f64>> = covs
         .iter()
         .map(|c| {
+            let mut ll = vec![0.0; n];
             c[pick(c, n)].1.local_loglik(y, sigma2, &mut ll);
-            ll.clone()
+            ll
         })
         .collect();
     // Softmax of windowed log-likelihood sums over the levels in `group`; within `half` of an
@@ -364,6 +364,7 @@ fn level_weights(
     };
     // Rougher levels compete with the tuned one over short windows (transients are short);
     // smoother ones over long windows (over-smoothing costs little likelihood per sample).
+    let h = levels[0];
     let rough: Vec<usize> = (0..levels.len()).filter(|&j| levels[j] >= h).collect();
     let smooth: Vec<usize> = std::iter::once(0)
         .chain((0..levels.len()).filter(|&j| levels[j] < h))
