@@ -46,13 +46,7 @@ pub fn ebic(n: usize, rss: f64, k: usize, p: usize, gamma: f64, floor: f64) -> f
 
 /// eBIC of every breakpoint's support (None where the refit is singular), in path order.
 /// `n` is eBIC's sample count (the rows, or fewer effective samples).
-pub fn path_ebic(
-    path: &Path,
-    n: usize,
-    p: usize,
-    gamma: f64,
-    rss_floor: f64,
-) -> Vec<Scored> {
+pub fn path_ebic(path: &Path, n: usize, p: usize, gamma: f64, rss_floor: f64) -> Vec<Scored> {
     let mut scorer = EbicScorer::new(n, p, gamma, rss_floor);
     (0..path.breakpoints.len())
         .map(|b| scorer.score(path, b))
