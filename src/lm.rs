@@ -63,7 +63,8 @@ pub struct LmStats {
     pub diverged: usize,
 }
 
-fn cost(r: &[f64]) -> f64 {
+/// The sum of squared residuals, the cost [`minimize`] lowers.
+pub fn cost(r: &[f64]) -> f64 {
     r.iter().map(|v| v * v).sum()
 }
 
@@ -99,16 +100,17 @@ pub fn minimize(
                 continue;
             };
             let trial: Vec<f64> = theta.iter().zip(step.iter()).map(|(a, b)| a + b).collect();
-            match p.residuals(&trial) {
-                Some(r) if cost(&r) < c => {
+            let trial_cost = p.residuals(&trial).map(|r| cost(&r));
+            match trial_cost {
+                Some(cn) if cn < c => {
                     stats.accepted += 1;
-                    improved = Some((trial, cost(&r)));
+                    improved = Some((trial, cn));
                     lambda = (lambda * o.shrink).max(o.lambda_min);
                     break;
                 }
-                r => {
+                _ => {
                     stats.rejected += 1;
-                    if r.is_none() {
+                    if trial_cost.is_none() {
                         stats.diverged += 1;
                     }
                     lambda *= 10.0;

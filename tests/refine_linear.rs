@@ -100,9 +100,9 @@ fn recovers_perturbed_coefficients_of_a_linear_system() {
     eprintln!(
         "refined {c:?} in {:.2} s ({} iterations, {} accepted / {} rejected steps); cost {:.5} -> {:.5}",
         t.elapsed().as_secs_f64(),
-        r.iterations,
-        r.accepted,
-        r.rejected,
+        r.lm.iterations,
+        r.lm.accepted,
+        r.lm.rejected,
         r.cost_before,
         r.cost_after
     );
@@ -189,10 +189,10 @@ fn a_trial_step_that_diverges_is_rejected_not_fatal() {
     let c = coefficients(&r.model);
     eprintln!(
         "{} diverged trial steps of {} rejected; cost {:.4} -> {:.5}; {c:?}",
-        r.diverged, r.rejected, r.cost_before, r.cost_after
+        r.lm.diverged, r.lm.rejected, r.cost_before, r.cost_after
     );
     assert!(
-        r.diverged >= 1,
+        r.lm.diverged >= 1,
         "the case must exercise a diverging trial step"
     );
     for (k, (a, b)) in c.iter().zip(truth).enumerate() {

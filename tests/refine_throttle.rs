@@ -56,7 +56,7 @@ fn throttle_refinement_removes_the_bias() {
     let r = g.refined.as_ref().unwrap();
     eprintln!(
         "{} in {secs:.2} s ({} iterations, {}/{} steps accepted/rejected); train NRMSE {:?} -> {:?}",
-        g.message, r.iterations, r.accepted, r.rejected, g.train_before, g.train_after
+        g.message, r.lm.iterations, r.lm.accepted, r.lm.rejected, g.train_before, g.train_after
     );
     assert!(g.kept, "{}", g.message);
     let before = free_run_nrmse(&start, &held_true).unwrap()[0];

@@ -894,7 +894,7 @@ fn refine_selected(
         validation_after: g.gate_after.clone(),
         derivative_fit: eqs(model),
         refined: g.refined.as_ref().map_or_else(Vec::new, |r| eqs(&r.model)),
-        iterations: g.refined.as_ref().map_or(0, |r| r.iterations),
+        iterations: g.refined.as_ref().map_or(0, |r| r.lm.iterations),
         seconds: g.refined.as_ref().map_or(0.0, |r| r.seconds),
     };
     Ok((g.model, report))

@@ -44,6 +44,7 @@ use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 
 use crate::error::{Error, Result};
+use crate::lm::{cost, LeastSquares, LmStats};
 use crate::model::{CompiledModel, Model};
 use crate::simulate::{
     fit_initial_state, rms_nrmse, simulate_model, simulate_model_sensitivities, SimOptions,
@@ -122,13 +123,8 @@ pub struct Refined {
     /// starting and the refined model, free-run from the starting and the refined initial states.
     pub cost_before: f64,
     pub cost_after: f64,
-    /// Accepted and rejected (diverged or not lower) trial steps; `diverged` counts the
-    /// rejected ones whose simulation diverged.
-    pub accepted: usize,
-    pub rejected: usize,
-    pub diverged: usize,
-    /// Jacobian evaluations.
-    pub iterations: usize,
+    /// Levenberg-Marquardt's counts over every stage of the refinement.
+    pub lm: LmStats,
     pub seconds: f64,
 }
 
@@ -280,7 +276,9 @@ impl<'a> Problem<'a> {
             .map(|j| (end[j] - next[j]) / self.state_scale[j] * self.defect_weight)
             .collect()
     }
+}
 
+impl LeastSquares for Problem<'_> {
     /// All residuals, or `None` when a segment diverges.
     fn residuals(&self, theta: &[f64]) -> Option<Vec<f64>> {
         let model = self.model_with(theta);
@@ -300,7 +298,7 @@ impl<'a> Problem<'a> {
     }
 
     /// Normal equations `J^T J`, `J^T r` from forward sensitivities, assembled per segment.
-    fn normal_equations(&self, theta: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
+    fn normal_equations(&self, theta: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)> {
         let nc = self.n_coef();
         let n = self.n;
         let np = self.n_params();
@@ -358,20 +356,7 @@ impl<'a> Problem<'a> {
                 }
             }
         }
-        (jtj, jtr)
-    }
-}
-
-fn cost(r: &[f64]) -> f64 {
-    r.iter().map(|v| v * v).sum()
-}
-
-impl crate::lm::LeastSquares for Problem<'_> {
-    fn residuals(&self, theta: &[f64]) -> Option<Vec<f64>> {
-        Problem::residuals(self, theta)
-    }
-    fn normal_equations(&self, theta: &[f64]) -> Option<(DMatrix<f64>, DVector<f64>)> {
-        Some(Problem::normal_equations(self, theta))
+        Some((jtj, jtr))
     }
 }
 
@@ -383,18 +368,12 @@ fn levenberg_marquardt(
     tol: f64,
     stats: &mut Refined,
 ) -> Option<(Vec<f64>, f64)> {
-    let mut s = crate::lm::LmStats::default();
     let o = crate::lm::LmOptions {
         max_iter,
         tol,
         ..Default::default()
     };
-    let out = crate::lm::minimize(p, theta, &o, &mut s);
-    stats.iterations += s.iterations;
-    stats.accepted += s.accepted;
-    stats.rejected += s.rejected;
-    stats.diverged += s.diverged;
-    out
+    crate::lm::minimize(p, theta, &o, &mut stats.lm)
 }
 
 /// Standard deviation (population) of a pooled set of samples.
@@ -559,10 +538,7 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
         initial_states: runs.iter().map(|r| r.x0.clone()).collect(),
         cost_before: f64::NAN,
         cost_after: f64::NAN,
-        accepted: 0,
-        rejected: 0,
-        diverged: 0,
-        iterations: 0,
+        lm: LmStats::default(),
         seconds: 0.0,
     };
     let whole: Vec<Segment> = runs
