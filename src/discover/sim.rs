@@ -54,7 +54,7 @@ impl System for AugModel {
         if scaled > 0.0 {
             scaled.max(1e-12 * x[k].abs())
         } else {
-            1.5e-8 * x[k].abs().max(1.0)
+            crate::simulate::default_fd_step(x[k])
         }
     }
 }
@@ -170,11 +170,15 @@ fn residual_weight(r: &SimRun) -> f64 {
     1.0 / (std_dev(&r.y).max(1e-300) * (r.y.len() as f64).sqrt())
 }
 
-/// Normalised free-run residuals of one run from `x0`, `(sim - y) / (sd(y) sqrt(len))`.
-fn run_residuals(m: &AugModel, r: &SimRun, x0: &[f64]) -> Option<Vec<f64>> {
-    let s = free_run_from(m, r, x0)?;
+/// A run's simulated output as normalised residuals, `(sim - y) / (sd(y) sqrt(len))`.
+fn weighted_residuals(sim: &[f64], r: &SimRun) -> Vec<f64> {
     let w = residual_weight(r);
-    Some(s.iter().zip(&r.y).map(|(a, b)| (a - b) * w).collect())
+    sim.iter().zip(&r.y).map(|(a, b)| (a - b) * w).collect()
+}
+
+/// Normalised free-run residuals of one run from `x0`.
+fn run_residuals(m: &AugModel, r: &SimRun, x0: &[f64]) -> Option<Vec<f64>> {
+    Some(weighted_residuals(&free_run_from(m, r, x0)?, r))
 }
 
 /// [`run_residuals`] and their derivatives with respect to the coefficients `free` and then the
@@ -204,12 +208,7 @@ fn run_sensitivities(
     let cols: Vec<Vec<f64>> = (0..q)
         .map(|c| (0..r.t.len()).map(|k| sens[k * n * q + c] * w).collect())
         .collect();
-    let res: Vec<f64> = tr
-        .series(0)
-        .iter()
-        .zip(&r.y)
-        .map(|(a, b)| (a - b) * w)
-        .collect();
+    let res = weighted_residuals(&tr.series(0), r);
     cols.iter()
         .chain(std::iter::once(&res))
         .all(|c| c.iter().all(|v| v.is_finite()))
@@ -239,11 +238,12 @@ pub fn refine_runs(
     let active: Vec<usize> = (0..full.len())
         .filter(|&j| j >= nc || !fixed.get(j).copied().unwrap_or(false))
         .collect();
+    let start: Vec<f64> = active.iter().map(|&j| full[j]).collect();
     let p = RunsProblem {
         m,
         runs,
-        full: full.clone(),
-        active: active.clone(),
+        full,
+        active,
         offsets: runs
             .iter()
             .scan(0, |a, r| {
@@ -262,7 +262,6 @@ pub fn refine_runs(
         lambda_max: f64::MAX,
         tol: 1e-7,
     };
-    let start: Vec<f64> = active.iter().map(|&j| full[j]).collect();
     let mut stats = crate::lm::LmStats::default();
     let Some((theta, _)) = crate::lm::minimize(&p, start, &o, &mut stats) else {
         return (m.clone(), runs.to_vec());
@@ -280,7 +279,7 @@ pub fn refine_runs(
 }
 
 /// The least-squares problem of [`refine_runs`]: parameters are the coefficients, then each
-/// run's initial state; only the `active` ones are free.
+/// run's initial state; only the `active` ones (ascending: free coefficients first) are free.
 struct RunsProblem<'a> {
     m: &'a AugModel,
     runs: &'a [SimRun],
@@ -323,20 +322,21 @@ impl crate::lm::LeastSquares for RunsProblem<'_> {
         let th = self.expand(theta);
         let mm = self.m.with_coefficients(&th[..nc]);
         // Sensitivities, one simulation per run: a coefficient's column touches every run, an
-        // initial state's only its own.
-        let free: Vec<usize> = self.active.iter().copied().filter(|&j| j < nc).collect();
+        // initial state's only its own. `active` is ascending, so its first entries are the
+        // free coefficients, in the order of the sensitivity columns.
+        let free = &self.active[..self.active.partition_point(|&j| j < nc)];
         let sens: Vec<(Vec<f64>, Vec<Vec<f64>>)> = self
             .runs
             .par_iter()
             .enumerate()
-            .map(|(k, r)| run_sensitivities(&mm, r, &th[nc + k * n..nc + (k + 1) * n], &free))
+            .map(|(k, r)| run_sensitivities(&mm, r, &th[nc + k * n..nc + (k + 1) * n], free))
             .collect::<Option<_>>()?;
         let total: usize = self.runs.iter().map(|r| r.y.len()).sum();
         let mut jac = DMatrix::<f64>::zeros(total, self.active.len());
         for (k, (_, cols)) in sens.iter().enumerate() {
             for (q, &j) in self.active.iter().enumerate() {
                 let col = if j < nc {
-                    free.iter().position(|&f| f == j).map(|f| &cols[f])
+                    Some(&cols[q])
                 } else if (j - nc) / n == k {
                     Some(&cols[free.len() + (j - nc) % n])
                 } else {

@@ -29,6 +29,11 @@ use nalgebra::{DMatrix, DVector};
 use crate::error::{Error, Result};
 use crate::model::CompiledModel;
 
+/// The default forward-difference step of [`System::fd_step`] for a state of value `x`.
+pub fn default_fd_step(x: f64) -> f64 {
+    1.5e-8 * x.abs().max(1.0)
+}
+
 /// A right-hand side `x' = f(x, u)`.
 pub trait System {
     /// Number of states.
@@ -45,7 +50,7 @@ pub trait System {
     /// the usual balance of truncation and rounding for states of order one. Systems whose
     /// states are far from that scale say so here.
     fn fd_step(&self, k: usize, x: &[f64]) -> f64 {
-        1.5e-8 * x[k].abs().max(1.0)
+        default_fd_step(x[k])
     }
     /// Writes `df/dx` (row-major `dim x dim`) into `jac`; the default uses forward differences
     /// with steps [`System::fd_step`].
