@@ -124,8 +124,6 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         "selected",
     ]);
     let mut noisy: Option<(Identification, Vec<crate::plants::Run>)> = None;
-    // The noise-free and the noisy searches are independent: run them side by side (each one's
-    // candidate scoring is uneven, one order often taking most of the time).
     // One identification of the demo: degree d, the order searched (None) or fixed.
     let run_identify = |runs: &[crate::plants::Run], d: usize, order: Option<usize>| {
         let rs = records(runs, &inputs, &outputs, o.tau)?;
@@ -141,8 +139,10 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         let runs = dataset(&plant, o.runs, o.samples, o.tau, eta, o.seed)?;
         Ok((run_identify(&runs, o.degree, None)?, runs))
     };
-    // The fixed n = 3, d = 1 identification on the noisy runs is independent of both searches:
-    // it follows the noisy one, which finishes well before the noise-free one.
+    // The noise-free and the noisy searches are independent: run them side by side (each one's
+    // candidate scoring is uneven, one order often taking most of the time). The fixed n = 3,
+    // d = 1 identification on the noisy runs is independent of both: it follows the noisy one,
+    // which finishes well before the noise-free one.
     let fixed = |d: usize, runs: &[crate::plants::Run]| run_identify(runs, d, Some(3));
     let (clean, (noisy_search, mut d1)) = rayon::join(
         || search(0.0),
@@ -207,8 +207,8 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         // (same runs, same order-3 derivatives, same fit and refinement): no need to repeat it.
         let id = if d == o.degree && id_noisy.outputs[0].order == 3 {
             id_noisy.clone()
-        } else if d == 1 && d1.is_some() {
-            d1.take().expect("checked")?
+        } else if let Some(done) = if d == 1 { d1.take() } else { None } {
+            done?
         } else {
             fixed(d, &runs)?
         };
