@@ -62,6 +62,9 @@ pub struct MimoArgs {
     pub noise: f64,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Structure search, as `identify --method`.
+    #[arg(long, value_enum, default_value_t = super::regress::MethodArg::ForwardOls)]
+    pub method: super::regress::MethodArg,
     #[arg(long)]
     pub out: Option<PathBuf>,
     /// No progress lines (they are shown only when standard error is a terminal anyway).
@@ -91,6 +94,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
                 engines: m.engines,
                 noise: m.noise,
                 seed: m.seed,
+                method: Some(m.method.into()),
                 out: m.out,
                 progress: super::show_progress(m.quiet),
                 ..Default::default()

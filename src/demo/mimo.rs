@@ -21,6 +21,8 @@ pub struct MimoOptions {
     pub seed: u64,
     pub degrees: Vec<usize>,
     pub engines: Vec<EngineChoice>,
+    /// Structure search (identify's default unless given).
+    pub method: Option<crate::regression::Method>,
     pub out: Option<PathBuf>,
     pub progress: bool,
 }
@@ -36,6 +38,7 @@ impl Default for MimoOptions {
             seed: 1,
             degrees: vec![2, 4, 6],
             engines: vec![EngineChoice::Cpu],
+            method: None,
             out: None,
             progress: true,
         }
@@ -84,6 +87,9 @@ pub fn run(o: &MimoOptions) -> Result<String> {
             .count();
         for &engine in &o.engines {
             let mut s = Settings::new(outputs.clone(), inputs.clone(), d);
+            if let Some(m) = o.method {
+                s.method = m;
+            }
             s.orders = Orders::Fixed(vec![3; outputs.len()]);
             s.engine = engine;
             s.progress = o.progress;
