@@ -6,7 +6,8 @@
 //! strongly correlated (monomials of the derivatives of smooth signals are), the lasso path
 //! fills up with small correlated terms before the true ones get their full weight: on the
 //! noise-free MIMO plant at d = 4 (1365 candidates per output) the LassoLars path reached its 40
-//! terms without containing the true model. Forward OLS instead adds, at each step, the
+//! terms without containing the true model (`ctsid demo mimo --degrees 4 --method lassolars`:
+//! 7 of 18 true terms). Forward OLS instead adds, at each step, the
 //! candidate that lowers the least-squares residual of the current support the most, so every
 //! breakpoint is the exact least-squares fit of its support and a true term, once in, keeps its
 //! full coefficient.
