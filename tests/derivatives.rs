@@ -244,3 +244,20 @@ fn bad_inputs_give_errors_not_panics() {
     let c = differentiate(&vec![3.0; 50], 0.1, 2).unwrap();
     assert!(c.values[0].iter().all(|v| *v == 3.0) && c.values[1].iter().all(|v| *v == 0.0));
 }
+
+#[test]
+fn smooth_window_must_be_finite_and_not_negative() {
+    let y: Vec<f64> = (0..200).map(|i| (0.05 * i as f64).sin()).collect();
+    for bad in [-1.0, f64::NAN, f64::INFINITY] {
+        let o = DerivativeOptions {
+            smooth_window: bad,
+            ..Default::default()
+        };
+        assert!(differentiate_runs(&[&y], 0.01, 2, &o).is_err(), "{bad}");
+    }
+    let off = DerivativeOptions {
+        smooth_window: 0.0,
+        ..Default::default()
+    };
+    assert!(differentiate_runs(&[&y], 0.01, 2, &off).is_ok());
+}

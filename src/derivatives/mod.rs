@@ -43,8 +43,9 @@ const LADDER: [f64; 6] = [0.0, 0.5, 1.0, 2.0, 3.0, -0.5];
 
 /// Local evidence for the smoother level is gathered over this many times the window of the
 /// rougher ones: over-smoothing costs little likelihood per sample, so short windows take it by
-/// chance (at 2x, sines and sys3 lost 30-60 % at every order; at 6x only the chirp's slow start
-/// takes it, and its error drops 10-20 %).
+/// chance. `cargo run --release --example derivative_windows` compares 0 (no smoother level),
+/// 2 and 6 on the shared signals: at 2 sines and sys3 get worse at nearly every order (up to 2x);
+/// at 6 only the chirp's slow start takes it, and the chirp's error drops 7-43 %.
 const SMOOTH_WINDOW: f64 = 6.0;
 
 /// Largest scaled step: beyond a few units the smoother interpolates the samples and the
@@ -66,6 +67,9 @@ pub struct DerivativeOptions {
     pub window: f64,
     /// Blend into the stationary-prior estimate near the ends.
     pub end_blend: bool,
+    /// Window of the smoother level's local likelihood, in units of `window`; 0 leaves the
+    /// smoother level out.
+    pub smooth_window: f64,
 }
 
 impl Default for DerivativeOptions {
@@ -77,6 +81,7 @@ impl Default for DerivativeOptions {
             adaptive: true,
             window: 2.0,
             end_blend: true,
+            smooth_window: SMOOTH_WINDOW,
         }
     }
 }
@@ -168,6 +173,12 @@ pub fn differentiate_runs(
             return Err(Error::param("h", format!("{h}; must be positive")));
         }
     }
+    if !(opts.smooth_window.is_finite() && opts.smooth_window >= 0.0) {
+        return Err(Error::param(
+            "smooth_window",
+            format!("{}; give a finite number >= 0", opts.smooth_window),
+        ));
+    }
 
     let means: Vec<f64> = runs
         .iter()
@@ -212,6 +223,7 @@ pub fn differentiate_runs(
     let mut levels: Vec<f64> = if opts.adaptive {
         LADDER
             .iter()
+            .filter(|&&o| o >= 0.0 || opts.smooth_window > 0.0)
             .map(|o| h * 2f64.powf(*o))
             .filter(|&l| l == h || l <= H_MAX)
             .collect()
@@ -249,6 +261,7 @@ pub fn differentiate_runs(
             y,
             fit.sigma2,
             (opts.window / h).round() as usize,
+            opts.smooth_window,
             pick,
         );
         // Accumulate mean and second moment of the blend, order by order.
@@ -319,7 +332,7 @@ fn end_weight(dist: f64, width: f64) -> f64 {
 
 /// Soft weights of the smoothing levels at every sample (`levels[0]` is the tuned one): softmax
 /// of windowed sums of the innovation log-likelihood, over `half` samples each side for the
-/// rougher levels and [`SMOOTH_WINDOW`] times that for the smoother one, then averaged over half
+/// rougher levels and `smooth_window` times that for the smoother one, then averaged over half
 /// a window so that switches are gradual.
 fn level_weights(
     levels: &[f64],
@@ -327,6 +340,7 @@ fn level_weights(
     y: &[f64],
     sigma2: f64,
     half: usize,
+    smooth_window: f64,
     pick: impl Fn(&[(usize, Cov)], usize) -> usize,
 ) -> Vec<Vec<f64>> {
     let n = y.len();
@@ -334,7 +348,7 @@ fn level_weights(
         return vec![vec![1.0; n]];
     }
     let half = half.clamp(2, (n / 2).max(2));
-    let long = ((SMOOTH_WINDOW * half as f64) as usize).clamp(2, (n / 2).max(2));
+    let long = ((smooth_window * half as f64) as usize).clamp(2, (n / 2).max(2));
     let lls: Vec<Vec<f64>> = covs
         .iter()
         .map(|c| {
