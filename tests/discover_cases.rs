@@ -27,6 +27,15 @@ fn coulomb_friction_is_named_with_its_coefficient_and_the_error_shrinks() {
     assert!(d.nrmse_before / d.nrmse_after > 3.0, "{}", d.text());
     let e = &d.effects[0];
     assert!(e.interval[1] < 0.0, "{}", d.text());
+    // Its report says how constant it is over time: both halves of the runs agree.
+    assert!(e.halves_z.is_finite() && e.halves_z < 3.5, "{}", d.text());
+    assert!(
+        e.halves
+            .iter()
+            .all(|c| (c / e.coefficient - 1.0).abs() < 0.2),
+        "{}",
+        d.text()
+    );
 }
 
 #[test]
