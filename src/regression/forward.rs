@@ -36,9 +36,7 @@
 // `!(x > t)` is deliberate throughout: NaN must fail these checks.
 #![allow(clippy::neg_cmp_op_on_partial_ord, clippy::needless_range_loop)]
 
-use super::path::{
-    dot, standardised_with_stats, Begun, Breakpoint, Event, Path, PathOptions, StopReason,
-};
+use super::path::{dot, Begun, Breakpoint, Event, Path, PathOptions, StopReason};
 use crate::error::Result;
 
 /// The forward-OLS steps of a started path (see the module docs); the monitor is called as in
@@ -53,8 +51,6 @@ pub(super) fn forward_path(
         nc,
         mut sd,
         mut path,
-        w,
-        sw,
         y_tilde,
     } = begun;
     let y_norm = path.y_norm;
@@ -140,8 +136,7 @@ pub(super) fn forward_path(
             if j == usize::MAX {
                 break;
             }
-            let col = sd.engine.columns(&[j])?.pop().expect("one column");
-            let (xt, m, s) = standardised_with_stats(&col, &w, sw, &path.sqrt_w);
+            let (xt, m, s) = sd.exact_column(j)?;
             let mut v = xt.clone();
             let mut coef_on_q = vec![0.0; q.len()];
             // Gram-Schmidt, repeated once when the first pass cancelled most of the column

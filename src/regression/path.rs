@@ -210,42 +210,14 @@ pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-/// x~ = s * (x - m) / n with the exact weighted mean and centred norm of `col` (zeros when
-/// the column is constant).
-pub(super) fn standardised(col: &[f64], w: &[f64], sw: f64, sqrt_w: &[f64]) -> Vec<f64> {
-    standardised_with_stats(col, w, sw, sqrt_w).0
-}
-
-/// [`standardised`], with the mean and centred norm it used.
-pub(super) fn standardised_with_stats(
-    col: &[f64],
-    w: &[f64],
-    sw: f64,
-    sqrt_w: &[f64],
-) -> (Vec<f64>, f64, f64) {
-    let m = w.iter().zip(col).map(|(a, b)| a * b).sum::<f64>() / sw;
-    let s = w
-        .iter()
-        .zip(col)
-        .map(|(a, b)| a * (b - m) * (b - m))
-        .sum::<f64>()
-        .sqrt();
-    if !(s > 0.0) {
-        return (vec![0.0; col.len()], m, s);
-    }
-    let xt = col
-        .iter()
-        .zip(sqrt_w)
-        .map(|(x, q)| q * (x - m) / s)
-        .collect();
-    (xt, m, s)
-}
-
 pub(super) struct Standardiser<'a> {
     pub(super) engine: &'a mut dyn SweepEngine,
     mean: Vec<f64>,
     norm: Vec<f64>,
     pub(super) usable: Vec<bool>,
+    /// Sample weights, their sum and their square roots.
+    w: Vec<f64>,
+    sw: f64,
     sqrt_w: Vec<f64>,
     raw: Vec<f64>,
     scaled: Vec<f64>,
@@ -253,6 +225,29 @@ pub(super) struct Standardiser<'a> {
 }
 
 impl Standardiser<'_> {
+    /// Candidate j's column standardised exactly in f64, `x~ = sqrt(w) (x - m) / s` with its
+    /// weighted mean m and centred norm s (zeros when the column is constant), and m and s.
+    pub(super) fn exact_column(&mut self, j: usize) -> Result<(Vec<f64>, f64, f64)> {
+        let col = self.engine.columns(&[j])?.pop().expect("one column");
+        let m = self.w.iter().zip(&col).map(|(a, b)| a * b).sum::<f64>() / self.sw;
+        let s = self
+            .w
+            .iter()
+            .zip(&col)
+            .map(|(a, b)| a * (b - m) * (b - m))
+            .sum::<f64>()
+            .sqrt();
+        if !(s > 0.0) {
+            return Ok((vec![0.0; col.len()], m, s));
+        }
+        let xt = col
+            .iter()
+            .zip(&self.sqrt_w)
+            .map(|(x, q)| q * (x - m) / s)
+            .collect();
+        Ok((xt, m, s))
+    }
+
     /// c_j = x~_j^T u for every candidate (0 for unusable ones).
     pub(super) fn corr(&mut self, u: &[f64], out: &mut [f64]) -> Result<()> {
         for ((s, w), x) in self.scaled.iter_mut().zip(&self.sqrt_w).zip(u) {
@@ -280,8 +275,6 @@ pub(super) struct Begun<'a> {
     pub(super) nc: usize,
     pub(super) sd: Standardiser<'a>,
     pub(super) path: Path,
-    pub(super) w: Vec<f64>,
-    pub(super) sw: f64,
     pub(super) y_tilde: Vec<f64>,
 }
 
@@ -346,6 +339,8 @@ fn begin<'a>(
         mean: stats.mean,
         norm: stats.norm,
         usable,
+        w,
+        sw,
         sqrt_w: sqrt_w.clone(),
         raw: vec![0.0; nc],
         scaled: vec![0.0; n],
@@ -375,8 +370,6 @@ fn begin<'a>(
         nc,
         sd,
         path,
-        w,
-        sw,
         y_tilde,
     }))
 }
@@ -423,8 +416,6 @@ fn lars_steps(
         nc,
         mut sd,
         mut path,
-        w,
-        sw,
         y_tilde,
     } = begun;
     let y_norm = path.y_norm;
@@ -522,8 +513,7 @@ fn lars_steps(
         }
         let mut added = false;
         if !drop {
-            let col = sd.engine.columns(&[c_idx])?.pop().expect("one column");
-            let (xt, m, s) = standardised_with_stats(&col, &w, sw, &path.sqrt_w);
+            let (xt, m, s) = sd.exact_column(c_idx)?;
             if !(s > 0.0) || !s.is_finite() {
                 skipped[c_idx] = true;
                 path.events.push(Event::SkippedCollinear {
@@ -639,8 +629,7 @@ fn lars_steps(
             });
             match arg {
                 Some(j) if g12 < c / aa => {
-                    let col = sd.engine.columns(&[j])?.pop().expect("one column");
-                    let xt = standardised(&col, &w, sw, &path.sqrt_w);
+                    let (xt, _, _) = sd.exact_column(j)?;
                     let (cj, aj) = (dot(&xt, &r), dot(&xt, &u));
                     let g = min_pos(
                         [(c - cj) / (aa - aj + TINY32), (c + cj) / (aa + aj + TINY32)].into_iter(),
@@ -716,8 +705,7 @@ fn lars_steps(
             | StopReason::NoImprovement
     ) && last_idx != usize::MAX
     {
-        let col = sd.engine.columns(&[last_idx])?.pop().expect("one column");
-        let exact = dot(&standardised(&col, &w, sw, &path.sqrt_w), &r);
+        let exact = dot(&sd.exact_column(last_idx)?.0, &r);
         let drift = (exact - cov[last_idx]).abs() / cov[last_idx].abs().max(f64::MIN_POSITIVE);
         if drift <= opts.refresh_tol {
             if let Some(bp) = path.breakpoints.last_mut() {
