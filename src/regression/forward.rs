@@ -47,12 +47,11 @@ pub(super) fn forward_path(
     monitor: &mut dyn FnMut(&Path, usize) -> bool,
 ) -> Result<Path> {
     let Begun {
-        n,
-        nc,
         mut sd,
         mut path,
         y_tilde,
     } = begun;
+    let (n, nc) = (y_tilde.len(), sd.usable.len());
     let y_norm = path.y_norm;
 
     let mut r = y_tilde.clone();

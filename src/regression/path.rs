@@ -270,9 +270,6 @@ impl Standardiser<'_> {
 /// What every path starts from: the standardiser over the engine, an empty path with the
 /// weighted, centred label, the weights and their sum.
 pub(super) struct Begun<'a> {
-    /// Samples and candidates of the engine.
-    pub(super) n: usize,
-    pub(super) nc: usize,
     pub(super) sd: Standardiser<'a>,
     pub(super) path: Path,
     pub(super) y_tilde: Vec<f64>,
@@ -365,13 +362,7 @@ fn begin<'a>(
     if !(path.y_norm > 0.0) {
         return Ok(Err(constant_label(path)));
     }
-    Ok(Ok(Begun {
-        n,
-        nc,
-        sd,
-        path,
-        y_tilde,
-    }))
+    Ok(Ok(Begun { sd, path, y_tilde }))
 }
 
 /// Computes the path of `y` over every candidate of `engine` (see the module docs).
@@ -412,12 +403,11 @@ fn lars_steps(
     monitor: &mut dyn FnMut(&Path, usize) -> bool,
 ) -> Result<Path> {
     let Begun {
-        n,
-        nc,
         mut sd,
         mut path,
         y_tilde,
     } = begun;
+    let (n, nc) = (y_tilde.len(), sd.usable.len());
     let y_norm = path.y_norm;
 
     let lasso = opts.method == Method::LassoLars;
