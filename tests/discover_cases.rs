@@ -17,6 +17,15 @@ fn run(name: &str, seed: u64) -> (bool, String, Discovery) {
     (j.pass, j.why, d)
 }
 
+/// Asserts that some effect was left out with `reason` in its report line.
+fn assert_dropped(d: &Discovery, reason: &str) {
+    assert!(
+        d.dropped.iter().any(|s| s.contains(reason)),
+        "no effect left out for '{reason}'\n{}",
+        d.text()
+    );
+}
+
 /// A tank driven harder than the standard case: its level swings near empty.
 const DRIVEN_TANK: f64 = 1.0 / 0.6;
 
@@ -116,11 +125,7 @@ fn tank_outflow_is_named_alone_when_a_second_effect_fails_its_gates() {
     let (j, d) = run_case("tank", 1, 0.03, 1.0);
     assert!(j.pass, "{}\n{}", j.why, d.text());
     assert!(!d.dropped.is_empty(), "{}", d.text());
-    assert!(
-        d.dropped.iter().any(|s| s.contains("inclusion")),
-        "{}",
-        d.text()
-    );
+    assert_dropped(&d, "inclusion");
     assert!(j.truth_ratio > 5.0, "{}", d.text());
 }
 
@@ -131,11 +136,7 @@ fn tank_outflow_is_named_alone_when_a_second_effect_fails_its_gates() {
 fn tank_bump_that_does_not_help_simulation_is_left_out() {
     let (j, d) = run_case("tank", 3, 0.03, DRIVEN_TANK);
     assert!(j.pass, "{}\n{}", j.why, d.text());
-    assert!(
-        d.dropped.iter().any(|s| s.contains("in simulation it")),
-        "{}",
-        d.text()
-    );
+    assert_dropped(&d, "in simulation it");
 }
 
 /// At 10 % noise the forward selection takes a Stribeck hump beside the Coulomb law; it is
@@ -177,9 +178,5 @@ fn sensor_drift_at_low_noise_is_not_named_an_offset() {
 fn effect_that_changes_along_the_runs_is_left_out_beside_a_constant_one() {
     let (j, d) = run_case("tank", 0, 0.03, DRIVEN_TANK);
     assert!(j.pass, "{}\n{}", j.why, d.text());
-    assert!(
-        d.dropped.iter().any(|s| s.contains("not constant in time")),
-        "{}",
-        d.text()
-    );
+    assert_dropped(&d, "not constant in time");
 }
