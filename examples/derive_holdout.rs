@@ -9,12 +9,15 @@ use ctsid::derivatives::score::{normalised_percentile, trimmed_range};
 use ctsid::plants::noise::add_noise;
 use ctsid::plants::rng::Rng;
 
+/// One damped sinusoid `A e^{-a t} sin(w t + p)`: (A, a, w, p).
+type Component = (f64, f64, f64, f64);
+
 fn main() {
     let n = 1000;
     let tau = 0.01;
     // Each signal: sum of damped sinusoids A e^{-a t} sin(w t + p); derivative k is the sum of
     // A |s|^k e^{-a t} sin(w t + p + k arg(s)) with s = -a + i w (exact).
-    let sets: Vec<(&str, Vec<(f64, f64, f64, f64)>)> = vec![
+    let sets: Vec<(&str, Vec<Component>)> = vec![
         (
             "sines_b",
             vec![
