@@ -1,4 +1,5 @@
 //! Diagnostic: where the largest order-3 residuals of the noise-free throttle sit.
+#![allow(clippy::needless_range_loop)]
 use ctsid::demo::records;
 use ctsid::identify::{identify, Orders, Settings, Split};
 use ctsid::plants::{dataset, Plant, ThrottlePreset};

@@ -1,4 +1,5 @@
 //! Diagnostic: sparse regression of the MIMO plant's y1''' on true derivatives (degree 3).
+#![allow(clippy::needless_range_loop)]
 use ctsid::engine::Features;
 use ctsid::plants::{dataset, Plant};
 use ctsid::regression::{EngineChoice, Regression};

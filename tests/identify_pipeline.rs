@@ -54,7 +54,7 @@ fn data(runs: usize, eta: f64, seed: u64) -> RecordSet {
             &c,
             &x0,
             &t,
-            &[u.clone()],
+            std::slice::from_ref(&u),
             &SimOptions {
                 rtol: 1e-10,
                 atol: 1e-12,

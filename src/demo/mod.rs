@@ -95,13 +95,16 @@ pub fn nrmse_vs_truth(
     )
 }
 
+/// One true term: (monomial, true coefficient, identified coefficient, relative error).
+pub type CoefficientRow = (String, f64, f64, f64);
+
 /// Relative error of each true coefficient in an identified equation (missing terms count as
 /// -100 %), and the terms identified but not in the truth.
 pub fn coefficient_errors(
     found: &ModelFile,
     truth: &ModelFile,
     output: usize,
-) -> (Vec<(String, f64, f64, f64)>, Vec<String>) {
+) -> (Vec<CoefficientRow>, Vec<String>) {
     let f = &found.outputs[output];
     let t = &truth.outputs[output];
     let mut rows = Vec::new();

@@ -11,8 +11,12 @@ use std::path::Path;
 pub const SIGNALS: [&str; 4] = ["sys3_multisine", "sines", "chirp", "etc_s1"];
 pub const NOISES: [u32; 3] = [1, 3, 5];
 
+/// The reference figures for one (signal, noise), orders 1..4: ml-derivatives' trimmed
+/// p95, the Kalman smoother's trimmed p95, ml-derivatives' full p100 (where meaningful).
+pub type Anchors = ([f64; 4], [f64; 4], Option<[f64; 4]>);
+
 /// (signal, noise %) -> (ml-derivatives trimmed p95, Kalman trimmed p95, ml-derivatives full p100), orders 1..4.
-pub fn anchors(signal: &str, noise: u32) -> Option<([f64; 4], [f64; 4], Option<[f64; 4]>)> {
+pub fn anchors(signal: &str, noise: u32) -> Option<Anchors> {
     let t = match (signal, noise) {
         ("sys3_multisine", 1) => (
             [0.0464, 0.141, 1.59, 4.82],

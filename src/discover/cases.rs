@@ -124,6 +124,22 @@ fn msd(c: f64, k: f64) -> Vec<Term> {
     ]
 }
 
+/// One generated case before noise: the true law and what the discovery should conclude.
+struct Spec {
+    /// Order of the plant (1: level, 2: position and velocity).
+    order: usize,
+    /// True right-hand side y^(order) = f(x, u), x = (y, ..., y^(order-1)).
+    f: fn(&[f64], f64) -> f64,
+    /// The nominal model handed to discovery (the truth without the missing effect).
+    nominal_terms: Vec<Term>,
+    expect: Expect,
+    /// Excitation amplitude and input offset.
+    amp: f64,
+    offset: f64,
+    /// Excite with one sine of random frequency (true) instead of a multisine.
+    single: bool,
+}
+
 /// Generates case `name` for `seed` at noise level `eta` (0.03 in the acceptance).
 pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
     generate_scaled(name, seed, eta, 1.0)
@@ -132,139 +148,131 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
 /// As [`generate`], with the excitation amplitude multiplied by `scale` (the input offset is
 /// kept): a tank driven harder swings closer to empty, where the outflow law is steepest.
 pub fn generate_scaled(name: &str, seed: u64, eta: f64, scale: f64) -> Result<Case> {
-    let (order, f, nominal_terms, expect, amp, offset, single): (
-        usize,
-        fn(&[f64], f64) -> f64,
-        Vec<Term>,
-        Expect,
-        f64,
-        f64,
-        bool,
-    ) = match name {
-        "coulomb" => (
-            2,
-            |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.5 * (x[1] / 1e-3).tanh(),
-            msd(0.4, 4.0),
-            Expect::Added {
+    let spec = match name {
+        "coulomb" => Spec {
+            order: 2,
+            f: |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.5 * (x[1] / 1e-3).tanh(),
+            nominal_terms: msd(0.4, 4.0),
+            expect: Expect::Added {
                 family: "coulomb_friction",
                 coef: -0.5,
             },
-            2.0,
-            0.0,
-            false,
-        ),
-        "duffing" => (
-            2,
-            |x, u| -0.8 * x[1] - 1.0 * x[0] - 2.0 * x[0].powi(3) + u,
-            msd(0.8, 1.0),
-            Expect::Added {
+            amp: 2.0,
+            offset: 0.0,
+            single: false,
+        },
+        "duffing" => Spec {
+            order: 2,
+            f: |x, u| -0.8 * x[1] - 1.0 * x[0] - 2.0 * x[0].powi(3) + u,
+            nominal_terms: msd(0.8, 1.0),
+            expect: Expect::Added {
                 family: "cubic_stiffness",
                 coef: -2.0,
             },
-            1.5,
-            0.0,
-            false,
-        ),
-        "quadratic_drag" => (
-            2,
-            |x, u| -0.2 * x[1] - 1.0 * x[0] - 0.8 * x[1].abs() * x[1] + u,
-            msd(0.2, 1.0),
-            Expect::Added {
+            amp: 1.5,
+            offset: 0.0,
+            single: false,
+        },
+        "quadratic_drag" => Spec {
+            order: 2,
+            f: |x, u| -0.2 * x[1] - 1.0 * x[0] - 0.8 * x[1].abs() * x[1] + u,
+            nominal_terms: msd(0.2, 1.0),
+            expect: Expect::Added {
                 family: "quadratic_drag",
                 coef: -0.8,
             },
-            1.5,
-            0.0,
-            false,
-        ),
-        "tank" => (
-            1,
+            amp: 1.5,
+            offset: 0.0,
+            single: false,
+        },
+        "tank" => Spec {
+            order: 1,
             // Outflow through an orifice, time constant 2 sqrt(h) / 2 = 1 s at h = 1; the level
             // swings over roughly 0.3..2.5, where sqrt is far from its tangent.
-            |x, u| -2.0 * x[0].max(0.0).sqrt() + 2.0 * u,
+            f: |x, u| -2.0 * x[0].max(0.0).sqrt() + 2.0 * u,
             // Linearised at h0 = 1: sqrt(h) ~ 0.5 + 0.5 h.
-            vec![
+            nominal_terms: vec![
                 Term::new(&[], -1.0),
                 Term::new(&[("y", 1)], -1.0),
                 Term::new(&[("u", 1)], 2.0),
             ],
-            Expect::Added {
+            expect: Expect::Added {
                 family: "sqrt_outflow",
                 coef: -2.0,
             },
-            0.6,
-            1.0,
-            false,
-        ),
-        "negative_none" | "negative_drift" => (
-            2,
-            |x, u| -0.4 * x[1] - 4.0 * x[0] + u,
-            msd(0.4, 4.0),
-            Expect::Nothing,
-            2.0,
-            0.0,
-            false,
-        ),
-        "negative_small" => (
-            2,
-            |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.005 * (x[1] / 1e-3).tanh(),
-            msd(0.4, 4.0),
-            Expect::Nothing,
-            2.0,
-            0.0,
-            false,
-        ),
-        "mistuned" => (
-            2,
-            |x, u| -0.4 * x[1] - 4.0 * x[0] + u,
-            msd(0.52, 4.0),
-            Expect::Retune {
+            amp: 0.6,
+            offset: 1.0,
+            single: false,
+        },
+        "negative_none" | "negative_drift" => Spec {
+            order: 2,
+            f: |x, u| -0.4 * x[1] - 4.0 * x[0] + u,
+            nominal_terms: msd(0.4, 4.0),
+            expect: Expect::Nothing,
+            amp: 2.0,
+            offset: 0.0,
+            single: false,
+        },
+        "negative_small" => Spec {
+            order: 2,
+            f: |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.005 * (x[1] / 1e-3).tanh(),
+            nominal_terms: msd(0.4, 4.0),
+            expect: Expect::Nothing,
+            amp: 2.0,
+            offset: 0.0,
+            single: false,
+        },
+        "mistuned" => Spec {
+            order: 2,
+            f: |x, u| -0.4 * x[1] - 4.0 * x[0] + u,
+            nominal_terms: msd(0.52, 4.0),
+            expect: Expect::Retune {
                 term: "y_d1",
                 value: -0.4,
             },
-            2.0,
-            0.0,
-            false,
-        ),
-        "distractor_relay" => (
-            2,
-            |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.5 * (x[1] / 1e-3).tanh(),
-            msd(0.4, 4.0),
-            Expect::Distractor {
+            amp: 2.0,
+            offset: 0.0,
+            single: false,
+        },
+        "distractor_relay" => Spec {
+            order: 2,
+            f: |x, u| -0.4 * x[1] - 4.0 * x[0] + u - 0.5 * (x[1] / 1e-3).tanh(),
+            nominal_terms: msd(0.4, 4.0),
+            expect: Expect::Distractor {
                 family: "coulomb_friction",
                 coef: -0.5,
                 wrong: "input_relay",
             },
-            3.0,
-            0.0,
-            true,
-        ),
-        "distractor_sin" => (
-            2,
-            |x, u| -0.8 * x[1] - 1.0 * x[0] - 2.0 * x[0].powi(3) + u,
-            msd(0.8, 1.0),
-            Expect::Distractor {
+            amp: 3.0,
+            offset: 0.0,
+            single: true,
+        },
+        "distractor_sin" => Spec {
+            order: 2,
+            f: |x, u| -0.8 * x[1] - 1.0 * x[0] - 2.0 * x[0].powi(3) + u,
+            nominal_terms: msd(0.8, 1.0),
+            expect: Expect::Distractor {
                 family: "cubic_stiffness",
                 coef: -2.0,
                 wrong: "trigonometric",
             },
-            1.0,
-            0.0,
-            false,
-        ),
-        "distractor_v3" => (
-            2,
-            |x, u| -0.2 * x[1] - 1.0 * x[0] - 0.8 * x[1].abs() * x[1] + u,
-            msd(0.2, 1.0),
-            Expect::Distractor {
+            amp: 1.0,
+            offset: 0.0,
+            single: false,
+        },
+        "distractor_v3" => Spec {
+            order: 2,
+            f: |x, u| -0.2 * x[1] - 1.0 * x[0] - 0.8 * x[1].abs() * x[1] + u,
+            nominal_terms: msd(0.2, 1.0),
+            expect: Expect::Distractor {
                 family: "quadratic_drag",
                 coef: -0.8,
                 wrong: "cubic_damping",
             },
-            1.5,
-            0.0,
-            false,
-        ),
+            amp: 1.5,
+            offset: 0.0,
+            single: false,
+        },
         other => {
             return Err(crate::error::Error::param(
                 "case",
@@ -272,6 +280,15 @@ pub fn generate_scaled(name: &str, seed: u64, eta: f64, scale: f64) -> Result<Ca
             ))
         }
     };
+    let Spec {
+        order,
+        f,
+        nominal_terms,
+        expect,
+        amp,
+        offset,
+        single,
+    } = spec;
     let case_id = CASES.iter().position(|c| *c == name).unwrap_or(0) as u64;
     let fmax = if name == "tank" { 0.3 } else { 1.2 };
     let amp = amp * scale;

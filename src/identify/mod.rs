@@ -409,7 +409,7 @@ impl Prepared<'_> {
     /// (without it the ends of the runs, where sigma is largest, would dominate the floor).
     fn label_floor(&self, i: usize, ord: &[usize], runs: &[usize], y: &[f64], w: &[f64]) -> f64 {
         let sw: f64 = w.iter().sum();
-        if !(sw > 0.0) {
+        if sw.is_nan() || sw <= 0.0 {
             return 0.0;
         }
         let mean = w.iter().zip(y).map(|(a, b)| a * b).sum::<f64>() / sw;
@@ -482,7 +482,7 @@ impl Prepared<'_> {
             let scale =
                 (1.4826 * crate::derivatives::score::percentile(&abs, 50.0)).max(1e-6 * label_rms);
             let worst = abs.iter().cloned().fold(0.0, f64::max);
-            if !(scale > 0.0) || worst < 4.685 * scale {
+            if scale.is_nan() || scale <= 0.0 || worst < 4.685 * scale {
                 break;
             }
             for s in 0..y.len() {
@@ -590,8 +590,8 @@ fn prepare<'a>(
         .map(|i| {
             equation_data(
                 rs,
-                &outputs,
-                &inputs,
+                outputs,
+                inputs,
                 &derivs,
                 i,
                 max_order,

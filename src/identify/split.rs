@@ -118,7 +118,8 @@ impl Split {
         let k = k.clamp(2, self.train.len().max(2));
         (0..k)
             .map(|f| {
-                let (val, fit): (Vec<(usize, usize)>, Vec<(usize, usize)>) = self
+                type Indexed = Vec<(usize, usize)>;
+                let (val, fit): (Indexed, Indexed) = self
                     .train
                     .iter()
                     .copied()
