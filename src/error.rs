@@ -34,7 +34,15 @@ pub enum Error {
         value: String,
     },
 
-    #[error("{path}: row {row}, column '{column}': time does not increase ({prev} then {value}); sort the rows or give a run column")]
+    #[error("{path}: row {row}, column '{column}': {value:e} is too large in magnitude to compute with (limit 1e150); rescale the column, e.g. to other units")]
+    ValueTooLarge {
+        path: String,
+        row: usize,
+        column: String,
+        value: f64,
+    },
+
+    #[error("{path}: row {row}, column '{column}': time does not increase ({prev:?} then {value:?}); sort the rows or give a run column")]
     TimeNotIncreasing {
         path: String,
         row: usize,
@@ -43,7 +51,7 @@ pub enum Error {
         value: f64,
     },
 
-    #[error("{path}: row {row}, column '{column}': non-uniform sampling (step {step} s, expected {tau} s within 1e-6 relative); resample the record to a uniform grid")]
+    #[error("{path}: row {row}, column '{column}': non-uniform sampling (step {step:?} s, expected {tau:?} s within 1e-6 relative); resample the record to a uniform grid, or, if the times are only rounded, give --tau and leave out the time column")]
     TimeNonUniform {
         path: String,
         row: usize,
@@ -52,10 +60,10 @@ pub enum Error {
         tau: f64,
     },
 
-    #[error("tau must be a positive finite number of seconds, got {0}")]
+    #[error("tau must be a positive finite number of seconds, got {0:?}")]
     InvalidTau(f64),
 
-    #[error("--tau {given} disagrees with the time column '{column}' (step {from_time}); drop --tau or fix it")]
+    #[error("--tau {given:?} disagrees with the time column '{column}' (step {from_time:?}); drop --tau or fix it")]
     TauMismatch {
         given: f64,
         from_time: f64,
@@ -64,6 +72,9 @@ pub enum Error {
 
     #[error("no sampling period: give --tau or a --time-column")]
     MissingTau,
+
+    #[error("{path}: no run has two samples, so the time column '{column}' gives no sampling period; give longer runs (or --tau)")]
+    NoTimeStep { path: String, column: String },
 
     #[error("run '{run}' has {len} samples but {what} needs at least {min}; use longer runs or a lower order")]
     RunTooShort {
@@ -101,7 +112,7 @@ pub enum Error {
     #[error("model file {path}: {message}")]
     Model { path: String, message: String },
 
-    #[error("simulation diverged at t = {time} s (run '{run}', state {state}); the model is unstable there or the step is too large")]
+    #[error("simulation diverged at t = {time:?} s (run '{run}', state {state}); the model is unstable there or the step is too large")]
     Diverged {
         run: String,
         time: f64,

@@ -7,16 +7,75 @@ use clap::Parser;
 
 fn main() {
     // Mesa's Vulkan loader complains on every adapter probe when XDG_RUNTIME_DIR is unset (as in
-    // containers and CI); give it a private folder before any thread starts.
+    // containers and CI); give it a private folder before any thread starts, removed at exit.
+    let mut private_dir = None;
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
         let dir = std::env::temp_dir().join(format!("ctsid-xdg-{}", std::process::id()));
         if std::fs::create_dir_all(&dir).is_ok() {
             std::env::set_var("XDG_RUNTIME_DIR", &dir);
+            private_dir = Some(dir);
         }
     }
-    let args = cli::Cli::parse();
-    if let Err(e) = cli::run(args) {
-        eprintln!("error: {e}");
-        std::process::exit(2);
+    let code = match cli::Cli::try_parse() {
+        Ok(args) => match cli::run(args) {
+            Ok(()) => 0,
+            Err(e) => {
+                eprintln!("error: {e}");
+                2
+            }
+        },
+        Err(e) => usage_error(e),
+    };
+    if let Some(dir) = private_dir {
+        let _ = std::fs::remove_dir_all(dir);
     }
+    std::process::exit(code);
+}
+
+/// Help and version go out as clap renders them; a usage error becomes one line: clap's first
+/// line, its tip if it has one, and where to read more.
+fn usage_error(e: clap::Error) -> i32 {
+    use clap::error::ErrorKind;
+    if matches!(
+        e.kind(),
+        ErrorKind::DisplayHelp
+            | ErrorKind::DisplayVersion
+            | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+    ) {
+        let _ = e.print();
+        return if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand {
+            2
+        } else {
+            0
+        };
+    }
+    let text = e.render().to_string();
+    let mut lines = text
+        .lines()
+        .map(str::trim)
+        .filter(|l| !l.is_empty())
+        .peekable();
+    let mut first = lines
+        .next()
+        .unwrap_or("error: invalid arguments")
+        .to_string();
+    // "the following required arguments were not provided:" lists them on the next lines.
+    if first.ends_with(':') {
+        let mut items = Vec::new();
+        while let Some(l) = lines.next_if(|l| !l.starts_with("Usage:") && !l.starts_with("tip:")) {
+            items.push(l);
+        }
+        first = format!("{} {}", first, items.join(", "));
+    }
+    let tip = lines
+        .find_map(|l| l.strip_prefix("tip:"))
+        .map(|t| format!(" ({})", t.trim()))
+        .unwrap_or_default();
+    let first = if first.starts_with("error:") {
+        first
+    } else {
+        format!("error: {first}")
+    };
+    eprintln!("{first}{tip}; see --help");
+    2
 }

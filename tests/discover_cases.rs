@@ -180,3 +180,28 @@ fn effect_that_changes_along_the_runs_is_left_out_beside_a_constant_one() {
     assert!(j.pass, "{}\n{}", j.why, d.text());
     assert_dropped(&d, "not constant in time");
 }
+
+#[test]
+fn a_user_effect_the_data_cannot_carry_is_an_error_not_a_silent_omission() {
+    let case = generate("duffing", 0, 0.03).unwrap();
+    let base = options(&case, 0);
+    for (name, expr, needle) in [
+        ("", "y^2", "has no name"),
+        ("cubic_stiffness", "y^3", "built-in"),
+        ("cube", "y^3", "already in the dictionary"),
+        ("root", "sqrt(y)", "not finite"),
+        ("kink", "relu(y-100)", "constant on the training data"),
+    ] {
+        let mut o = base.clone();
+        o.user_effects = vec![(name.into(), expr.into())];
+        let e = discover(&case.records, &case.nominal, &o)
+            .err()
+            .unwrap_or_else(|| panic!("'{name}={expr}' was accepted"))
+            .to_string();
+        assert!(e.contains(needle), "'{name}={expr}': {e}");
+    }
+    // A user effect the data do carry is a candidate like any other.
+    let mut o = base.clone();
+    o.user_effects = vec![("dead_zone".into(), "relu(abs(y)-0.1)*sign(y)".into())];
+    discover(&case.records, &case.nominal, &o).unwrap();
+}

@@ -116,4 +116,20 @@ fn discover_cli_uses_the_given_split() {
         "99",
     ]);
     assert!(!ok && err.contains("run '99' does not exist"), "{err}");
+    // One list given: the omitted ones share the other runs (they used to default to fixed
+    // positions and clash with it).
+    let (ok, out, err) = ctsid(&[
+        "discover",
+        d,
+        "--nominal",
+        n,
+        "--run-column",
+        "run",
+        "--time-column",
+        "t",
+        "--train",
+        &list(&[5, 6, 7, 8]),
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.contains("| 5 | train |") && out.contains("| 0 | validation |"), "{out}");
 }

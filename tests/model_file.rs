@@ -211,3 +211,31 @@ fn name_clashes_and_degree_are_checked() {
     );
     assert!(e.contains("degree 2") && e.contains("degree 1"), "{e}");
 }
+
+#[test]
+fn typos_huge_orders_and_foreign_files_are_named() {
+    let e = err_of(
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":2,"termz":[]}]}"#,
+    );
+    assert!(
+        e.contains("no \"terms\" list") && e.contains("termz"),
+        "{e}"
+    );
+    let e = err_of(
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":2,"terms":[{"exponents":{"y":1,"y":2},"coefficient":1}]}]}"#,
+    );
+    assert!(e.contains("'y' appears twice"), "{e}");
+    let e = err_of(
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":100000000,"terms":[]}]}"#,
+    );
+    assert!(
+        e.contains("order 100000000") && e.contains("up to 8"),
+        "{e}"
+    );
+    // A regression result is not a model file: named as such, not by its first missing field.
+    let e = err_of(r#"{"terms":[],"diagnostics":{}}"#);
+    assert!(e.contains("no \"format\" field"), "{e}");
+    // A byte-order mark (as some editors write) is not an error.
+    let text = format!("\u{feff}{}", siso().to_json_string().unwrap());
+    Model::from_json_str(&text, "bom.json").unwrap();
+}

@@ -161,6 +161,21 @@ impl Basis {
                 format!("{degree}; at most {MAX_DEGREE} is supported"),
             ));
         }
+        if let Some((i, name)) = names
+            .iter()
+            .enumerate()
+            .find(|(i, a)| names[..*i].contains(a))
+        {
+            let first = names.iter().position(|a| a == name).unwrap_or(0);
+            return Err(Error::param(
+                "features",
+                format!(
+                    "'{name}' is named twice (positions {} and {})",
+                    first + 1,
+                    i + 1
+                ),
+            ));
+        }
         let total = count(n, degree).unwrap_or(u64::MAX);
         if total > limits.max_candidates {
             let mib = |c: u64| c as f64 * BYTES_PER_CANDIDATE as f64 / 1048576.0;

@@ -75,6 +75,9 @@ pub struct MimoArgs {
 pub fn run(a: DemoArgs) -> Result<()> {
     match a.which {
         Which::Etc(e) => {
+            if let Some(d) = &e.out {
+                super::check_output_dir(d)?;
+            }
             let o = etc::EtcOptions {
                 patm: e.patm,
                 physical: e.preset == Preset::Physical,
@@ -86,9 +89,12 @@ pub fn run(a: DemoArgs) -> Result<()> {
                 progress: super::show_progress(e.quiet),
                 ..Default::default()
             };
-            print!("{}", etc::run(&o)?);
+            out!("{}", etc::run(&o)?)?;
         }
         Which::Mimo(m) => {
+            if let Some(d) = &m.out {
+                super::check_output_dir(d)?;
+            }
             let o = mimo::MimoOptions {
                 degrees: m.degrees,
                 engines: m.engines,
@@ -99,7 +105,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
                 progress: super::show_progress(m.quiet),
                 ..Default::default()
             };
-            print!("{}", mimo::run(&o)?);
+            out!("{}", mimo::run(&o)?)?;
         }
     }
     Ok(())

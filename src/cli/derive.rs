@@ -30,8 +30,18 @@ pub struct DeriveArgs {
 }
 
 pub fn run(a: DeriveArgs) -> Result<()> {
-    if a.order == 0 {
-        return Err(Error::param("order", "give an order of at least 1"));
+    if a.order == 0 || a.order > ctsid::derivatives::MAX_ORDER {
+        return Err(Error::param(
+            "order",
+            format!(
+                "{}; give an order of 1..={}",
+                a.order,
+                ctsid::derivatives::MAX_ORDER
+            ),
+        ));
+    }
+    if let Some(o) = &a.output {
+        super::check_output_file(o, &[&a.input])?;
     }
     let spec = a
         .sampling
@@ -64,7 +74,7 @@ pub fn run(a: DeriveArgs) -> Result<()> {
     })?;
     let d0 = &ders[0];
     eprintln!(
-        "derived '{}' up to order {} on {} run(s), tau = {} s: noise sd {:.4e}, smoothing bandwidth {:.3} rad/s",
+        "derived '{}' up to order {} on {} run(s), tau = {:?} s: noise sd {:.4e}, smoothing bandwidth {:.3} rad/s",
         a.column,
         a.order,
         ders.len(),

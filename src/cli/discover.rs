@@ -23,7 +23,7 @@ pub struct DiscoverArgs {
     #[command(flatten)]
     pub sampling: super::runs::SamplingArgs,
     /// Omitted lists: training = the first half of the runs, validation = the next quarter,
-    /// test = the rest.
+    /// test = the rest (of the runs no given list names).
     #[command(flatten)]
     pub split: super::runs::SplitArgs,
     /// Prior half-width of a nominal term, `TERM=PCT` (`y_d1=10`, `u=fixed`, `1=approximate`).
@@ -44,6 +44,12 @@ pub struct DiscoverArgs {
 }
 
 pub fn run(a: DiscoverArgs) -> Result<()> {
+    if let Some(o) = &a.output_model {
+        super::check_output_file(o, &[&a.data, &a.nominal])?;
+    }
+    if let Some(d) = &a.report {
+        super::check_output_dir(d)?;
+    }
     let nominal = Model::read(&a.nominal.to_string_lossy())?;
     let mut columns: Vec<String> = nominal.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(nominal.inputs.iter().cloned());
@@ -59,11 +65,31 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
             format!("{n} runs; give --train, --validation and --test explicitly (one run each at least)"),
         ));
     }
-    let h = (n / 2).max(1);
-    let q = ((n - h) / 2).max(1);
-    let train = given.train.unwrap_or_else(|| (0..h).collect());
-    let validation = given.validation.unwrap_or_else(|| (h..h + q).collect());
-    let test = given.test.unwrap_or_else(|| (h + q..n).collect());
+    // Omitted lists share, in order, the runs no given list names: training half of them,
+    // validation a quarter, test the rest (by these weights among the omitted lists only).
+    let named: Vec<usize> = [&given.train, &given.validation, &given.test]
+        .into_iter()
+        .flatten()
+        .flatten()
+        .copied()
+        .collect();
+    let mut rest: Vec<usize> = (0..n).filter(|r| !named.contains(r)).collect();
+    let mut lists = [given.train, given.validation, given.test];
+    let weights = [2usize, 1, 1];
+    let omitted: Vec<usize> = (0..3).filter(|&i| lists[i].is_none()).collect();
+    let mut weight_left: usize = omitted.iter().map(|&i| weights[i]).sum();
+    for (k, &i) in omitted.iter().enumerate() {
+        let take = if k + 1 == omitted.len() {
+            rest.len()
+        } else {
+            (rest.len() * weights[i] / weight_left)
+                .max(1)
+                .min(rest.len())
+        };
+        lists[i] = Some(rest.drain(..take).collect());
+        weight_left -= weights[i];
+    }
+    let [train, validation, test] = lists.map(Option::unwrap_or_default);
     // The same checks as identify: non-empty training, no run in two lists.
     let checked = Split::new(train, Some(validation), test, &names)?;
     let (train, validation, test) = (
@@ -105,7 +131,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
             .push((name.trim().to_string(), ex.trim().to_string()));
     }
     let d = discover(&rs, &nominal, &o)?;
-    print!("{}", d.text());
+    out!("{}", d.text())?;
     if let Some(p) = &a.output_model {
         d.augmented_model(&nominal)?.write(&p.to_string_lossy())?;
     }

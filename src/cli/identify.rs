@@ -1,7 +1,7 @@
 //! `ctsid identify`: the main job on measured data.
 
 use clap::Args;
-use ctsid::identify::split::parse_runs;
+use ctsid::identify::split::parse_list;
 use ctsid::identify::{identify, Orders, Settings, Split};
 use ctsid::records::RecordSet;
 use ctsid::regression::EngineChoice;
@@ -14,10 +14,10 @@ pub struct IdentifyArgs {
     /// CSV file with a header row.
     pub data: PathBuf,
     /// Output channel(s), comma separated.
-    #[arg(long, value_delimiter = ',', required = true)]
+    #[arg(long, value_delimiter = ',', required = true, value_parser = super::trimmed)]
     pub output: Vec<String>,
     /// Input channel(s), comma separated.
-    #[arg(long, value_delimiter = ',')]
+    #[arg(long, value_delimiter = ',', value_parser = super::trimmed)]
     pub input: Vec<String>,
     /// Run (experiment) id column.
     #[arg(long)]
@@ -59,7 +59,7 @@ pub struct IdentifyArgs {
 
 fn parse_orders(text: &str) -> Result<Vec<usize>> {
     let t = text.replace("..", "-");
-    parse_runs(&t)?
+    parse_list(&t, "orders")?
         .iter()
         .map(|s| {
             s.parse::<usize>().map_err(|_| {
@@ -73,6 +73,23 @@ fn parse_orders(text: &str) -> Result<Vec<usize>> {
 }
 
 pub fn run(a: IdentifyArgs) -> Result<()> {
+    if let Some(o) = &a.output_model {
+        super::check_output_file(o, &[a.data.as_ref()])?;
+    }
+    if let Some(d) = &a.report {
+        super::check_output_dir(d)?;
+    }
+    // Every setting is checked before the data are read.
+    let mut s = Settings::new(a.output.clone(), a.input.clone(), a.degree);
+    s.orders = match &a.order {
+        Some(o) => Orders::Fixed(o.clone()),
+        None => Orders::Search(parse_orders(&a.orders)?),
+    };
+    s.eta = a.eta;
+    s.engine = a.engine;
+    s.method = a.method.into();
+    s.progress = super::show_progress(a.quiet);
+    s.validate()?;
     let mut columns = a.output.clone();
     columns.extend(a.input.iter().cloned());
     let spec = a.sampling.spec(columns, a.run_column.clone(), None);
@@ -88,15 +105,6 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             .collect(),
     };
     let split = Split::new(train, validation, test, &ids)?;
-    let mut s = Settings::new(a.output.clone(), a.input.clone(), a.degree);
-    s.orders = match &a.order {
-        Some(o) => Orders::Fixed(o.clone()),
-        None => Orders::Search(parse_orders(&a.orders)?),
-    };
-    s.eta = a.eta;
-    s.engine = a.engine;
-    s.method = a.method.into();
-    s.progress = super::show_progress(a.quiet);
     let id = identify(&rs, &split, &s)?;
 
     let mut text = String::new();
@@ -181,7 +189,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     if let Some(r) = &id.refinement {
         text += &format!("Refinement by free-run simulation error: {}.\n", r.message);
     }
-    print!("{text}");
+    out!("{text}")?;
 
     if let Some(path) = &a.output_model {
         let mut model = id.model.clone();

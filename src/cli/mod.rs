@@ -1,4 +1,17 @@
 //! Subcommand definitions and dispatch. Each subcommand lives in its own file.
+//!
+//! Results go to standard output through [`out!`] / [`outln!`], never `print!`: a closed pipe
+//! (`ctsid ... | head`) or a full disk is then an error line, not a panic.
+
+/// `print!` that returns a [`ctsid::Result`] instead of panicking when standard output fails.
+macro_rules! out {
+    ($($t:tt)*) => { $crate::cli::write_stdout(&format!($($t)*)) };
+}
+
+/// `println!` that returns a [`ctsid::Result`] instead of panicking when standard output fails.
+macro_rules! outln {
+    ($($t:tt)*) => { $crate::cli::write_stdout(&format!("{}\n", format_args!($($t)*))) };
+}
 
 mod csvout;
 mod demo;
@@ -12,7 +25,8 @@ use clap::{Parser, Subcommand};
 
 mod regress;
 mod runs;
-use ctsid::Result;
+use ctsid::{Error, Result};
+use std::path::Path;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -60,4 +74,74 @@ pub fn run(cli: Cli) -> Result<()> {
 pub fn show_progress(quiet: bool) -> bool {
     use std::io::IsTerminal;
     !quiet && std::io::stderr().is_terminal()
+}
+
+/// Writes `text` to standard output and flushes it.
+pub fn write_stdout(text: &str) -> Result<()> {
+    use std::io::Write;
+    let mut o = std::io::stdout().lock();
+    o.write_all(text.as_bytes())
+        .and_then(|_| o.flush())
+        .map_err(|e| Error::Io {
+            path: "standard output".into(),
+            message: e.to_string(),
+        })
+}
+
+/// Checks an output file before any work is done: its folder exists, it is not a folder, and
+/// it is none of `inputs` (writing would truncate a file that is still to be read).
+pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
+    let name = out.display().to_string();
+    let err = |message: String| Error::Io {
+        path: name.clone(),
+        message,
+    };
+    if out.is_dir() {
+        return Err(err("is a folder; give a file name".into()));
+    }
+    let parent = out.parent().filter(|p| !p.as_os_str().is_empty());
+    if let Some(p) = parent {
+        if !p.is_dir() {
+            return Err(err(format!(
+                "folder {} does not exist; create it or write elsewhere",
+                p.display()
+            )));
+        }
+    }
+    if let Ok(o) = out.canonicalize() {
+        for i in inputs {
+            if i.canonicalize().is_ok_and(|c| c == o) {
+                return Err(err(
+                    "is also an input file; writing it would destroy the input, so give another output file".into(),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks a report folder before any work: it is not an existing file and its parent exists.
+pub fn check_output_dir(dir: &Path) -> Result<()> {
+    let name = dir.display().to_string();
+    if dir.exists() && !dir.is_dir() {
+        return Err(Error::Io {
+            path: name,
+            message: "is a file, not a folder; give a folder for the report".into(),
+        });
+    }
+    if let Some(p) = dir.parent().filter(|p| !p.as_os_str().is_empty()) {
+        if !p.is_dir() {
+            return Err(Error::Io {
+                path: name,
+                message: format!("folder {} does not exist; create it first", p.display()),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Value parser for names in comma lists: `--input "u, t"` means `u` and `t` (CSV headers are
+/// trimmed too).
+pub fn trimmed(s: &str) -> std::result::Result<String, String> {
+    Ok(s.trim().to_string())
 }

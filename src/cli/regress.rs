@@ -17,7 +17,7 @@ pub struct RegressArgs {
     /// CSV file with a header row.
     pub data: PathBuf,
     /// Feature columns, comma separated.
-    #[arg(long, value_delimiter = ',', required = true)]
+    #[arg(long, value_delimiter = ',', required = true, value_parser = super::trimmed)]
     pub features: Vec<String>,
     /// Label column.
     #[arg(long)]
@@ -83,6 +83,9 @@ fn read_columns(path: &std::path::Path, wanted: &[String]) -> Result<Vec<Vec<f64
 }
 
 pub fn run(a: RegressArgs) -> Result<()> {
+    if let Some(o) = &a.output {
+        super::check_output_file(o, &[&a.data])?;
+    }
     let engine = match a.engine {
         EngineArg::Cpu => EngineChoice::Cpu,
         EngineArg::Gpu => EngineChoice::Gpu,
@@ -114,16 +117,16 @@ pub fn run(a: RegressArgs) -> Result<()> {
     let started = std::time::Instant::now();
     let model = reg.fit(&features, &label, &a.label, weights.as_deref())?;
     let d = &model.diagnostics;
-    println!("{}", model.equation());
+    outln!("{}", model.equation())?;
     for note in &d.notes {
-        println!("note: {note}");
+        outln!("note: {note}")?;
     }
-    println!(
+    outln!(
         "engine: {}; {} samples, {} candidates ({} constant), {:?} path of {} steps ({:?}), {} sweeps, {} refreshes, {:.2} s",
         d.engine, d.n_samples, d.n_candidates, d.constant_candidates, d.method, d.path_steps, d.stop, d.sweeps, d.refreshes,
         started.elapsed().as_secs_f64()
-    );
-    println!(
+    )?;
+    outln!(
         "selection: eBIC chose breakpoint {} ({} terms, eBIC {:.2}); pruned [{}]; final eBIC {:.2}, R^2 {:.6}",
         d.chosen_breakpoint,
         model.path[d.chosen_breakpoint].active.len(),
@@ -131,12 +134,12 @@ pub fn run(a: RegressArgs) -> Result<()> {
         d.pruned.join(", "),
         d.ebic_final,
         d.r2
-    );
+    )?;
     if !d.skipped_collinear.is_empty() {
-        println!(
+        outln!(
             "skipped as collinear with the active set: {}",
             d.skipped_collinear.join(", ")
-        );
+        )?;
     }
     if let Some(out) = &a.output {
         let text =
@@ -145,7 +148,7 @@ pub fn run(a: RegressArgs) -> Result<()> {
             path: out.display().to_string(),
             message: e.to_string(),
         })?;
-        println!("model written to {}", out.display());
+        eprintln!("model written to {}", out.display());
     }
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! `--train / --validation / --test` for those that split runs.
 
 use clap::Args;
-use ctsid::identify::split::{parse_runs, resolve};
+use ctsid::identify::split::{parse_list, resolve};
 use ctsid::records::CsvSpec;
 use ctsid::Result;
 
@@ -64,7 +64,7 @@ impl SplitArgs {
     pub fn resolve(&self, ids: &[String]) -> Result<Given> {
         let pick = |t: &Option<String>, what: &str| -> Result<Option<Vec<usize>>> {
             t.as_deref()
-                .map(|t| resolve(&parse_runs(t)?, ids, what))
+                .map(|t| resolve(&parse_list(t, what)?, ids, what))
                 .transpose()
         };
         Ok(Given {

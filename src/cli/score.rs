@@ -13,18 +13,26 @@ pub struct ScoreArgs {
 }
 
 pub fn run(a: ScoreArgs) -> Result<()> {
+    if !a.signals.is_dir() {
+        return Err(ctsid::Error::Io {
+            path: a.signals.display().to_string(),
+            message:
+                "no such folder; give --signals DIR (the repository's copy: tests/data/signals)"
+                    .into(),
+        });
+    }
     let t = std::time::Instant::now();
     let rows = benchmark::run(&a.signals)?;
     let secs = t.elapsed().as_secs_f64();
-    println!("Derivative accuracy on {} (trimmed p95 / full p100 per order 1/2/3/4; anchors from the project's issue)\n", a.signals.display());
-    print!("{}", benchmark::table(&rows));
+    outln!("Derivative accuracy on {} (trimmed p95 / full p100 per order 1/2/3/4; anchors from the project's issue)\n", a.signals.display())?;
+    out!("{}", benchmark::table(&rows))?;
     let passed = rows.iter().filter(|r| benchmark::gates_pass(r)).count();
-    println!(
+    outln!(
         "\n{} of {} rows meet every gate; {} runs in {:.2} s",
         passed,
         rows.len(),
         rows.len(),
         secs
-    );
+    )?;
     Ok(())
 }

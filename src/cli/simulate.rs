@@ -42,6 +42,9 @@ pub struct SimulateArgs {
 }
 
 pub fn run(args: SimulateArgs) -> Result<()> {
+    if let Some(o) = &args.output {
+        super::check_output_file(o.as_ref(), &[args.data.as_ref(), args.model.as_ref()])?;
+    }
     let model = Model::read(&args.model)?;
     let compiled = model.compile()?;
     if let Some(tau) = args.sampling.tau {
@@ -65,10 +68,13 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     let mut simulated: Vec<Vec<Vec<f64>>> = Vec::with_capacity(rs.runs.len());
     let mut pooled_sim: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let mut pooled_meas: Vec<Vec<f64>> = vec![Vec::new(); n_out];
-    println!(
+    outln!(
         "{:<12} {:<12} {:>14} {:>10}",
-        "run", "output", "RMS", "NRMSE %"
-    );
+        "run",
+        "output",
+        "RMS",
+        "NRMSE %"
+    )?;
     for run in &rs.runs {
         let id = &run.id;
         let t: Vec<f64> = (0..run.len()).map(|k| run.t0 + k as f64 * rs.tau).collect();
@@ -97,13 +103,13 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         for (i, o) in model.outputs.iter().enumerate() {
             let sim = traj.series(compiled.offset(i));
             let (rms, nrmse) = rms_nrmse(&sim, &ys[i]);
-            println!(
+            outln!(
                 "{:<12} {:<12} {:>14.6e} {:>10.4}",
                 id,
                 o.name,
                 rms,
                 100.0 * nrmse
-            );
+            )?;
             pooled_sim[i].extend_from_slice(&sim);
             pooled_meas[i].extend_from_slice(&ys[i]);
             per_run.push(sim);
@@ -112,13 +118,13 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     }
     for (i, o) in model.outputs.iter().enumerate() {
         let (rms, nrmse) = rms_nrmse(&pooled_sim[i], &pooled_meas[i]);
-        println!(
+        outln!(
             "{:<12} {:<12} {:>14.6e} {:>10.4}",
             "all",
             o.name,
             rms,
             100.0 * nrmse
-        );
+        )?;
     }
     if let Some(path) = &args.output {
         let out = std::path::Path::new(path);

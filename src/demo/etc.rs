@@ -13,7 +13,7 @@ use crate::identify::{identify, profile::Profile, Identification, Orders, Settin
 use crate::plants::{dataset, Plant, ThrottlePreset};
 use crate::regression::EngineChoice;
 use crate::report::{svg, write_file, Table};
-use crate::Result;
+use crate::{Error, Result};
 use std::fmt::Write;
 use std::path::PathBuf;
 
@@ -61,6 +61,15 @@ fn prof_cells(p: &Profile) -> Vec<String> {
 
 /// Runs the experiment; returns the report text (also printed by the CLI).
 pub fn run(o: &EtcOptions) -> Result<String> {
+    // Settings are checked before the minutes of simulation and fitting, not after.
+    super::check_noise(o.noise)?;
+    super::check_degree(o.degree)?;
+    if !(o.patm.is_finite() && o.patm >= 0.0) {
+        return Err(Error::param(
+            "patm",
+            format!("{:?}; give a pressure in Pa, >= 0", o.patm),
+        ));
+    }
     let t_all = std::time::Instant::now();
     let plant = if o.physical {
         Plant::throttle(ThrottlePreset::Physical)

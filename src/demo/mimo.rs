@@ -46,6 +46,10 @@ impl Default for MimoOptions {
 }
 
 pub fn run(o: &MimoOptions) -> Result<String> {
+    super::check_noise(o.noise)?;
+    for &d in &o.degrees {
+        super::check_degree(d)?;
+    }
     let plant = Plant::mimo();
     let inputs = plant.input_names();
     let outputs = plant.output_names();

@@ -10,7 +10,7 @@ use crate::identify::Identification;
 use crate::model::Model as ModelFile;
 use crate::plants::Run as PlantRun;
 use crate::records::{RecordSet, Run};
-use crate::Result;
+use crate::{Error, Result};
 
 /// A record set (channels: inputs then outputs, by name) from generated plant runs.
 pub fn records(
@@ -129,4 +129,28 @@ pub fn coefficient_errors(
         .map(|x| format!("{:+.4e}*{}", x.coefficient, x.monomial()))
         .collect();
     (rows, extra)
+}
+
+/// A demonstration's noise level eta: finite and >= 0.
+fn check_noise(noise: f64) -> Result<()> {
+    if noise.is_finite() && noise >= 0.0 {
+        Ok(())
+    } else {
+        Err(Error::param(
+            "noise",
+            format!("{noise:?}; give a level >= 0, e.g. 0.03"),
+        ))
+    }
+}
+
+/// A demonstration's basis degree: 1..=MAX_DEGREE.
+fn check_degree(degree: usize) -> Result<()> {
+    if (1..=crate::basis::MAX_DEGREE).contains(&degree) {
+        Ok(())
+    } else {
+        Err(Error::param(
+            "degree",
+            format!("{degree} is outside 1..={}", crate::basis::MAX_DEGREE),
+        ))
+    }
 }

@@ -5,7 +5,7 @@
 
 use super::score::{coverage, normalised_percentile, spearman, trimmed_range};
 use super::{differentiate_with, DerivativeOptions, Derivatives};
-use crate::error::Result;
+use crate::error::{Error, Result};
 use std::path::Path;
 
 pub const SIGNALS: [&str; 4] = ["sys3_multisine", "sines", "chirp", "etc_s1"];
@@ -155,7 +155,8 @@ pub fn run_with(dir: &Path, opts: &DerivativeOptions) -> Result<Vec<Row>> {
     for name in SIGNALS {
         let sig = load_signal(dir, name)?;
         for (noise, y) in &sig.noisy {
-            let d = differentiate_with(y, sig.tau, 4, opts)?;
+            let d = differentiate_with(y, sig.tau, 4, opts)
+                .map_err(|e| Error::InvalidData(format!("{name}.csv, ym_{noise}pct: {e}")))?;
             rows.push(score_one(&sig, &d, *noise));
         }
     }

@@ -8,7 +8,7 @@
 //! mechanical model, `y` itself for a first-order one).
 
 use super::expr::Expr;
-use crate::error::Result;
+use crate::error::{Error, Result};
 
 /// One named candidate.
 #[derive(Debug, Clone)]
@@ -139,24 +139,48 @@ pub fn build(
             .join("*");
         add("polynomial", txt);
     }
+    let built_in = list.len();
     for (name, e) in user {
-        add(name, e.clone());
+        let name = name.trim();
+        if name.is_empty() {
+            return Err(Error::param(
+                "effect",
+                format!("'={e}' has no name; write NAME=EXPRESSION"),
+            ));
+        }
+        if list.iter().any(|(f, _)| f == name) {
+            return Err(Error::param(
+                "effect",
+                format!("'{name}' is the name of a built-in effect; choose another"),
+            ));
+        }
+        list.push((name.to_string(), e.clone()));
     }
     let mut out: Vec<Effect> = Vec::new();
-    for (family, formula) in list {
+    for (k, (family, formula)) in list.into_iter().enumerate() {
         let expr = Expr::parse(&formula, vars)?;
         // Drop exact duplicates (a polynomial that a named family already covers keeps the name)
-        // and nominal monomials written as a family formula.
-        if let Some(m) = expr.monomial() {
-            if nominal_monomials.contains(&m)
-                || out
-                    .iter()
-                    .any(|o: &Effect| o.expr.monomial().as_ref() == Some(&m))
-            {
-                continue;
-            }
+        // and nominal monomials written as a family formula; a user's effect is named instead.
+        let twin = match expr.monomial() {
+            Some(m) if nominal_monomials.contains(&m) => Some("a term of the nominal model".into()),
+            Some(m) => out
+                .iter()
+                .find(|o: &&Effect| o.expr.monomial().as_ref() == Some(&m))
+                .map(|o| format!("{} {}", o.family, o.formula)),
+            None => None,
         }
-        if out.iter().any(|o| o.formula == formula) {
+        .or_else(|| {
+            out.iter()
+                .find(|o| o.formula == formula)
+                .map(|o| format!("{} {}", o.family, o.formula))
+        });
+        if let Some(twin) = twin {
+            if k >= built_in {
+                return Err(Error::param(
+                    "effect",
+                    format!("'{family}' ({formula}) is already in the dictionary as {twin}; leave it out"),
+                ));
+            }
             continue;
         }
         out.push(Effect {

@@ -244,6 +244,10 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         .iter()
         .map(|u| rs.channel_index(u))
         .collect::<Result<_>>()?;
+    rs.require_varies(yc, &o.train, "output")?;
+    for &c in &uc {
+        rs.require_varies(c, &o.train, "input")?;
+    }
     for name in o.confidence.keys() {
         if !eq.terms.iter().any(|t| t.monomial() == *name) {
             return Err(Error::param(
@@ -318,6 +322,7 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         .map(|t| monomial_exponents(t, &vars))
         .collect();
     let effects = dictionary::build(&vars, n, &scales, &nom_monos, &o.user_effects)?;
+    check_user_effects(&effects, &o.user_effects, &zhat, &o.train)?;
     let effects = distinct_on_data(effects, &zhat, &o.train);
     // Zero crossings of the smoothed output (the raw one crosses its mean at every noise sample).
     let train_y: Vec<&[f64]> = o.train.iter().map(|&r| zhat[r][0].as_slice()).collect();
@@ -405,6 +410,56 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         eps,
         half_width: m,
     })
+}
+
+/// A user's effect that the training data cannot carry is an error, not a silent omission (the
+/// built-in ones are left out quietly, below): one that is not finite there, or that barely
+/// varies (the runs never reach where it acts).
+fn check_user_effects(
+    effects: &[Effect],
+    user: &[(String, String)],
+    zhat: &[Vec<Vec<f64>>],
+    train: &[usize],
+) -> Result<()> {
+    for e in effects
+        .iter()
+        .filter(|e| user.iter().any(|(n, _)| n.trim() == e.family))
+    {
+        let mut col = Vec::new();
+        for &r in train {
+            let len = zhat[r].first().map_or(0, |c| c.len());
+            for i in 0..len {
+                let z: Vec<f64> = zhat[r].iter().map(|c| c[i]).collect();
+                col.push(e.expr.eval(&z));
+            }
+        }
+        if col.iter().any(|v| !v.is_finite()) {
+            return Err(Error::param(
+                "effect",
+                format!(
+                    "'{}' ({}) is not finite on the training data; reformulate it",
+                    e.family, e.formula
+                ),
+            ));
+        }
+        let (lo, hi) = col
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        let scale = lo.abs().max(hi.abs()).max(1e-300);
+        let changes = col.windows(2).filter(|w| w[0] != w[1]).count();
+        if hi - lo <= 1e-9 * scale || changes * 20 < col.len() {
+            return Err(Error::param(
+                "effect",
+                format!(
+                    "'{}' ({}) is (nearly) constant on the training data, {lo:?}..{hi:?}: the runs do not reach where it acts",
+                    e.family, e.formula
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Drops candidates that the training data cannot tell from a simpler one: a column that is

@@ -171,6 +171,12 @@ impl Settings {
                 return Err(Error::param("orders", "no candidate order"))
             }
             Orders::Search(c) | Orders::Fixed(c) => {
+                if let Orders::Search(_) = &self.orders {
+                    let twice = c.iter().enumerate().find(|(i, o)| c[..*i].contains(o));
+                    if let Some((_, o)) = twice {
+                        return Err(Error::param("orders", format!("order {o} is listed twice")));
+                    }
+                }
                 if let Some(o) = c.iter().find(|&&o| o == 0 || o > 6) {
                     return Err(Error::param(
                         "orders",
@@ -639,6 +645,12 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         .iter()
         .map(|u| rs.channel_index(u))
         .collect::<Result<_>>()?;
+    for &c in &outputs {
+        rs.require_varies(c, &split.train, "output")?;
+    }
+    for &c in &inputs {
+        rs.require_varies(c, &split.train, "input")?;
+    }
     let max_order = settings.max_order();
     rs.require_min_len(
         crate::derivatives::min_samples(max_order),

@@ -5,6 +5,11 @@ use crate::error::{Error, Result};
 
 /// Parses `0-24,30,a7` into a list of run ids (ranges expand over integers).
 pub fn parse_runs(text: &str) -> Result<Vec<String>> {
+    parse_list(text, "runs")
+}
+
+/// As [`parse_runs`], with `what` naming the setting in errors (`train`, `orders`, ...).
+pub fn parse_list(text: &str, what: &str) -> Result<Vec<String>> {
     let mut out = Vec::new();
     for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         match part.split_once('-') {
@@ -15,12 +20,12 @@ pub fn parse_runs(text: &str) -> Result<Vec<String>> {
                 );
                 if b < a {
                     return Err(Error::param(
-                        "runs",
+                        what,
                         format!("range '{part}' runs backwards; write {b}-{a}"),
                     ));
                 }
                 if b - a > 10_000_000 {
-                    return Err(Error::param("runs", format!("range '{part}' is too long")));
+                    return Err(Error::param(what, format!("range '{part}' is too long")));
                 }
                 out.extend((a..=b).map(|i| i.to_string()));
             }
@@ -28,7 +33,7 @@ pub fn parse_runs(text: &str) -> Result<Vec<String>> {
         }
     }
     if out.is_empty() {
-        return Err(Error::param("runs", format!("'{text}' names no run")));
+        return Err(Error::param(what, format!("'{text}' names nothing")));
     }
     Ok(out)
 }
@@ -38,14 +43,16 @@ pub fn resolve(names: &[String], ids: &[String], what: &str) -> Result<Vec<usize
     names
         .iter()
         .map(|n| {
+            // An exact id first; only then a numeric match ("1" for a run written "01").
             ids.iter()
-                .position(|id| {
-                    id == n
-                        || id
-                            .parse::<f64>()
+                .position(|id| id == n)
+                .or_else(|| {
+                    ids.iter().position(|id| {
+                        id.parse::<f64>()
                             .ok()
                             .zip(n.parse::<f64>().ok())
                             .is_some_and(|(a, b)| a == b)
+                    })
                 })
                 .ok_or_else(|| {
                     let shown: Vec<&str> = ids.iter().take(8).map(String::as_str).collect();
@@ -149,6 +156,17 @@ mod tests {
         assert_eq!(parse_runs(" a, b ").unwrap(), ["a", "b"]);
         assert!(parse_runs("5-2").is_err());
         assert!(parse_runs(",").is_err());
+    }
+
+    #[test]
+    fn an_exact_id_wins_over_a_numeric_match() {
+        let id: Vec<String> = ["0", "01", "1"].iter().map(|s| s.to_string()).collect();
+        assert_eq!(resolve(&["1".into()], &id, "test").unwrap(), [2]);
+        assert_eq!(resolve(&["01".into()], &id, "test").unwrap(), [1]);
+        // Without an exact id, "1.0" still finds run "01" first by value.
+        assert_eq!(resolve(&["1.0".into()], &id, "test").unwrap(), [1]);
+        let e = parse_list("4-1", "orders").unwrap_err().to_string();
+        assert!(e.contains("'orders'"), "{e}");
     }
 
     #[test]

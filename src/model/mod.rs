@@ -203,8 +203,8 @@ struct RawModel {
 struct RawOutput {
     name: String,
     order: usize,
-    #[serde(default)]
-    terms: Vec<RawTerm>,
+    // Required: a misspelt key would otherwise leave an equation without terms.
+    terms: Option<Vec<RawTerm>>,
     #[serde(flatten)]
     extra: Map<String, Value>,
 }
@@ -212,11 +212,42 @@ struct RawOutput {
 #[derive(Deserialize)]
 struct RawTerm {
     #[serde(default)]
-    exponents: Map<String, Value>,
+    exponents: Pairs,
     coefficient: f64,
     #[serde(flatten)]
     extra: Map<String, Value>,
 }
+
+/// A JSON object read as its key-value pairs in file order, duplicates kept (a `Map` keeps only
+/// the last of two equal keys, and `{"y": 1, "y": 2}` is a typo worth naming).
+#[derive(Default)]
+struct Pairs(Vec<(String, Value)>);
+
+impl<'de> Deserialize<'de> for Pairs {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Pairs, D::Error> {
+        struct V;
+        impl<'de> serde::de::Visitor<'de> for V {
+            type Value = Pairs;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("an object of variable names and exponents")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(
+                self,
+                mut m: A,
+            ) -> std::result::Result<Pairs, A::Error> {
+                let mut v = Vec::new();
+                while let Some(pair) = m.next_entry::<String, Value>()? {
+                    v.push(pair);
+                }
+                Ok(Pairs(v))
+            }
+        }
+        d.deserialize_map(V)
+    }
+}
+
+/// Highest derivative order a model file may give an output (that of the derivative estimates).
+pub const MAX_ORDER: usize = crate::derivatives::MAX_ORDER;
 
 impl Model {
     /// A model with the given outputs; `degree` is the largest term degree.
@@ -242,6 +273,21 @@ impl Model {
             path: path.into(),
             message,
         };
+        let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        // The format first: another JSON file (a regression result, say) is named as such
+        // rather than by its first missing field.
+        let value: Value =
+            serde_json::from_str(text).map_err(|e| err(format!("not valid JSON: {e}")))?;
+        if !value.is_object() {
+            return Err(err(format!(
+                "not a model file (a JSON object with \"format\": \"{FORMAT}\")"
+            )));
+        }
+        if value.get("format").is_none() {
+            return Err(err(format!(
+                "no \"format\" field: not a {FORMAT} file (identify and discover write those)"
+            )));
+        }
         let raw: RawModel =
             serde_json::from_str(text).map_err(|e| err(format!("not a valid model file: {e}")))?;
         let format = match raw.format {
@@ -260,10 +306,31 @@ impl Model {
         }
         let mut outputs = Vec::with_capacity(raw.outputs.len());
         for o in raw.outputs {
-            let mut terms = Vec::with_capacity(o.terms.len());
-            for (k, t) in o.terms.into_iter().enumerate() {
+            let Some(raw_terms) = o.terms else {
+                let keys: Vec<&str> = o.extra.keys().map(String::as_str).collect();
+                return Err(err(format!(
+                    "output '{}' has no \"terms\" list{}",
+                    o.name,
+                    if keys.is_empty() {
+                        String::new()
+                    } else {
+                        format!(" (fields not understood: {})", keys.join(", "))
+                    }
+                )));
+            };
+            let mut terms = Vec::with_capacity(raw_terms.len());
+            for (k, t) in raw_terms.into_iter().enumerate() {
                 let mut exponents = BTreeMap::new();
-                for (name, v) in t.exponents {
+                for (i, (name, _)) in t.exponents.0.iter().enumerate() {
+                    if t.exponents.0[..i].iter().any(|(n, _)| n == name) {
+                        return Err(err(format!(
+                            "output '{}', term {}: '{name}' appears twice in the exponents",
+                            o.name,
+                            k + 1
+                        )));
+                    }
+                }
+                for (name, v) in t.exponents.0 {
                     let e = v.as_u64().filter(|&e| e <= u32::MAX as u64).ok_or_else(|| {
                         err(format!(
                             "output '{}', term {}: exponent of '{name}' is {v}; exponents must be non-negative integers",
@@ -365,6 +432,12 @@ impl Model {
                 return Err(err(format!(
                     "output '{}' has order 0; orders start at 1",
                     o.name
+                )));
+            }
+            if o.order > MAX_ORDER {
+                return Err(err(format!(
+                    "output '{}' has order {}; orders go up to {MAX_ORDER}",
+                    o.name, o.order
                 )));
             }
         }

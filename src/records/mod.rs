@@ -13,6 +13,10 @@ use std::path::Path;
 /// Relative tolerance on the sampling period.
 pub const TAU_RTOL: f64 = 1e-6;
 
+/// Largest magnitude a sample may have: its square must stay finite in f64 (overflow at 1.8e308).
+/// Higher powers, in polynomial features, are checked where the features are standardised.
+pub const MAX_MAGNITUDE: f64 = 1e150;
+
 /// One run: samples of every channel, all of the same length.
 #[derive(Debug, Clone)]
 pub struct Run {
@@ -110,6 +114,30 @@ impl RecordSet {
         Ok(&self.runs[run].channels[c])
     }
 
+    /// Refuses a channel that is constant over `runs`: as an output there is nothing to explain,
+    /// as an input it is indistinguishable from the constant term. `role` names it ("input").
+    pub fn require_varies(&self, channel: usize, runs: &[usize], role: &str) -> Result<()> {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for &r in runs {
+            for &v in &self.runs[r].channels[channel] {
+                lo = lo.min(v);
+                hi = hi.max(v);
+            }
+        }
+        if lo.is_finite() && hi - lo <= 1e-12 * lo.abs().max(hi.abs()) {
+            let name = &self.channel_names[channel];
+            let fix = if role == "output" {
+                "there is nothing to identify; check the column"
+            } else {
+                "it cannot be told from the constant term; vary it in the experiments or leave it out"
+            };
+            return Err(Error::InvalidData(format!(
+                "{role} '{name}' is constant ({lo:?}) over the training runs: {fix}"
+            )));
+        }
+        Ok(())
+    }
+
     /// Refuses any run shorter than `min` samples, naming `what` needs them.
     pub fn require_min_len(&self, min: usize, what: &str) -> Result<()> {
         for r in &self.runs {
@@ -162,15 +190,26 @@ impl RecordSet {
             .iter()
             .map(|s| s.to_string())
             .collect();
+        if header.iter().all(|h| h.is_empty()) {
+            return Err(Error::InvalidData(format!(
+                "{label}: empty file (no header row naming the columns)"
+            )));
+        }
         let find = |name: &str| -> Result<usize> {
-            header
-                .iter()
-                .position(|h| h == name)
-                .ok_or_else(|| Error::MissingColumn {
+            let mut at = header.iter().enumerate().filter(|(_, h)| *h == name);
+            match (at.next(), at.next()) {
+                (Some((i, _)), None) => Ok(i),
+                (Some((i, _)), Some((j, _))) => Err(Error::InvalidData(format!(
+                    "{label}: column '{name}' appears twice in the header (columns {} and {}); rename one",
+                    i + 1,
+                    j + 1
+                ))),
+                _ => Err(Error::MissingColumn {
                     path: label.into(),
                     column: name.into(),
                     available: header.join(", "),
-                })
+                }),
+            }
         };
         if spec.columns.is_empty() {
             return Err(Error::param("columns", "name at least one column to load"));
@@ -183,16 +222,17 @@ impl RecordSet {
         let run_col = spec.run_column.as_deref().map(find).transpose()?;
         let time_col = spec.time_column.as_deref().map(find).transpose()?;
 
-        struct Acc {
-            id: String,
-            channels: Vec<Vec<f64>>,
-            times: Vec<f64>,
-            rows: Vec<usize>,
-        }
         let mut runs: Vec<Acc> = Vec::new();
         let mut index: std::collections::HashMap<String, usize> = Default::default();
         let parse = |s: &str, row: usize, col: &str| -> Result<f64> {
             match s.parse::<f64>() {
+                // Squares and low powers of larger values overflow f64.
+                Ok(v) if v.is_finite() && v.abs() >= MAX_MAGNITUDE => Err(Error::ValueTooLarge {
+                    path: label.into(),
+                    row,
+                    column: col.into(),
+                    value: v,
+                }),
                 Ok(v) if v.is_finite() => Ok(v),
                 _ => Err(Error::NonFinite {
                     path: label.into(),
@@ -237,11 +277,6 @@ impl RecordSet {
 
         let mut tau = spec.tau;
         if let Some(tname) = spec.time_column.as_deref() {
-            // tau from the first run with two samples; every step of every run must agree.
-            let from_time = runs
-                .iter()
-                .find(|r| r.times.len() >= 2)
-                .map(|r| r.times[1] - r.times[0]);
             for r in &runs {
                 for w in 1..r.times.len() {
                     let (a, b) = (r.times[w - 1], r.times[w]);
@@ -256,56 +291,88 @@ impl RecordSet {
                     }
                 }
             }
-            if let Some(ft) = from_time {
-                match tau {
-                    Some(t) if ((t - ft) / t).abs() > TAU_RTOL => {
-                        return Err(Error::TauMismatch {
-                            given: t,
-                            from_time: ft,
-                            column: tname.into(),
-                        })
-                    }
-                    None => tau = Some(ft),
-                    _ => {}
+            // The first run with two samples gives the step: its (lower) median step to judge
+            // uniformity by, so that one odd step is blamed on its own row, then its mean step,
+            // which carries every digit of the stamps, as tau.
+            let Some(first) = runs.iter().find(|r| r.times.len() >= 2) else {
+                if tau.is_none() {
+                    return Err(Error::NoTimeStep {
+                        path: label.into(),
+                        column: tname.into(),
+                    });
                 }
-                let t = tau.unwrap();
-                for r in &runs {
-                    for w in 1..r.times.len() {
-                        let step = r.times[w] - r.times[w - 1];
-                        // Compare absolute times with the grid, so slow drift is caught too.
-                        let expect = r.times[0] + w as f64 * t;
-                        if ((step - t) / t).abs() > TAU_RTOL
-                            && ((r.times[w] - expect) / t).abs() > TAU_RTOL * (w as f64).max(1.0)
-                        {
-                            return Err(Error::TimeNonUniform {
-                                path: label.into(),
-                                row: r.rows[w],
-                                column: tname.into(),
-                                step,
-                                tau: t,
-                            });
-                        }
+                return finish(tau, runs, spec);
+            };
+            let mut steps: Vec<f64> = first.times.windows(2).map(|w| w[1] - w[0]).collect();
+            steps.sort_by(f64::total_cmp);
+            let median = steps[(steps.len() - 1) / 2];
+            for r in &runs {
+                // Time stamps far from zero (Unix time) carry only so many digits: a step
+                // is uniform when it agrees to 1e-6 relative or to a few units in the last
+                // place of the stamps themselves.
+                let big = r.times.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                let tol = (TAU_RTOL * median).max(4.0 * big * f64::EPSILON);
+                for w in 1..r.times.len() {
+                    let step = r.times[w] - r.times[w - 1];
+                    // Compare absolute times with the grid, so slow drift is caught too.
+                    let expect = r.times[0] + w as f64 * median;
+                    if (step - median).abs() > tol
+                        && (r.times[w] - expect).abs() > tol * (w as f64).max(1.0)
+                    {
+                        return Err(Error::TimeNonUniform {
+                            path: label.into(),
+                            row: r.rows[w],
+                            column: tname.into(),
+                            step,
+                            tau: median,
+                        });
                     }
                 }
             }
+            let n = first.times.len();
+            let mean = (first.times[n - 1] - first.times[0]) / (n - 1) as f64;
+            match tau {
+                Some(t) if ((t - mean) / t).abs() > TAU_RTOL => {
+                    return Err(Error::TauMismatch {
+                        given: t,
+                        from_time: mean,
+                        column: tname.into(),
+                    })
+                }
+                None => tau = Some(mean),
+                _ => {}
+            }
         }
-        let tau = tau.ok_or(Error::MissingTau)?;
-        check_tau(tau)?;
-        let runs = runs
-            .into_iter()
-            .map(|a| Run {
-                id: a.id,
-                t0: a.times.first().copied().unwrap_or(0.0),
-                channels: a.channels,
-                rows: a.rows,
-            })
-            .collect();
-        Ok(RecordSet {
-            tau,
-            channel_names: spec.columns.clone(),
-            runs,
-        })
+        finish(tau, runs, spec)
     }
+}
+
+/// One run while the file is read.
+struct Acc {
+    id: String,
+    channels: Vec<Vec<f64>>,
+    times: Vec<f64>,
+    rows: Vec<usize>,
+}
+
+/// The record set from the grouped runs, once tau is settled.
+fn finish(tau: Option<f64>, runs: Vec<Acc>, spec: &CsvSpec) -> Result<RecordSet> {
+    let tau = tau.ok_or(Error::MissingTau)?;
+    check_tau(tau)?;
+    let runs = runs
+        .into_iter()
+        .map(|a| Run {
+            id: a.id,
+            t0: a.times.first().copied().unwrap_or(0.0),
+            channels: a.channels,
+            rows: a.rows,
+        })
+        .collect();
+    Ok(RecordSet {
+        tau,
+        channel_names: spec.columns.clone(),
+        runs,
+    })
 }
 
 fn check_tau(tau: f64) -> Result<()> {

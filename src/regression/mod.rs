@@ -44,8 +44,12 @@ use std::collections::BTreeMap;
 
 pub use crate::engine::select::EngineChoice;
 
+/// Fewest samples a fit accepts: below this, selection among candidates means nothing.
+pub const MIN_SAMPLES: usize = 10;
+
 /// Unchecked settings; [`RegressionBuilder::build`] validates them into a [`Regression`].
 #[derive(Debug, Clone)]
+
 pub struct RegressionBuilder {
     degree: usize,
     method: Method,
@@ -161,6 +165,15 @@ impl RegressionBuilder {
 
     /// Checks every setting; the error names the first bad one.
     pub fn build(self) -> Result<Regression> {
+        if self.degree == 0 {
+            return Err(Error::param(
+                "degree",
+                format!(
+                    "0 leaves only the constant; give 1..={}",
+                    crate::basis::MAX_DEGREE
+                ),
+            ));
+        }
         if self.degree > crate::basis::MAX_DEGREE {
             return Err(Error::param(
                 "degree",
@@ -495,6 +508,11 @@ impl Regression {
             ));
         }
         let n_rows = engine.n_samples();
+        if n_rows < MIN_SAMPLES {
+            return Err(Error::InvalidData(format!(
+                "{n_rows} samples are too few to select terms (at least {MIN_SAMPLES}); give more data"
+            )));
+        }
         // eBIC's n: the effective number of independent samples, never more than the rows.
         let n = self
             .effective_samples
@@ -502,7 +520,13 @@ impl Regression {
         let p = basis.len();
         let mut scorer = select::EbicScorer::new(n, p, self.ebic_gamma, self.rss_floor);
         let patience = self.ebic_patience;
-        let path = lars_path_monitored(engine, label, weights, &self.path, &mut |path, b| {
+        // A path that enters as many terms as samples interpolates them (R^2 = 1, eBIC -inf):
+        // at most half as many terms as samples may enter.
+        let options = PathOptions {
+            max_terms: self.path.max_terms.min(n_rows / 2),
+            ..self.path
+        };
+        let path = lars_path_monitored(engine, label, weights, &options, &mut |path, b| {
             scorer.score(path, b);
             patience > 0 && scorer.best.is_some_and(|(_, best)| b >= best + patience)
         })?;

@@ -20,7 +20,9 @@
 //! the order of the method is kept.
 //!
 //! # Failure
-//! A non-finite state, a state beyond [`SimOptions::bound`] in magnitude, a step size that
+//! A non-finite state, a state beyond [`SimOptions::bound`] times the run's scale (the largest
+//! magnitude in the initial state and in the input at the output times, at least 1: records in
+//! any units are judged alike) in magnitude, a step size that
 //! collapses below [`SimOptions::h_min_rel`] of the interval, or too many steps, ends the
 //! simulation with [`Error::Diverged`] naming the run, the time and the state.
 
@@ -217,7 +219,8 @@ pub struct SimOptions {
     pub h_max: Option<f64>,
     /// Smallest step as a fraction of the output interval before the run is declared diverged.
     pub h_min_rel: f64,
-    /// A state beyond this magnitude means divergence.
+    /// A state beyond this many times the run's scale (the largest magnitude in the initial
+    /// state and in the input at the output times, at least 1) means divergence.
     pub bound: f64,
     /// Most steps between two output times.
     pub max_steps_per_interval: usize,
@@ -435,6 +438,8 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     scratch: Vec<f64>,
     /// Forward sensitivities, when asked for.
     sens: Option<Sens<'a>>,
+    /// Divergence threshold on |state|: `opts.bound` times the run's scale.
+    bound: f64,
     /// Factors of exact stage matrices of constant Jacobians, by step (see `propagate`).
     sens_lu: LuCache,
 }
@@ -680,7 +685,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
 
     fn diverged(&self, t: f64, x: &[f64]) -> Option<Error> {
         for (k, v) in x.iter().enumerate() {
-            if !v.is_finite() || v.abs() > self.opts.bound {
+            if !v.is_finite() || v.abs() > self.bound {
                 return Some(Error::Diverged {
                     run: self.opts.run.clone(),
                     time: t,
@@ -940,17 +945,24 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
     if !(opts.rtol > 0.0 && opts.atol > 0.0) {
         return Err(Error::param("tolerances", "rtol and atol must be positive"));
     }
+    let mut scale = x0.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+    let mut u = vec![0.0; sys.n_inputs()];
+    for &t in times {
+        input.eval(t, &mut u);
+        scale = u.iter().fold(scale, |m, v| m.max(v.abs()));
+    }
     let mut it = Integrator {
         sys,
         input,
         rk: Radau::new(),
         opts,
         n,
-        u: vec![0.0; sys.n_inputs()],
+        u,
         lu_cache: LuCache::default(),
         scratch: Vec::new(),
         sens,
         sens_lu: LuCache::default(),
+        bound: opts.bound * scale,
     };
     let mut x = x0.to_vec();
     if let Some(e) = it.diverged(times[0], &x) {

@@ -1,0 +1,486 @@
+//! Bad or awkward input across the subcommands: every case is one line on standard error, a
+//! non-zero exit, and no panic; and nothing is destroyed or silently mis-read.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn dir() -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ctsid-badinput-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn file(name: &str, text: &str) -> String {
+    let p = dir().join(name);
+    std::fs::write(&p, text).unwrap();
+    p.display().to_string()
+}
+
+fn run(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_ctsid"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Runs and asserts a one-line error containing every needle, exit code 2.
+fn fails(args: &[&str], needles: &[&str]) -> String {
+    let out = run(args);
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+    assert_eq!(
+        err.trim_end().lines().count(),
+        1,
+        "{args:?}: not one line:\n{err}"
+    );
+    assert!(err.starts_with("error: "), "{err}");
+    for n in needles {
+        assert!(err.contains(n), "{args:?}: '{n}' not in: {err}");
+    }
+    err
+}
+
+/// `run,t,u,y` with two runs of 300 samples, tau 0.01: y = sin(t + r) + 0.1 u, u = cos(3 t).
+fn good_csv() -> String {
+    let mut s = String::from("run,t,u,y\n");
+    for r in 0..2 {
+        for i in 0..300 {
+            let t = i as f64 * 0.01;
+            let u = (3.0 * t).cos();
+            s += &format!("{r},{t},{u},{}\n", (t + r as f64).sin() + 0.1 * u);
+        }
+    }
+    s
+}
+
+#[test]
+fn a_failing_standard_output_is_an_error_line_not_a_panic() {
+    if !std::path::Path::new("/dev/full").exists() {
+        println!("skipping: no /dev/full");
+        return;
+    }
+    let data = file("full.csv", &good_csv());
+    for args in [
+        vec![
+            "regress",
+            &data,
+            "--features",
+            "u,t",
+            "--label",
+            "y",
+            "--degree",
+            "2",
+        ],
+        vec![
+            "derive",
+            &data,
+            "--column",
+            "y",
+            "--order",
+            "1",
+            "--run-column",
+            "run",
+            "--tau",
+            "0.01",
+        ],
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_ctsid"))
+            .args(&args)
+            .stdout(std::fs::File::create("/dev/full").unwrap())
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains("standard output") && !err.contains("panicked"),
+            "{err}"
+        );
+    }
+}
+
+#[test]
+fn writing_over_an_input_or_into_a_missing_folder_is_refused_before_any_work() {
+    let text = good_csv();
+    let data = file("inplace.csv", &text);
+    fails(
+        &[
+            "derive",
+            &data,
+            "--column",
+            "y",
+            "--order",
+            "1",
+            "--run-column",
+            "run",
+            "--tau",
+            "0.01",
+            "-o",
+            &data,
+        ],
+        &["also an input file"],
+    );
+    assert_eq!(
+        std::fs::read_to_string(&data).unwrap(),
+        text,
+        "the input was changed"
+    );
+    let model = file(
+        "m.json",
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-1}]}]}"#,
+    );
+    fails(
+        &[
+            "simulate",
+            &model,
+            &data,
+            "--run-column",
+            "run",
+            "--tau",
+            "0.01",
+            "-o",
+            &data,
+        ],
+        &["also an input file"],
+    );
+    assert_eq!(std::fs::read_to_string(&data).unwrap(), text);
+    let missing = dir().join("no-such-folder").join("m.json");
+    let t = std::time::Instant::now();
+    fails(
+        &[
+            "identify",
+            &data,
+            "--output",
+            "y",
+            "--input",
+            "u",
+            "--run-column",
+            "run",
+            "--time-column",
+            "t",
+            "--degree",
+            "2",
+            "-o",
+            &missing.display().to_string(),
+        ],
+        &["does not exist"],
+    );
+    assert!(
+        t.elapsed().as_secs_f64() < 5.0,
+        "checked only after the fit"
+    );
+    fails(
+        &["demo", "etc", "--out", &data],
+        &["is a file, not a folder"],
+    );
+}
+
+#[test]
+fn columns_named_twice_and_values_too_large_are_refused() {
+    let dup = file("dup.csv", "t,y,y\n0,1,2\n0.1,2,3\n");
+    fails(
+        &[
+            "derive",
+            &dup,
+            "--column",
+            "y",
+            "--order",
+            "1",
+            "--time-column",
+            "t",
+        ],
+        &["'y' appears twice", "columns 2 and 3"],
+    );
+    let big = file(
+        "big.csv",
+        &(String::from("t,y\n")
+            + &(0..40)
+                .map(|i| format!("{},{}\n", i as f64 * 0.1, if i == 7 { 1e300 } else { 1.0 }))
+                .collect::<String>()),
+    );
+    fails(
+        &[
+            "derive",
+            &big,
+            "--column",
+            "y",
+            "--order",
+            "1",
+            "--time-column",
+            "t",
+        ],
+        &["row 9", "too large"],
+    );
+    let empty = file("empty.csv", "");
+    fails(
+        &[
+            "derive", &empty, "--column", "y", "--order", "1", "--tau", "0.1",
+        ],
+        &["empty file"],
+    );
+    let single = file("single.csv", "run,t,y\n0,0,1\n1,0,2\n");
+    fails(
+        &[
+            "derive",
+            &single,
+            "--column",
+            "y",
+            "--order",
+            "1",
+            "--time-column",
+            "t",
+            "--run-column",
+            "run",
+        ],
+        &["no run has two samples"],
+    );
+}
+
+#[test]
+fn time_stamps_far_from_zero_and_an_odd_first_step() {
+    // Unix time at 1 ms: the stamps carry about 0.2 us; the grid is uniform to that.
+    let mut s = String::from("t,y\n");
+    for i in 0..400 {
+        s += &format!("{},{}\n", 1.7e9 + i as f64 * 1e-3, (i as f64 * 1e-2).sin());
+    }
+    let unix = file("unix.csv", &s);
+    let out = run(&[
+        "derive",
+        &unix,
+        "--column",
+        "y",
+        "--order",
+        "1",
+        "--time-column",
+        "t",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // The first step is twice the rest: blamed on its own row (3), not on the second.
+    let mut s = String::from("t,y\n0,0\n");
+    for i in 2..40 {
+        s += &format!("{},{}\n", i as f64 * 0.01, i);
+    }
+    let odd = file("odd.csv", &s);
+    fails(
+        &[
+            "derive",
+            &odd,
+            "--column",
+            "y",
+            "--order",
+            "1",
+            "--time-column",
+            "t",
+        ],
+        &["row 3", "non-uniform", "leave out the time column"],
+    );
+}
+
+#[test]
+fn usage_errors_are_one_line() {
+    let data = file("usage.csv", &good_csv());
+    fails(
+        &[
+            "derive", &data, "--column", "y", "--order", "1", "--tau", "-1",
+        ],
+        &["'-1'", "--help"],
+    );
+    fails(&["derive", &data], &["--column", "--order"]);
+    fails(
+        &[
+            "identify", &data, "--output", "y", "--degree", "2", "--engine", "foo",
+        ],
+        &["foo"],
+    );
+    fails(
+        &[
+            "derive", &data, "--column", "y", "--order", "100", "--tau", "0.01",
+        ],
+        &["1..=8"],
+    );
+    fails(
+        &[
+            "identify", &data, "--output", "y", "--degree", "2", "--orders", "4..1",
+        ],
+        &["'orders'", "backwards"],
+    );
+    fails(
+        &[
+            "identify", &data, "--output", "y", "--degree", "2", "--orders", "2,2", "--tau", "0.01",
+        ],
+        &["listed twice"],
+    );
+}
+
+#[test]
+fn demo_settings_are_checked_before_the_work() {
+    fails(&["demo", "mimo", "--degrees", "0"], &["degree", "1..=12"]);
+    fails(&["demo", "etc", "--noise=-1"], &["noise"]);
+    fails(&["demo", "etc", "--patm", "nan"], &["patm"]);
+}
+
+#[test]
+fn constant_channels_are_refused() {
+    let mut s = String::from("run,t,u,y\n");
+    for r in 0..3 {
+        for i in 0..300 {
+            let t = i as f64 * 0.01;
+            s += &format!("{r},{t},1.0,{}\n", (t + r as f64).sin());
+        }
+    }
+    let constu = file("constu.csv", &s);
+    fails(
+        &[
+            "identify",
+            &constu,
+            "--output",
+            "y",
+            "--input",
+            "u",
+            "--run-column",
+            "run",
+            "--time-column",
+            "t",
+            "--degree",
+            "2",
+            "--order",
+            "2",
+        ],
+        &["input 'u' is constant"],
+    );
+    fails(
+        &[
+            "identify",
+            &constu,
+            "--output",
+            "u",
+            "--input",
+            "y",
+            "--run-column",
+            "run",
+            "--time-column",
+            "t",
+            "--degree",
+            "2",
+            "--order",
+            "2",
+        ],
+        &["output 'u' is constant"],
+    );
+}
+
+#[test]
+fn regression_refuses_too_few_samples_degree_zero_and_a_feature_twice() {
+    let short = file("short.csv", "u,y\n1,2\n2,3\n3,5\n4,4\n5,9\n");
+    fails(
+        &[
+            "regress",
+            &short,
+            "--features",
+            "u",
+            "--label",
+            "y",
+            "--degree",
+            "3",
+        ],
+        &["5 samples", "at least 10"],
+    );
+    let data = file("reg.csv", &good_csv());
+    fails(
+        &[
+            "regress",
+            &data,
+            "--features",
+            "u,t",
+            "--label",
+            "y",
+            "--degree",
+            "0",
+        ],
+        &["degree"],
+    );
+    fails(
+        &[
+            "regress",
+            &data,
+            "--features",
+            "u,u",
+            "--label",
+            "y",
+            "--degree",
+            "2",
+        ],
+        &["'u' is named twice"],
+    );
+    // Spaces after the commas are not part of the names.
+    let out = run(&[
+        "regress",
+        &data,
+        "--features",
+        "u, t",
+        "--label",
+        "y",
+        "--degree",
+        "1",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn large_signals_are_not_called_divergent() {
+    // y' = -y + u with u = 1e13: y rises to 1e13, beyond the old absolute bound of 1e12.
+    let model = file(
+        "lag.json",
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":1}]}]}"#,
+    );
+    let mut s = String::from("run,u,y\n");
+    for i in 0..500 {
+        let t = i as f64 * 0.01;
+        s += &format!("0,1e13,{}\n", 1e13 * (1.0 - (-t).exp()));
+    }
+    let data = file("lag.csv", &s);
+    let out = run(&[
+        "simulate",
+        &model,
+        &data,
+        "--run-column",
+        "run",
+        "--tau",
+        "0.01",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let nrmse: f64 = text
+        .lines()
+        .find(|l| l.starts_with("all"))
+        .and_then(|l| l.split_whitespace().last())
+        .and_then(|v| v.parse().ok())
+        .unwrap();
+    assert!(nrmse < 0.1, "NRMSE {nrmse} %\n{text}");
+}
+
+#[test]
+fn no_private_runtime_folder_is_left_behind() {
+    let tmp = dir().join("tmpdir");
+    std::fs::create_dir_all(&tmp).unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_ctsid"))
+        .arg("--version")
+        .env_remove("XDG_RUNTIME_DIR")
+        .env("TMPDIR", &tmp)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let left: Vec<_> = std::fs::read_dir(&tmp).unwrap().collect();
+    assert!(left.is_empty(), "{left:?}");
+}
