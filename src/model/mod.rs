@@ -440,6 +440,21 @@ impl Model {
                     o.name, o.order
                 )));
             }
+            // Two terms with one monomial add up, but a file that says so is almost surely a
+            // slip (and a million copies would only slow every evaluation).
+            let mut seen: std::collections::HashMap<&BTreeMap<String, u32>, usize> =
+                Default::default();
+            for (k, t) in o.terms.iter().enumerate() {
+                if let Some(first) = seen.insert(&t.exponents, k) {
+                    return Err(err(format!(
+                        "output '{}': terms {} and {} have the same monomial {}; combine them into one",
+                        o.name,
+                        first + 1,
+                        k + 1,
+                        t.monomial()
+                    )));
+                }
+            }
         }
         let table = self.variable_table().map_err(err)?;
         for o in &self.outputs {
