@@ -42,13 +42,15 @@ pub enum Error {
         value: f64,
     },
 
-    #[error("{path}: row {row}, column '{column}': time does not increase ({prev:?} then {value:?}); sort the rows or give a run column")]
+    #[error("{path}: row {row}, column '{column}': time does not increase ({prev:?} then {value:?}); {hint}")]
     TimeNotIncreasing {
         path: String,
         row: usize,
         column: String,
         prev: f64,
         value: f64,
+        /// What to do about it (depends on whether runs are grouped by a run column).
+        hint: String,
     },
 
     #[error("{path}: row {row}, column '{column}': non-uniform sampling (step {step:?} s, expected {tau:?} s within 1e-6 relative); resample the record to a uniform grid, or, if the times are only rounded, give --tau and leave out the time column")]
@@ -60,7 +62,7 @@ pub enum Error {
         tau: f64,
     },
 
-    #[error("tau must be a positive finite number of seconds, got {0:?}")]
+    #[error("tau must be a number of seconds between 1e-12 and 1e9, got {0:?}")]
     InvalidTau(f64),
 
     #[error("--tau {given:?} disagrees with the time column '{column}' (step {from_time:?}); drop --tau or fix it")]

@@ -20,7 +20,9 @@ fn main() {
         Ok(args) => match cli::run(args) {
             Ok(()) => 0,
             Err(e) => {
-                eprintln!("error: {e}");
+                // One line even when a header or run id from the data carries a line break.
+                let text = e.to_string().replace('\r', "\\r").replace('\n', "\\n");
+                eprintln!("error: {text}");
                 2
             }
         },

@@ -484,3 +484,196 @@ fn no_private_runtime_folder_is_left_behind() {
     let left: Vec<_> = std::fs::read_dir(&tmp).unwrap().collect();
     assert!(left.is_empty(), "{left:?}");
 }
+
+#[test]
+fn pipes_hard_links_and_far_time_stamps() {
+    let data = file("piped.csv", &good_csv());
+    // derive copies the input's rows, so it must read the file twice: a pipe is refused.
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ctsid"))
+        .args([
+            "derive",
+            "/dev/stdin",
+            "--column",
+            "y",
+            "--order",
+            "1",
+            "--run-column",
+            "run",
+            "--tau",
+            "0.01",
+        ])
+        .stdin(std::process::Stdio::piped())
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    {
+        use std::io::Write;
+        let mut pipe = child.stdin.take().unwrap();
+        // The refusal may come before the data are read: a broken pipe here is fine.
+        let _ = pipe.write_all(std::fs::read(&data).unwrap().as_slice());
+    }
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("regular file"), "{err}");
+    // A hard link to the input is the input.
+    #[cfg(unix)]
+    {
+        let link = dir().join("hardlink.csv");
+        let _ = std::fs::remove_file(&link);
+        std::fs::hard_link(&data, &link).unwrap();
+        fails(
+            &[
+                "derive",
+                &data,
+                "--column",
+                "y",
+                "--order",
+                "1",
+                "--run-column",
+                "run",
+                "--tau",
+                "0.01",
+                "-o",
+                &link.display().to_string(),
+            ],
+            &["also an input file"],
+        );
+    }
+    // Unix-time stamps: the model is simulated on time since the run's start, so it is as
+    // accurate as on stamps from zero (y' = -y + 2 sin t from y = 0: exact solution below).
+    let mut s = String::from("run,t,u,y\n");
+    for i in 0..3000 {
+        let t = i as f64 * 1e-3;
+        s += &format!(
+            "0,{:.3},{},{}\n",
+            1.7e9 + t,
+            t.sin(),
+            t.sin() - t.cos() + (-t).exp()
+        );
+    }
+    let unix = file("unix_lag.csv", &s);
+    let model = file(
+        "lag2.json",
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":2}]}]}"#,
+    );
+    let out = run(&[
+        "simulate",
+        &model,
+        &unix,
+        "--run-column",
+        "run",
+        "--time-column",
+        "t",
+    ]);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let nrmse: f64 = text
+        .lines()
+        .find(|l| l.starts_with("all"))
+        .and_then(|l| l.split_whitespace().last())
+        .and_then(|v| v.parse().ok())
+        .unwrap();
+    assert!(nrmse < 1e-3, "NRMSE {nrmse} %");
+}
+
+#[test]
+fn odd_settings_and_line_breaks_in_names() {
+    let data = file("odd.csv", &good_csv());
+    fails(
+        &[
+            "derive",
+            &data,
+            "--column",
+            "y",
+            "--order",
+            "1",
+            "--run-column",
+            "run",
+            "--tau",
+            "1e-300",
+        ],
+        &["between 1e-12 and 1e9"],
+    );
+    fails(
+        &[
+            "identify",
+            &data,
+            "--output",
+            "y",
+            "--input",
+            "u",
+            "--run-column",
+            "run",
+            "--tau",
+            "0.01",
+            "--degree",
+            "2",
+            "--eta",
+            "inf",
+        ],
+        &["eta", "finite"],
+    );
+    // A header name with a line break (quoted CSV) still gives one line.
+    let nl = file("nl.csv", "run,t,\"u\nx\",y\n0,0,1,2\n");
+    fails(
+        &[
+            "identify",
+            &nl,
+            "--output",
+            "y",
+            "--input",
+            "u",
+            "--run-column",
+            "run",
+            "--time-column",
+            "t",
+            "--degree",
+            "2",
+        ],
+        &["no column named 'u'"],
+    );
+    let model = file(
+        "nom.json",
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-1}]}]}"#,
+    );
+    fails(
+        &[
+            "discover",
+            &data,
+            "--nominal",
+            &model,
+            "--run-column",
+            "run",
+            "--tau",
+            "0.01",
+            "--confidence",
+            "y=10",
+            "--confidence",
+            "y=20",
+        ],
+        &["'y' is given twice"],
+    );
+    fails(
+        &[
+            "discover",
+            &data,
+            "--nominal",
+            &model,
+            "--run-column",
+            "run",
+            "--tau",
+            "0.01",
+            "--effect",
+            "a=y^2",
+            "--effect",
+            "a=y^3",
+        ],
+        &["'a' is given twice"],
+    );
+}

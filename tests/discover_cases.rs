@@ -89,16 +89,36 @@ fn quadratic_drag_is_never_named_as_cubic_damping_alone() {
 
 #[test]
 fn augmented_model_file_is_valid_and_carries_the_discovery() {
-    let case = generate("coulomb", 0, 0.03).unwrap();
+    let case = generate("duffing", 0, 0.03).unwrap();
     let (tr, va, te) = split();
-    let d = discover(&case.records, &case.nominal, &Options::new(tr, va, te)).unwrap();
+    let d = discover(
+        &case.records,
+        &case.nominal,
+        &Options::new(tr.clone(), va.clone(), te.clone()),
+    )
+    .unwrap();
     let m = d.augmented_model(&case.nominal).unwrap();
     let text = m.to_json_string().unwrap();
     let back = ctsid::model::Model::from_json_str(&text, "augmented").unwrap();
     let disc = back.extra.get("discovery").unwrap();
     assert_eq!(disc["verdict"], "added");
-    assert_eq!(disc["effects"][0]["family"], "coulomb_friction");
+    assert_eq!(disc["effects"][0]["family"], "cubic_stiffness");
     assert!(disc["nrmse_after"].as_f64().unwrap() < disc["nrmse_before"].as_f64().unwrap());
+    // The cubic term is in the right-hand side itself, so the file simulates the discovery.
+    let cubic = back.outputs[0]
+        .terms
+        .iter()
+        .find(|t| t.monomial() == "y^3")
+        .expect("no y^3 term in the file");
+    assert!((cubic.coefficient - d.effects[0].coefficient).abs() < 1e-12);
+    // Coulomb friction (sign) has no polynomial form: no file rather than one without it.
+    let case = generate("coulomb", 0, 0.03).unwrap();
+    let d = discover(&case.records, &case.nominal, &Options::new(tr, va, te)).unwrap();
+    let e = d.augmented_model(&case.nominal).unwrap_err().to_string();
+    assert!(
+        e.contains("not a polynomial") && e.contains("coulomb_friction"),
+        "{e}"
+    );
 }
 
 #[test]

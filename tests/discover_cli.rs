@@ -131,5 +131,8 @@ fn discover_cli_uses_the_given_split() {
         &list(&[5, 6, 7, 8]),
     ]);
     assert!(ok, "{err}");
-    assert!(out.contains("| 5 | train |") && out.contains("| 0 | validation |"), "{out}");
+    assert!(
+        out.contains("| 5 | train |") && out.contains("| 0 | validation |"),
+        "{out}"
+    );
 }

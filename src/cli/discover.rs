@@ -50,6 +50,50 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     if let Some(d) = &a.report {
         super::check_output_dir(d)?;
     }
+    let mut conf = BTreeMap::new();
+    for c in &a.confidence {
+        let (t, p) = c
+            .split_once('=')
+            .ok_or_else(|| Error::param("confidence", format!("'{c}': use TERM=PCT")))?;
+        let v = match p.trim() {
+            "fixed" => 0.0,
+            "approximate" => 1.0,
+            s => {
+                let v: f64 = s.trim_end_matches('%').parse().map_err(|_| {
+                    Error::param(
+                        "confidence",
+                        format!("'{c}': '{s}' is not a percentage, 'fixed' or 'approximate'"),
+                    )
+                })?;
+                if !(v >= 0.0 && v.is_finite()) {
+                    return Err(Error::param(
+                        "confidence",
+                        format!("'{c}': give a finite percentage >= 0"),
+                    ));
+                }
+                v / 100.0
+            }
+        };
+        if conf.insert(t.trim().to_string(), v).is_some() {
+            return Err(Error::param(
+                "confidence",
+                format!("'{}' is given twice", t.trim()),
+            ));
+        }
+    }
+    let mut user_effects = Vec::new();
+    for e in &a.effect {
+        let (name, ex) = e
+            .split_once('=')
+            .ok_or_else(|| Error::param("effect", format!("'{e}': use NAME=EXPRESSION")))?;
+        if user_effects.iter().any(|(n, _)| n == name.trim()) {
+            return Err(Error::param(
+                "effect",
+                format!("'{}' is given twice", name.trim()),
+            ));
+        }
+        user_effects.push((name.trim().to_string(), ex.trim().to_string()));
+    }
     let nominal = Model::read(&a.nominal.to_string_lossy())?;
     let mut columns: Vec<String> = nominal.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(nominal.inputs.iter().cloned());
@@ -99,37 +143,8 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     );
     let mut o = Options::new(train, validation, test);
     o.seed = a.seed;
-    let mut conf = BTreeMap::new();
-    for c in &a.confidence {
-        let (t, p) = c
-            .split_once('=')
-            .ok_or_else(|| Error::param("confidence", format!("'{c}': use TERM=PCT")))?;
-        let v = match p.trim() {
-            "fixed" => 0.0,
-            "approximate" => 1.0,
-            s => {
-                let v: f64 = s.trim_end_matches('%').parse().map_err(|_| {
-                    Error::param(
-                        "confidence",
-                        format!("'{c}': '{s}' is not a percentage, 'fixed' or 'approximate'"),
-                    )
-                })?;
-                if !(v >= 0.0 && v.is_finite()) {
-                    return Err(Error::param("confidence", format!("'{c}': must be >= 0")));
-                }
-                v / 100.0
-            }
-        };
-        conf.insert(t.trim().to_string(), v);
-    }
     o.confidence = conf;
-    for e in &a.effect {
-        let (name, ex) = e
-            .split_once('=')
-            .ok_or_else(|| Error::param("effect", format!("'{e}': use NAME=EXPRESSION")))?;
-        o.user_effects
-            .push((name.trim().to_string(), ex.trim().to_string()));
-    }
+    o.user_effects = user_effects;
     let d = discover(&rs, &nominal, &o)?;
     out!("{}", d.text())?;
     if let Some(p) = &a.output_model {

@@ -101,6 +101,9 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
     }
     let parent = out.parent().filter(|p| !p.as_os_str().is_empty());
     if let Some(p) = parent {
+        if p.exists() && !p.is_dir() {
+            return Err(err(format!("{} is a file, not a folder", p.display())));
+        }
         if !p.is_dir() {
             return Err(err(format!(
                 "folder {} does not exist; create it or write elsewhere",
@@ -110,7 +113,7 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
     }
     if let Ok(o) = out.canonicalize() {
         for i in inputs {
-            if i.canonicalize().is_ok_and(|c| c == o) {
+            if i.canonicalize().is_ok_and(|c| c == o) || same_file(out, i) {
                 return Err(err(
                     "is also an input file; writing it would destroy the input, so give another output file".into(),
                 ));
@@ -144,4 +147,33 @@ pub fn check_output_dir(dir: &Path) -> Result<()> {
 /// trimmed too).
 pub fn trimmed(s: &str) -> std::result::Result<String, String> {
     Ok(s.trim().to_string())
+}
+
+/// Whether two paths are one file (hard links included).
+#[cfg(unix)]
+fn same_file(a: &Path, b: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (std::fs::metadata(a), std::fs::metadata(b)) {
+        (Ok(x), Ok(y)) => x.dev() == y.dev() && x.ino() == y.ino(),
+        _ => false,
+    }
+}
+
+#[cfg(not(unix))]
+fn same_file(_: &Path, _: &Path) -> bool {
+    false
+}
+
+/// Commands that copy the input's rows into their output read it twice: refuse a pipe or a
+/// device, which would give its rows only once (the output would silently lose them).
+pub fn require_regular_file(input: &Path, what: &str) -> Result<()> {
+    match std::fs::metadata(input) {
+        Ok(m) if !m.is_file() => Err(Error::Io {
+            path: input.display().to_string(),
+            message: format!(
+                "{what} reads its input twice (to copy its rows): give a regular file, not a pipe or a device"
+            ),
+        }),
+        _ => Ok(()),
+    }
 }

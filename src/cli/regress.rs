@@ -118,8 +118,9 @@ pub fn run(a: RegressArgs) -> Result<()> {
     let model = reg.fit(&features, &label, &a.label, weights.as_deref())?;
     let d = &model.diagnostics;
     outln!("{}", model.equation())?;
+    // Engine notes are about the run, not the result: standard error, like identify's.
     for note in &d.notes {
-        outln!("note: {note}")?;
+        eprintln!("note: {note}");
     }
     outln!(
         "engine: {}; {} samples, {} candidates ({} constant), {:?} path of {} steps ({:?}), {} sweeps, {} refreshes, {:.2} s",

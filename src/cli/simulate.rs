@@ -19,7 +19,7 @@ use ctsid::simulate::{
     estimate_initial_derivatives, fit_initial_state, initial_window, rms_nrmse, simulate_model,
     SimOptions,
 };
-use ctsid::{Error, Result};
+use ctsid::Result;
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
@@ -44,13 +44,12 @@ pub struct SimulateArgs {
 pub fn run(args: SimulateArgs) -> Result<()> {
     if let Some(o) = &args.output {
         super::check_output_file(o.as_ref(), &[args.data.as_ref(), args.model.as_ref()])?;
+        super::require_regular_file(args.data.as_ref(), "simulate -o")?;
     }
     let model = Model::read(&args.model)?;
     let compiled = model.compile()?;
     if let Some(tau) = args.sampling.tau {
-        if !(tau.is_finite() && tau > 0.0) {
-            return Err(Error::InvalidTau(tau));
-        }
+        ctsid::records::check_tau(tau)?;
     }
     let mut columns: Vec<String> = model.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(model.inputs.iter().cloned());
@@ -77,7 +76,9 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     )?;
     for run in &rs.runs {
         let id = &run.id;
-        let t: Vec<f64> = (0..run.len()).map(|k| run.t0 + k as f64 * rs.tau).collect();
+        // Time since the run's start: the model is time invariant, and stamps far from zero
+        // (Unix time) would leave the integrator a few digits of resolution.
+        let t: Vec<f64> = (0..run.len()).map(|k| k as f64 * rs.tau).collect();
         let ys: Vec<Vec<f64>> = run.channels[..n_out].to_vec();
         let us: Vec<Vec<f64>> = run.channels[n_out..].to_vec();
         let mut x0 = Vec::with_capacity(compiled.n_state());

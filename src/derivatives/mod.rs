@@ -128,9 +128,7 @@ pub fn differentiate_runs(
     max_order: usize,
     opts: &DerivativeOptions,
 ) -> Result<Vec<Derivatives>> {
-    if !(tau.is_finite() && tau > 0.0) {
-        return Err(Error::InvalidTau(tau));
-    }
+    crate::records::check_tau(tau)?;
     if max_order > MAX_ORDER {
         return Err(Error::param(
             "order",

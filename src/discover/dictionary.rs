@@ -148,11 +148,14 @@ pub fn build(
                 format!("'={e}' has no name; write NAME=EXPRESSION"),
             ));
         }
-        if list.iter().any(|(f, _)| f == name) {
+        if list[..built_in].iter().any(|(f, _)| f == name) {
             return Err(Error::param(
                 "effect",
                 format!("'{name}' is the name of a built-in effect; choose another"),
             ));
+        }
+        if list[built_in..].iter().any(|(f, _)| f == name) {
+            return Err(Error::param("effect", format!("'{name}' is given twice")));
         }
         list.push((name.to_string(), e.clone()));
     }

@@ -37,6 +37,10 @@ enum Fun {
 }
 
 /// A parsed expression over a fixed list of variable names.
+/// Longest expression, in tokens, and deepest nesting of parentheses or signs.
+const MAX_TOKENS: usize = 2000;
+const MAX_NESTING: usize = 64;
+
 #[derive(Debug, Clone, PartialEq)]
 pub struct Expr {
     text: String,
@@ -47,6 +51,38 @@ impl Expr {
     /// Parses `text` over `vars` (the names of the entries of `z` in [`Expr::eval`]).
     pub fn parse(text: &str, vars: &[String]) -> Result<Expr> {
         let toks = lex(text)?;
+        // Parsing and evaluation recurse along the nesting: bound it (and the length) so that
+        // no expression can exhaust the stack.
+        let too = |what: String| {
+            let shown: String = text.trim().chars().take(40).collect();
+            let more = if text.trim().chars().count() > 40 {
+                "..."
+            } else {
+                ""
+            };
+            Error::param("expression", format!("'{shown}{more}': {what}"))
+        };
+        if toks.len() > MAX_TOKENS {
+            return Err(too(format!("longer than {MAX_TOKENS} tokens")));
+        }
+        let (mut depth, mut deepest, mut signs, mut most_signs) = (0usize, 0usize, 0usize, 0usize);
+        for t in &toks {
+            match t {
+                Tok::Op('(') => depth += 1,
+                Tok::Op(')') => depth = depth.saturating_sub(1),
+                _ => {}
+            }
+            signs = if matches!(t, Tok::Op('-') | Tok::Op('+')) {
+                signs + 1
+            } else {
+                0
+            };
+            deepest = deepest.max(depth);
+            most_signs = most_signs.max(signs);
+        }
+        if deepest > MAX_NESTING || most_signs > MAX_NESTING {
+            return Err(too(format!("nested more than {MAX_NESTING} levels deep")));
+        }
         let mut p = Parser {
             toks,
             pos: 0,
@@ -359,6 +395,23 @@ impl Parser<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn deep_nesting_is_an_error_not_a_stack_overflow() {
+        let vars = vec!["y".to_string()];
+        let deep = format!("{}y{}", "(".repeat(500), ")".repeat(500));
+        let e = Expr::parse(&deep, &vars).unwrap_err().to_string();
+        assert!(e.contains("nested more than") && e.len() < 200, "{e}");
+        let deeper = format!("{}y{}", "(".repeat(9000), ")".repeat(9000));
+        let e = Expr::parse(&deeper, &vars).unwrap_err().to_string();
+        assert!(e.contains("longer than") && e.len() < 200, "{e}");
+        let signs = format!("{}y", "-".repeat(40000));
+        assert!(Expr::parse(&signs, &vars).is_err());
+        let long = vec!["y"; 5000].join("+");
+        assert!(Expr::parse(&long, &vars).is_err());
+        let fine = format!("{}y{}", "(".repeat(60), ")".repeat(60));
+        assert!(Expr::parse(&fine, &vars).is_ok());
+    }
 
     #[test]
     fn parses_and_evaluates() {

@@ -110,8 +110,8 @@ pub struct FoundEffect {
     pub interval: [f64; 2],
     pub inclusion: f64,
     pub aliases: Vec<String>,
-    /// Whether the term is written into the model's polynomial right-hand side (monomials only;
-    /// other effects live in the `discovery` section).
+    /// Whether the term can be written into the model's polynomial right-hand side (monomials
+    /// only; [`Discovery::augmented_model`] refuses a discovery with any other effect).
     pub in_model_terms: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reading: Option<String>,
@@ -280,6 +280,11 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
     let _ = conf;
 
     let ys: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[yc].as_slice()).collect();
+    // Checked here, where runs have their ids (the derivative code knows only positions).
+    rs.require_min_len(
+        crate::derivatives::min_samples(n),
+        &format!("derivatives up to order {n}"),
+    )?;
     let der = differentiate_runs(&ys, rs.tau, n, &DerivativeOptions::default())?;
     let nz = vars.len();
     let zhat: Vec<Vec<Vec<f64>>> = rs
@@ -1393,13 +1398,13 @@ impl Discovery {
         let mut s = format!("verdict: {}\n", self.verdict);
         for e in &self.effects {
             s += &format!(
-                "  {}: {} {}, 95 % CI [{}, {}] (weak form {}), bootstrap inclusion {:.0} %\n",
+                "  {}: {} {} (weak form {}, 95 % CI [{}, {}]), bootstrap inclusion {:.0} %\n",
                 e.family,
                 num(e.coefficient),
                 e.formula,
+                num(e.weak_coefficient),
                 num(e.interval[0]),
                 num(e.interval[1]),
-                num(e.weak_coefficient),
                 100.0 * e.inclusion
             );
             if let Some(r) = &e.reading {
@@ -1511,6 +1516,17 @@ impl Discovery {
     /// The augmented model file: the nominal output with the final coefficients, monomial effects
     /// as terms, and the `discovery` section.
     pub fn augmented_model(&self, nominal: &Model) -> Result<Model> {
+        // A file that simulated without an effect the report calls added would be a silently
+        // wrong model: refuse instead.
+        if let Some(e) = self.effects.iter().find(|e| !e.in_model_terms) {
+            return Err(Error::InvalidData(format!(
+                "no model file written: the added effect {} {} is not a polynomial term, and a {} file holds polynomial terms only; its coefficient ({:.4}) is in the report (and in --report DIR/discovery.json)",
+                e.family,
+                e.formula,
+                crate::model::FORMAT,
+                e.coefficient
+            )));
+        }
         let mut m = nominal.clone();
         let fm = self.final_model.as_ref();
         let eq = &mut m.outputs[0];

@@ -178,9 +178,14 @@ impl Settings {
                     }
                 }
                 if let Some(o) = c.iter().find(|&&o| o == 0 || o > 6) {
+                    let name = if matches!(self.orders, Orders::Fixed(_)) {
+                        "order"
+                    } else {
+                        "orders"
+                    };
                     return Err(Error::param(
-                        "orders",
-                        format!("order {o} is outside 1..=6"),
+                        name,
+                        format!("order {o} is outside 1..=6 (identification goes up to 6)"),
                     ));
                 }
             }
@@ -198,7 +203,10 @@ impl Settings {
             }
         }
         if !(self.eta >= 1.0 && self.eta.is_finite()) {
-            return Err(Error::param("eta", format!("{} must be >= 1", self.eta)));
+            return Err(Error::param(
+                "eta",
+                format!("{:?}; give a finite number >= 1", self.eta),
+            ));
         }
         if self.degree == 0 || self.degree > crate::basis::MAX_DEGREE {
             return Err(Error::param(
@@ -847,9 +855,9 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
 /// The data of run `r` for the refinement, with the smoothed derivatives as state guesses.
 fn refine_run(model: &ModelFile, prep: &Prepared, outputs: &[usize], r: usize) -> refine::RunData {
     let run = &prep.rs.runs[r];
-    let t: Vec<f64> = (0..run.len())
-        .map(|k| run.t0 + k as f64 * prep.rs.tau)
-        .collect();
+    // Time since the run's start: the models are time invariant, and stamps far from zero
+    // (Unix time) would leave the integrator a few digits of resolution.
+    let t: Vec<f64> = (0..run.len()).map(|k| k as f64 * prep.rs.tau).collect();
     let states: Vec<Vec<f64>> = model
         .outputs
         .iter()
@@ -953,7 +961,8 @@ pub fn simulate_runs(
     for &r in runs {
         let run = &rs.runs[r];
         let n = run.len();
-        let times: Vec<f64> = (0..n).map(|k| run.t0 + k as f64 * rs.tau).collect();
+        // Time since the run's start (see refine_run).
+        let times: Vec<f64> = (0..n).map(|k| k as f64 * rs.tau).collect();
         let mut x0 = Vec::new();
         for (o, eq) in model.outputs.iter().enumerate() {
             for k in 0..eq.order {

@@ -304,6 +304,15 @@ impl Model {
                 "unknown format \"{format}\"; this version reads \"{FORMAT}\""
             )));
         }
+        // `y_d0` is another name of output `y` itself; stored as `y`, so that one variable has one
+        // name everywhere (monomials compare equal, discover's expressions know it).
+        let output_names: Vec<String> = raw.outputs.iter().map(|o| o.name.clone()).collect();
+        let canonical = |name: String| -> String {
+            match name.strip_suffix("_d0") {
+                Some(base) if output_names.iter().any(|o| o == base) => base.to_string(),
+                _ => name,
+            }
+        };
         let mut outputs = Vec::with_capacity(raw.outputs.len());
         for o in raw.outputs {
             let Some(raw_terms) = o.terms else {
@@ -321,16 +330,27 @@ impl Model {
             let mut terms = Vec::with_capacity(raw_terms.len());
             for (k, t) in raw_terms.into_iter().enumerate() {
                 let mut exponents = BTreeMap::new();
-                for (i, (name, _)) in t.exponents.0.iter().enumerate() {
-                    if t.exponents.0[..i].iter().any(|(n, _)| n == name) {
+                let pairs: Vec<(String, Value)> = t
+                    .exponents
+                    .0
+                    .into_iter()
+                    .map(|(n, v)| (canonical(n), v))
+                    .collect();
+                for (i, (name, _)) in pairs.iter().enumerate() {
+                    if pairs[..i].iter().any(|(n, _)| n == name) {
+                        let note = if output_names.contains(name) {
+                            format!(" ({name}_d0 is {name})")
+                        } else {
+                            String::new()
+                        };
                         return Err(err(format!(
-                            "output '{}', term {}: '{name}' appears twice in the exponents",
+                            "output '{}', term {}: '{name}' appears twice in the exponents{note}",
                             o.name,
                             k + 1
                         )));
                     }
                 }
-                for (name, v) in t.exponents.0 {
+                for (name, v) in pairs {
                     let e = v.as_u64().filter(|&e| e <= u32::MAX as u64).ok_or_else(|| {
                         err(format!(
                             "output '{}', term {}: exponent of '{name}' is {v}; exponents must be non-negative integers",
@@ -418,9 +438,11 @@ impl Model {
             )));
         }
         if let Some(tau) = self.tau {
-            if !(tau.is_finite() && tau > 0.0) {
+            if crate::records::check_tau(tau).is_err() {
                 return Err(err(format!(
-                    "tau must be a positive number of seconds, got {tau}"
+                    "tau must be a number of seconds between {:e} and {:e}, got {tau:?}",
+                    crate::records::TAU_MIN,
+                    crate::records::TAU_MAX
                 )));
             }
         }

@@ -208,9 +208,7 @@ pub fn dataset(
     noise: f64,
     seed: u64,
 ) -> Result<Vec<Run>> {
-    if !(tau.is_finite() && tau > 0.0) {
-        return Err(Error::InvalidTau(tau));
-    }
+    crate::records::check_tau(tau)?;
     if n_samples < 2 {
         return Err(Error::param("n_samples", "need at least 2 samples per run"));
     }

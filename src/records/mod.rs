@@ -287,6 +287,14 @@ impl RecordSet {
                             column: tname.into(),
                             prev: a,
                             value: b,
+                            hint: if run_col.is_some() {
+                                format!(
+                                    "within run '{}' times must increase: is the run id used twice, or the rows out of order?",
+                                    r.id
+                                )
+                            } else {
+                                "sort the rows or give a run column".into()
+                            },
                         });
                     }
                 }
@@ -375,8 +383,14 @@ fn finish(tau: Option<f64>, runs: Vec<Acc>, spec: &CsvSpec) -> Result<RecordSet>
     })
 }
 
-fn check_tau(tau: f64) -> Result<()> {
-    if tau.is_finite() && tau > 0.0 {
+/// Sampling periods outside [TAU_MIN, TAU_MAX] seconds are refused: beyond them the powers of
+/// 1/tau that scale high derivatives leave the range of f64 (and no instrument samples there).
+pub const TAU_MIN: f64 = 1e-12;
+pub const TAU_MAX: f64 = 1e9;
+
+/// Checks a sampling period (seconds) against [TAU_MIN, TAU_MAX].
+pub fn check_tau(tau: f64) -> Result<()> {
+    if (TAU_MIN..=TAU_MAX).contains(&tau) {
         Ok(())
     } else {
         Err(Error::InvalidTau(tau))

@@ -5,13 +5,25 @@ pub mod svg;
 use crate::error::{Error, Result};
 use std::path::Path;
 
-/// Writes a text file, creating the folder, with an error naming the path.
+/// Writes a text file, creating the folder, with an error naming the path. Characters of `name`
+/// other than ASCII letters, digits and `._-` become `_` (names carry run ids from the data).
 pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::Io {
         path: dir.display().to_string(),
         message: e.to_string(),
     })?;
-    let p = dir.join(name);
+    // Names carry run ids and channel names from the data: keep them inside `dir`.
+    let safe: String = name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || "._-".contains(c) {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let p = dir.join(safe);
     std::fs::write(&p, text).map_err(|e| Error::Io {
         path: p.display().to_string(),
         message: e.to_string(),
@@ -61,5 +73,16 @@ impl Table {
             s += &(r.iter().map(q).collect::<Vec<_>>().join(",") + "\n");
         }
         s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn file_names_from_the_data_stay_in_the_folder() {
+        let dir = std::env::temp_dir().join(format!("ctsid-report-{}", std::process::id()));
+        super::write_file(&dir, "test_run_../exp/5.svg", "x").unwrap();
+        assert!(dir.join("test_run_.._exp_5.svg").is_file());
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
