@@ -71,7 +71,15 @@ fn usage_error(e: clap::Error) -> i32 {
     }
     let tip = lines
         .find_map(|l| l.strip_prefix("tip:"))
-        .map(|t| format!(" ({})", t.trim()))
+        .map(|t| {
+            // clap suggests `-- -1`, which ends the options; a negative value of an option is
+            // written `--tau=-1`.
+            if t.contains("as a value, use '--") {
+                " (a negative value is written with '=', like --tau=-1)".to_string()
+            } else {
+                format!(" ({})", t.trim())
+            }
+        })
         .unwrap_or_default();
     let first = if first.starts_with("error:") {
         first

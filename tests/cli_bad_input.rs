@@ -286,7 +286,7 @@ fn usage_errors_are_one_line() {
         &[
             "derive", &data, "--column", "y", "--order", "1", "--tau", "-1",
         ],
-        &["'-1'", "--help"],
+        &["'-1'", "--tau=-1", "--help"],
     );
     fails(&["derive", &data], &["--column", "--order"]);
     fails(
