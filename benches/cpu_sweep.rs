@@ -22,7 +22,7 @@ fn setup(precision: Precision) -> (CpuEngine, Vec<f64>) {
     let cols = (0..11)
         .map(|_| (0..n).map(|_| uniform(&mut s)).collect())
         .collect();
-    let f = Features::new(names.clone(), cols);
+    let f = Features::new(names.clone(), cols).unwrap();
     let b = Basis::new(&names, 6, BasisLimits::default()).unwrap();
     let e = CpuEngine::new(
         &b,

@@ -36,7 +36,7 @@ fn bench(c: &mut Criterion) {
     let cols: Vec<Vec<f64>> = (0..n_z)
         .map(|k| (0..n_s).map(|i| h((k * n_s + i) as u64 + 1)).collect())
         .collect();
-    let feats = Features::new(names, cols);
+    let feats = Features::new(names, cols).unwrap();
     let v: Vec<f64> = (0..n_s).map(|i| h(i as u64 + 1_000_000_007)).collect();
     let label = format!("{n_s}x{}", basis.len());
     let mut g = c.benchmark_group("sweep");

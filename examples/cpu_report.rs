@@ -71,7 +71,7 @@ fn data(nz: usize, n: usize, seed: u64) -> Features {
     let cols = (0..nz)
         .map(|_| (0..n).map(|_| r.uniform()).collect())
         .collect();
-    Features::new(names, cols)
+    Features::new(names, cols).unwrap()
 }
 
 fn time<F: FnMut()>(reps: usize, mut f: F) -> f64 {

@@ -106,7 +106,7 @@ fn main() {
         let cols: Vec<Vec<f64>> = (0..n_z)
             .map(|_| (0..n_s).map(|_| rng.uniform_in(-1.0, 1.0)).collect())
             .collect();
-        let feats = Features::new(names.clone(), cols);
+        let feats = Features::new(names.clone(), cols).unwrap();
         let mut rows = vec![0.0; n_s * n_z];
         for k in 0..n_z {
             for i in 0..n_s {

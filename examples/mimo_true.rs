@@ -30,7 +30,7 @@ fn main() {
         cols[9].extend_from_slice(&r.u[0]);
         cols[10].extend_from_slice(&r.u[1]);
     }
-    let f = Features::new(names, cols);
+    let f = Features::new(names, cols).unwrap();
     for o in 0..3 {
         let w: Vec<f64> = (0..labels[o].len())
             .map(|i| {

@@ -24,7 +24,7 @@ fn main() {
     };
     let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
     let cols = (0..nz).map(|_| (0..n).map(|_| u()).collect()).collect();
-    let f = Features::new(names.clone(), cols);
+    let f = Features::new(names.clone(), cols).unwrap();
     let b = Basis::new(&names, d, BasisLimits::default()).unwrap();
     let mut e = CpuEngine::new(
         &b,

@@ -69,13 +69,24 @@ pub fn cost(r: &[f64]) -> f64 {
 }
 
 /// Minimises the problem from `theta`: the final parameters and cost, or `None` when the
-/// residuals cannot be evaluated at the start.
+/// residuals cannot be evaluated at the start or the damping settings are degenerate (a
+/// non-positive `lambda0` or `lambda_min`, `shrink` outside (0, 1), an infinite `lambda_max`).
 pub fn minimize(
     p: &dyn LeastSquares,
     mut theta: Vec<f64>,
     o: &LmOptions,
     stats: &mut LmStats,
 ) -> Option<(Vec<f64>, f64)> {
+    // Degenerate damping settings would retry one rejected step forever.
+    let damping_ok = o.lambda0 > 0.0
+        && o.lambda_min > 0.0
+        && o.shrink > 0.0
+        && o.shrink < 1.0
+        && o.lambda_max.is_finite()
+        && o.lambda_max >= o.lambda0;
+    if !damping_ok {
+        return None;
+    }
     let mut c = cost(&p.residuals(&theta)?);
     let mut lambda = o.lambda0;
     for _ in 0..o.max_iter {

@@ -35,7 +35,7 @@ fn a_device_lost_mid_path_falls_back_to_the_cpu_engine_with_one_line() {
     let y: Vec<f64> = (0..n)
         .map(|i| 2.0 * a[i] * b[i] - 0.5 * a[i].powi(3) + 0.3 + 1e-3 * next())
         .collect();
-    let f = Features::new(vec!["a".into(), "b".into()], vec![a, b]);
+    let f = Features::new(vec!["a".into(), "b".into()], vec![a, b]).unwrap();
     let build = |e| {
         Regression::builder()
             .degree(4)

@@ -137,7 +137,7 @@ fn random_problem(seed: u64, n_s: usize, n_z: usize, d: usize) -> (Basis, Featur
     let cols: Vec<Vec<f64>> = (0..n_z)
         .map(|_| (0..n_s).map(|_| rng.uniform(-1.0, 1.0)).collect())
         .collect();
-    let f = Features::new(names, cols);
+    let f = Features::new(names, cols).unwrap();
     let n_terms = 3 + rng.below(4);
     let mut y = vec![0.0; n_s];
     for _ in 0..n_terms {

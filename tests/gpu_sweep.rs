@@ -19,7 +19,7 @@ fn features(rng: &mut Rng, n_s: usize, n_z: usize, lo: f64, hi: f64) -> Features
     let cols = (0..n_z)
         .map(|_| (0..n_s).map(|_| rng.uniform(lo, hi)).collect())
         .collect();
-    Features::new(names(n_z), cols)
+    Features::new(names(n_z), cols).unwrap()
 }
 
 /// The engine, or None (with the notice) where there is no adapter and none is required.

@@ -185,7 +185,7 @@ fn bad_exponents_and_coefficients_are_refused() {
             {{"exponents":{{"u":{bad}}},"coefficient":1}}]}}]}}"#
         ));
         assert!(
-            e.contains("term 1") && e.contains("'u'") && e.contains("non-negative integers"),
+            e.contains("term 1") && e.contains("'u'") && e.contains("integers in 0..=64"),
             "{bad}: {e}"
         );
     }

@@ -47,7 +47,7 @@ fn problem(seed: u64, nz: usize, d: usize, n: usize, n_true: usize, noise: f64) 
         *l += noise * rms * rng.normal();
     }
     Problem {
-        features: Features::new(names, cols),
+        features: Features::new(names, cols).unwrap(),
         label,
         truth,
     }
@@ -183,7 +183,7 @@ fn duplicated_feature_is_skipped_without_nan() {
         let y: Vec<f64> = (0..n)
             .map(|i| 1.5 * a[i] - 2.0 * a[i] * b[i] + 0.3 + 0.05 * rng.normal())
             .collect();
-        let f = Features::new(vec!["a".into(), "a2".into(), "b".into()], vec![a, a2, b]);
+        let f = Features::new(vec!["a".into(), "a2".into(), "b".into()], vec![a, a2, b]).unwrap();
         for method in [Method::Lars, Method::LassoLars] {
             let m = Regression::builder()
                 .degree(2)
@@ -229,7 +229,8 @@ fn zero_and_constant_features_are_excluded() {
     let f = Features::new(
         vec!["a".into(), "zero".into(), "three".into()],
         vec![a, vec![0.0; n], vec![3.0; n]],
-    );
+    )
+    .unwrap();
     let m = Regression::builder()
         .degree(2)
         .build()
@@ -291,7 +292,8 @@ fn model_json_and_equation() {
     let f = Features::new(
         vec!["u".into(), "y".into()],
         vec![p.features.column(0).to_vec(), p.features.column(1).to_vec()],
-    );
+    )
+    .unwrap();
     let m = Regression::builder()
         .degree(2)
         .build()
@@ -344,13 +346,13 @@ fn bad_settings_are_refused_before_fitting() {
     assert!(b().refresh_tol(-1.0).build().is_err());
     assert!(b().degree(6).max_terms(10).build().is_ok());
     // Data errors are typed too.
-    let f = Features::new(vec!["a".into()], vec![vec![0.0, 1.0, f64::NAN]]);
+    let f = Features::new(vec!["a".into()], vec![vec![0.0, 1.0, f64::NAN]]).unwrap();
     assert!(b()
         .build()
         .unwrap()
         .fit(&f, &[1.0, 2.0, 3.0], "y", None)
         .is_err());
-    let f = Features::new(vec!["a".into()], vec![vec![0.0, 1.0, 2.0]]);
+    let f = Features::new(vec!["a".into()], vec![vec![0.0, 1.0, 2.0]]).unwrap();
     assert!(b()
         .build()
         .unwrap()
@@ -365,7 +367,8 @@ fn bad_settings_are_refused_before_fitting() {
     let f = Features::new(
         (0..5).map(|k| format!("v{k}")).collect(),
         vec![vec![0.0; 3]; 5],
-    );
+    )
+    .unwrap();
     assert!(matches!(
         too_big.fit(&f, &[0.0; 3], "y", None),
         Err(Error::TooLarge { .. })
@@ -451,6 +454,7 @@ fn dynamic_features(n: usize) -> Features {
             .collect(),
         vec![y(0), y(1), y(2), u],
     )
+    .unwrap()
 }
 
 /// Forward orthogonal least squares: every breakpoint is the least-squares fit of its support

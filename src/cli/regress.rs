@@ -113,7 +113,7 @@ pub fn run(a: RegressArgs) -> Result<()> {
     let mut cols = read_columns(&a.data, &wanted)?;
     let weights = a.weights.as_ref().map(|_| cols.pop().unwrap());
     let label = cols.pop().unwrap();
-    let features = Features::new(a.features.clone(), cols);
+    let features = Features::new(a.features.clone(), cols)?;
     let started = std::time::Instant::now();
     let model = reg.fit(&features, &label, &a.label, weights.as_deref())?;
     let d = &model.diagnostics;

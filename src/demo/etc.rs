@@ -64,6 +64,7 @@ pub fn run(o: &EtcOptions) -> Result<String> {
     // Settings are checked before the minutes of simulation and fitting, not after.
     super::check_noise(o.noise)?;
     super::check_degree(o.degree)?;
+    super::check_runs(o.train, o.runs)?;
     if !(o.patm.is_finite() && o.patm >= 0.0) {
         return Err(Error::param(
             "patm",
@@ -164,7 +165,10 @@ pub fn run(o: &EtcOptions) -> Result<String> {
             (r, d1)
         },
     );
-    for (eta, result) in [(0.0, clean), (o.noise, noisy_search)] {
+    for (k, (eta, result)) in [(0.0, clean), (o.noise, noisy_search)]
+        .into_iter()
+        .enumerate()
+    {
         let (id, runs) = result?;
         let rep = &id.outputs[0];
         for c in &rep.candidates {
@@ -187,13 +191,14 @@ pub fn run(o: &EtcOptions) -> Result<String> {
             });
             profile_table.row(row);
         }
-        if eta > 0.0 {
+        // The second search, also at noise 0 when asked for.
+        if k == 1 {
             noisy = Some((id, runs));
         }
     }
     let _ = writeln!(out, "## Error profile per order on the training runs (p_q = percentile(|e|, q) / median(|label|)), eta-rule on 5-fold validation\n\n{}", profile_table.markdown());
     tables.push(("profiles".into(), profile_table));
-    let (id_noisy, runs) = noisy.unwrap();
+    let (id_noisy, runs) = noisy.expect("the loop above stores the second search");
     let _ = writeln!(
         out,
         "Selected order: {} (noise-free run above, noisy below; the truth is 3).\n",
@@ -221,7 +226,9 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         } else {
             fixed(d, &runs)?
         };
-        let own = id.outputs[0].test.unwrap();
+        let own = id.outputs[0]
+            .test
+            .expect("the demo has test runs (check_runs)");
         test_table.row(
             [format!("ours (n = 3, d = {d})"), "our labels".into()]
                 .into_iter()

@@ -47,6 +47,7 @@ impl Default for MimoOptions {
 
 pub fn run(o: &MimoOptions) -> Result<String> {
     super::check_noise(o.noise)?;
+    super::check_runs(o.train, o.runs)?;
     for &d in &o.degrees {
         super::check_degree(d)?;
     }

@@ -154,3 +154,15 @@ fn check_degree(degree: usize) -> Result<()> {
         ))
     }
 }
+
+/// A demonstration's split: at least one training and one test run.
+fn check_runs(train: usize, runs: usize) -> Result<()> {
+    if train >= 1 && train < runs {
+        Ok(())
+    } else {
+        Err(Error::param(
+            "runs",
+            format!("{train} training runs of {runs}; give 1 <= train < runs"),
+        ))
+    }
+}

@@ -52,6 +52,9 @@ const SMOOTH_WINDOW: f64 = 6.0;
 /// integrator chain's transition matrix only loses precision.
 const H_MAX: f64 = 4.0;
 
+/// Largest scaled step a caller may impose.
+const H_OVERRIDE_MAX: f64 = 1e3;
+
 /// Optional overrides; the defaults self-tune everything.
 #[derive(Debug, Clone)]
 pub struct DerivativeOptions {
@@ -165,11 +168,34 @@ pub fn differentiate_runs(
                 y[i]
             )));
         }
+        if let Some(i) = y
+            .iter()
+            .position(|v| v.abs() >= crate::records::MAX_MAGNITUDE)
+        {
+            return Err(Error::InvalidData(format!(
+                "run {r}, sample {i}: {:e} is too large in magnitude to compute with (limit {:e}); rescale the signal",
+                y[i],
+                crate::records::MAX_MAGNITUDE
+            )));
+        }
     }
     if let Some(h) = opts.h {
-        if !(h.is_finite() && h > 0.0) {
-            return Err(Error::param("h", format!("{h}; must be positive")));
+        // Tuning stops at H_MAX; an override may go further (the identification's equation
+        // smoothing does), but not so far that (h / tau)^k leaves f64.
+        if !(h > 0.0 && h <= H_OVERRIDE_MAX) {
+            return Err(Error::param(
+                "h",
+                format!("{h:?}; give a scaled step in (0, {H_OVERRIDE_MAX}]"),
+            ));
         }
+    }
+    // 0 turns the stationary end prior into the integrator chain, which has no stationary
+    // covariance; the range keeps its characteristic polynomial well scaled.
+    if opts.end_blend && !(1e-3..=1e3).contains(&opts.end_lambda) {
+        return Err(Error::param(
+            "end_lambda",
+            format!("{:?}; give a damping in [1e-3, 1e3]", opts.end_lambda),
+        ));
     }
     if !(opts.smooth_window.is_finite() && opts.smooth_window >= 0.0) {
         return Err(Error::param(
@@ -218,6 +244,12 @@ pub fn differentiate_runs(
         Some(h) => (h, tune::evaluate(m, h, 0.0, &live_y)),
         None => tune::best_h(m, &live_y, (1e-4f64).ln(), H_MAX.ln()),
     };
+    // Constant runs share the record set's sensor and smoothing level too (callers take h
+    // from any run, the first among them).
+    for d in out.iter_mut() {
+        d.h = h;
+        d.noise_sd = fit.sigma2.sqrt();
+    }
     let mut levels: Vec<f64> = if opts.adaptive {
         LADDER
             .iter()

@@ -330,6 +330,9 @@ impl Parser<'_> {
             match self.toks.get(self.pos) {
                 Some(Tok::Num(v)) => {
                     self.pos += 1;
+                    if v.abs() > 64.0 {
+                        return Err(self.err("exponents go up to 64"));
+                    }
                     return Ok(Node::Pow(Box::new(a), if neg { -v } else { *v }));
                 }
                 _ => return Err(self.err("'^' needs a number as exponent")),

@@ -236,6 +236,25 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
             "discover needs at least one train, one validation and one test run",
         ));
     }
+    // The same rules as identify's split: indices in range, no run in two lists.
+    let ids: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
+    crate::identify::Split::new(
+        o.train.clone(),
+        Some(o.validation.clone()),
+        o.test.clone(),
+        &ids,
+    )?;
+    if let Some(m) = o.half_width {
+        let shortest = rs.runs.iter().map(|r| r.len()).min().unwrap_or(0);
+        if m.checked_mul(2).is_none_or(|w| w + 1 > shortest) {
+            return Err(Error::param(
+                "half width",
+                format!(
+                    "{m} samples: a window of 2m+1 must fit the shortest run ({shortest} samples)"
+                ),
+            ));
+        }
+    }
     let mut vars: Vec<String> = (0..n).map(|k| derivative_name(&eq.name, k)).collect();
     vars.extend(nominal.inputs.iter().cloned());
     let yc = rs.channel_index(&eq.name)?;
@@ -1526,6 +1545,18 @@ impl Discovery {
                 crate::model::FORMAT,
                 e.coefficient
             )));
+        }
+        let nominal_terms = self
+            .final_model
+            .as_ref()
+            .map(|fm| fm.terms.len().checked_sub(self.effects.len()));
+        if nominal.outputs.len() != 1
+            || nominal_terms.is_some_and(|k| k != Some(nominal.outputs[0].terms.len()))
+        {
+            return Err(Error::param(
+                "nominal",
+                "not the nominal model this discovery was run with",
+            ));
         }
         let mut m = nominal.clone();
         let fm = self.final_model.as_ref();

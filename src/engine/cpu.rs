@@ -82,6 +82,7 @@ const B64: usize = kernel::SIMD_B;
 impl CpuEngine {
     /// Builds the engine for `basis` over the feature rows `features` (names must match).
     pub fn new(basis: &Basis, features: &Features, options: CpuOptions) -> Result<CpuEngine> {
+        features.check()?;
         if features.n_vars() != basis.n_vars() {
             return Err(Error::param(
                 "features",
@@ -355,7 +356,7 @@ mod tests {
             .collect();
         (
             Basis::new(&names, d, BasisLimits::default()).unwrap(),
-            Features::new(names, cols),
+            Features::new(names, cols).unwrap(),
         )
     }
 

@@ -243,6 +243,7 @@ fn mib(b: u64) -> f64 {
 impl GpuEngine {
     /// Builds the engine for all candidates of `basis` on the rows of `features`.
     pub fn new(features: &Features, basis: &Basis, options: GpuOptions) -> Result<GpuEngine> {
+        features.check()?;
         let n_s = features.n_samples;
         let n_z = features.n_vars();
         let n_c = basis.len();
@@ -984,7 +985,7 @@ mod tests {
                     .collect()
             })
             .collect();
-        let f = Features::new(vec!["a".into(), "b".into(), "c".into()], cols);
+        let f = Features::new(vec!["a".into(), "b".into(), "c".into()], cols).unwrap();
         let b = Basis::new(&f.names, 3, Default::default()).unwrap();
         match GpuEngine::new(&f, &b, GpuOptions::default()) {
             Ok(e) => Some(e),

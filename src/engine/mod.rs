@@ -14,7 +14,7 @@
 //! weights are the algorithm's business (it passes `w * v` when it wants a weighted sweep), which
 //! keeps engines small and lets CPU and GPU results be compared element by element.
 
-use crate::error::Result;
+use crate::error::{Error, Result};
 
 pub mod cpu;
 pub mod gpu;
@@ -31,18 +31,45 @@ pub struct Features {
 }
 
 impl Features {
-    pub fn new(names: Vec<String>, columns: Vec<Vec<f64>>) -> Features {
+    /// One column per name, all of one length.
+    pub fn new(names: Vec<String>, columns: Vec<Vec<f64>>) -> Result<Features> {
+        if names.len() != columns.len() {
+            return Err(Error::InvalidData(format!(
+                "{} feature names for {} columns",
+                names.len(),
+                columns.len()
+            )));
+        }
         let n_samples = columns.first().map_or(0, |c| c.len());
-        assert!(
-            columns.iter().all(|c| c.len() == n_samples),
-            "feature columns must have equal length"
-        );
-        let data = columns.concat();
-        Features {
+        if let Some(k) = columns.iter().position(|c| c.len() != n_samples) {
+            return Err(Error::InvalidData(format!(
+                "feature '{}' has {} samples, '{}' has {n_samples}",
+                names[k],
+                columns[k].len(),
+                names[0]
+            )));
+        }
+        let f = Features {
             n_samples,
             names,
-            data,
+            data: columns.concat(),
+        };
+        f.check()?;
+        Ok(f)
+    }
+
+    /// The shape the engines rely on (the fields are public: a value built by hand is checked
+    /// where it is used).
+    pub fn check(&self) -> Result<()> {
+        if self.data.len() != self.names.len() * self.n_samples {
+            return Err(Error::InvalidData(format!(
+                "features: {} values for {} variables x {} samples",
+                self.data.len(),
+                self.names.len(),
+                self.n_samples
+            )));
         }
+        Ok(())
     }
 
     pub fn n_vars(&self) -> usize {

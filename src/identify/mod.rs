@@ -411,7 +411,9 @@ impl Prepared<'_> {
                 weights.push(w);
             }
         }
-        (Features::new(names, cols), label, weights, excluded)
+        // Every column runs over the same training samples.
+        let features = Features::new(names, cols).expect("feature columns of one length");
+        (features, label, weights, excluded)
     }
 
     /// The label's own uncertainty relative to its spread: `sqrt(sum w sigma^2 / sum w (y -
@@ -643,6 +645,7 @@ fn prepare<'a>(
 /// Runs the whole workflow on a record set with a checked split.
 pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Identification> {
     settings.validate()?;
+    split.check(rs.runs.len())?;
     let outputs: Vec<usize> = settings
         .outputs
         .iter()

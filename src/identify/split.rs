@@ -88,6 +88,23 @@ impl Split {
         if train.is_empty() {
             return Err(Error::param("train", "no training runs"));
         }
+        if validation.as_ref().is_some_and(|v| v.is_empty()) {
+            return Err(Error::param(
+                "validation",
+                "an empty list; give runs, or none for folds over the training runs",
+            ));
+        }
+        let split = Split {
+            train,
+            validation,
+            test,
+        };
+        split.check(ids.len())?;
+        let Split {
+            train,
+            validation,
+            test,
+        } = split;
         let groups: [(&str, &[usize]); 3] = [
             ("train", &train),
             ("validation", validation.as_deref().unwrap_or(&[])),
@@ -118,6 +135,25 @@ impl Split {
             validation,
             test,
         })
+    }
+
+    /// Every index names one of `n_runs` runs (the fields are public: a split built by hand is
+    /// checked again where it is used).
+    pub fn check(&self, n_runs: usize) -> Result<()> {
+        let lists = [
+            ("train", self.train.as_slice()),
+            ("validation", self.validation.as_deref().unwrap_or(&[])),
+            ("test", self.test.as_slice()),
+        ];
+        for (name, list) in lists {
+            if let Some(r) = list.iter().find(|&&r| r >= n_runs) {
+                return Err(Error::param(
+                    name,
+                    format!("run index {r} is out of range: the record set has {n_runs} runs"),
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Deterministic k folds over the training runs (run i goes to fold i mod k).

@@ -74,7 +74,9 @@ impl Term {
 
     /// Total degree.
     pub fn degree(&self) -> u32 {
-        self.exponents.values().sum()
+        self.exponents
+            .values()
+            .fold(0u32, |a, &e| a.saturating_add(e))
     }
 
     /// Human-readable monomial, `y*y_d1^2*u`, or `1`.
@@ -246,6 +248,10 @@ impl<'de> Deserialize<'de> for Pairs {
     }
 }
 
+/// Largest exponent of one variable in a term: powers are evaluated with `powi(i32)`, and degrees
+/// are summed in `u32`; no identified model comes near it.
+pub const MAX_EXPONENT: u32 = 64;
+
 /// Highest derivative order a model file may give an output (that of the derivative estimates).
 pub const MAX_ORDER: usize = crate::derivatives::MAX_ORDER;
 
@@ -351,9 +357,9 @@ impl Model {
                     }
                 }
                 for (name, v) in pairs {
-                    let e = v.as_u64().filter(|&e| e <= u32::MAX as u64).ok_or_else(|| {
+                    let e = v.as_u64().filter(|&e| e <= MAX_EXPONENT as u64).ok_or_else(|| {
                         err(format!(
-                            "output '{}', term {}: exponent of '{name}' is {v}; exponents must be non-negative integers",
+                            "output '{}', term {}: exponent of '{name}' is {v}; exponents must be integers in 0..={MAX_EXPONENT}",
                             o.name,
                             k + 1
                         ))
@@ -486,6 +492,11 @@ impl Model {
                     return Err(err(format!(
                         "{at}: coefficient {} is not finite",
                         t.coefficient
+                    )));
+                }
+                if let Some((name, e)) = t.exponents.iter().find(|(_, &e)| e > MAX_EXPONENT) {
+                    return Err(err(format!(
+                        "{at}: exponent of '{name}' is {e}; exponents go up to {MAX_EXPONENT}"
                     )));
                 }
                 for name in t.exponents.keys() {

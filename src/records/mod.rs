@@ -14,7 +14,8 @@ use std::path::Path;
 pub const TAU_RTOL: f64 = 1e-6;
 
 /// Largest magnitude a sample may have: its square must stay finite in f64 (overflow at 1.8e308).
-/// Higher powers, in polynomial features, are checked where the features are standardised.
+/// Higher powers, in polynomial features, are checked where a regression chooses the precision
+/// of its sweeps (f64 on the CPU when f32 monomials would overflow).
 pub const MAX_MAGNITUDE: f64 = 1e150;
 
 /// One run: samples of every channel, all of the same length.
@@ -62,6 +63,16 @@ impl RecordSet {
     /// Builds a record set from in-memory runs (validated like a file).
     pub fn new(tau: f64, channel_names: Vec<String>, runs: Vec<Run>) -> Result<RecordSet> {
         check_tau(tau)?;
+        if let Some((i, name)) = channel_names
+            .iter()
+            .enumerate()
+            .find(|(i, n)| channel_names[..*i].contains(n))
+        {
+            return Err(Error::InvalidData(format!(
+                "channel '{name}' is named twice (channel {})",
+                i + 1
+            )));
+        }
         for r in &runs {
             if r.channels.len() != channel_names.len() {
                 return Err(Error::InvalidData(format!(
@@ -84,6 +95,12 @@ impl RecordSet {
                 if let Some(i) = ch.iter().position(|v| !v.is_finite()) {
                     return Err(Error::InvalidData(format!(
                         "run '{}': channel '{}' sample {i} is not a finite number ({})",
+                        r.id, channel_names[c], ch[i]
+                    )));
+                }
+                if let Some(i) = ch.iter().position(|v| v.abs() >= MAX_MAGNITUDE) {
+                    return Err(Error::InvalidData(format!(
+                        "run '{}': channel '{}' sample {i} is {:e}, too large in magnitude to compute with (limit {MAX_MAGNITUDE:e}); rescale it",
                         r.id, channel_names[c], ch[i]
                     )));
                 }

@@ -3,7 +3,7 @@
 //! ```no_run
 //! use ctsid::regression::{Regression, Method};
 //! # fn main() -> ctsid::Result<()> {
-//! # let features = ctsid::engine::Features::new(vec!["u".into(), "y".into()], vec![vec![0.0; 10], vec![1.0; 10]]);
+//! # let features = ctsid::engine::Features::new(vec!["u".into(), "y".into()], vec![vec![0.0; 10], vec![1.0; 10]])?;
 //! # let label = vec![0.0; 10];
 //! let model = Regression::builder().degree(3).method(Method::LassoLars).max_terms(20).build()?
 //!     .fit(&features, &label, "y_d1", None)?;
@@ -403,6 +403,7 @@ impl Model {
 
     /// Evaluates the model on feature rows (by the model's feature names).
     pub fn predict(&self, features: &Features) -> Result<Vec<f64>> {
+        features.check()?;
         let mut out = vec![0.0; features.n_samples];
         for t in &self.terms {
             let mut col = vec![t.coefficient; features.n_samples];
@@ -455,9 +456,37 @@ impl Regression {
             },
         )?;
         let mut notes = Vec::new();
+        features.check()?;
+        // f32 sweeps build monomials from the raw features: beyond about 1e30 they overflow
+        // (degree 6 on features of 1e6). Such data are swept in f64 on the CPU.
+        let largest = (0..features.n_vars())
+            .map(|k| {
+                features
+                    .column(k)
+                    .iter()
+                    .fold(1.0f64, |m, v| m.max(v.abs()))
+            })
+            .fold(1.0f64, f64::max);
+        let label_scale = label.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+        let f32_safe = (self.degree as f64) * largest.log10() + label_scale.log10() < 30.0;
         let decision = choose(self.engine, features.n_samples, basis.len())?;
         notes.push(decision.reason.clone());
-        if decision.kind == EngineKind::Gpu {
+        if !f32_safe {
+            notes.push(format!(
+                "features up to {largest:.1e} at degree {}: monomials beyond the f32 range, so the sweeps run in f64 on the CPU",
+                self.degree
+            ));
+        }
+        if decision.kind == EngineKind::Gpu && !f32_safe && self.engine == EngineChoice::Gpu {
+            return Err(Error::param(
+                "engine",
+                format!(
+                    "the GPU sweeps in f32, and features up to {largest:.1e} at degree {} overflow it; rescale the features or use the CPU engine",
+                    self.degree
+                ),
+            ));
+        }
+        if decision.kind == EngineKind::Gpu && f32_safe {
             let attempt = GpuEngine::new(features, &basis, GpuOptions::default())
                 .and_then(|mut g| self.fit_with_engine(&basis, &mut g, label, label_name, weights));
             match attempt {
@@ -474,7 +503,11 @@ impl Regression {
                 }
             }
         }
-        let precision = self.precision.unwrap_or(Precision::F32);
+        let precision = match self.precision {
+            Some(p) => p,
+            None if f32_safe => Precision::F32,
+            None => Precision::F64,
+        };
         let mut engine = CpuEngine::new(
             &basis,
             features,

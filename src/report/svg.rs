@@ -24,11 +24,19 @@ fn nice_ticks(lo: f64, hi: f64, n: usize) -> Vec<f64> {
         .map(|m| m * mag)
         .find(|s| span / s <= n as f64)
         .unwrap_or(10.0 * mag);
-    let mut t = (lo / step).ceil() * step;
+    // Ticks as k * step: adding step to a value far larger than it (time stamps in ns) would
+    // not move it, and the loop would not end.
+    let first = (lo / step).ceil();
     let mut out = Vec::new();
-    while t <= hi + 1e-9 * step {
+    for k in 0..=4 * n {
+        let t = (first + k as f64) * step;
+        if t.is_nan() || t > hi + 1e-9 * step {
+            break;
+        }
+        if out.last() == Some(&t) {
+            break;
+        }
         out.push(if t.abs() < 1e-12 * step { 0.0 } else { t });
-        t += step;
     }
     out
 }

@@ -942,8 +942,23 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
             "output times must be finite and strictly increasing",
         ));
     }
-    if !(opts.rtol > 0.0 && opts.atol > 0.0) {
+    if !(opts.rtol > 0.0 && opts.atol > 0.0 && opts.rtol.is_finite() && opts.atol.is_finite()) {
         return Err(Error::param("tolerances", "rtol and atol must be positive"));
+    }
+    if opts.h_max.is_some_and(|h| !(h > 0.0 && h.is_finite())) {
+        return Err(Error::param(
+            "h_max",
+            "must be a positive number of seconds",
+        ));
+    }
+    if !(opts.h_min_rel > 0.0 && opts.h_min_rel < 1.0) || opts.max_steps_per_interval == 0 {
+        return Err(Error::param(
+            "step limits",
+            "h_min_rel must be in (0, 1) and max_steps_per_interval at least 1",
+        ));
+    }
+    if opts.bound.is_nan() || opts.bound <= 0.0 {
+        return Err(Error::param("bound", "must be positive"));
     }
     let mut scale = x0.iter().fold(1.0f64, |m, v| m.max(v.abs()));
     let mut u = vec![0.0; sys.n_inputs()];
@@ -1073,6 +1088,12 @@ pub fn estimate_initial_derivatives(
         });
     }
     let deg = order + 1;
+    if let Some(i) = y[..m].iter().position(|v| !v.is_finite()) {
+        return Err(Error::InvalidData(format!(
+            "run '{run}': sample {i} is not a finite number ({})",
+            y[i]
+        )));
+    }
     let span = t[m - 1] - t[0];
     if !(span.is_finite() && span > 0.0) {
         return Err(Error::InvalidData(format!(

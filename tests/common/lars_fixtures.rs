@@ -99,6 +99,7 @@ pub fn problem(f: &Fixture) -> (Basis, Features) {
         (0..nz)
             .map(|k| f.z.iter().map(|r| r[k]).collect())
             .collect(),
-    );
+    )
+    .unwrap();
     (basis, feats)
 }

@@ -1,0 +1,195 @@
+//! The library's entry points return typed errors for inputs a caller can pass by mistake:
+//! no panic, no hang, no silently wrong result.
+
+use ctsid::derivatives::{differentiate_runs, differentiate_with, DerivativeOptions};
+use ctsid::discover::{cases, discover, Options};
+use ctsid::engine::Features;
+use ctsid::identify::{identify, Settings, Split};
+use ctsid::model::Model;
+use ctsid::records::{RecordSet, Run};
+use ctsid::report::svg::{line_plot, Series};
+
+fn sine(n: usize, phase: f64) -> Vec<f64> {
+    (0..n).map(|i| (i as f64 * 0.01 + phase).sin()).collect()
+}
+
+fn run(id: &str, channels: Vec<Vec<f64>>) -> Run {
+    Run {
+        id: id.into(),
+        channels,
+        t0: 0.0,
+        rows: Vec::new(),
+    }
+}
+
+#[test]
+fn features_of_unequal_length_are_an_error() {
+    let e = Features::new(
+        vec!["u".into(), "y".into()],
+        vec![vec![0.0; 20], vec![0.0; 19]],
+    );
+    assert!(e.unwrap_err().to_string().contains("19 samples"));
+    assert!(Features::new(vec!["u".into(), "y".into()], vec![vec![0.0; 20]]).is_err());
+    // Built by hand past the constructor: checked where used.
+    let bad = Features {
+        n_samples: 20,
+        names: vec!["u".into(), "y".into()],
+        data: vec![0.0; 20],
+    };
+    let reg = ctsid::regression::Regression::builder()
+        .degree(2)
+        .build()
+        .unwrap();
+    assert!(reg.fit(&bad, &[0.0; 20], "l", None).is_err());
+}
+
+#[test]
+fn split_indices_outside_the_record_set_are_an_error() {
+    let ids: Vec<String> = (0..3).map(|i| i.to_string()).collect();
+    let e = Split::new(vec![0, 1, 3], None, vec![2], &ids).unwrap_err();
+    assert!(e.to_string().contains("out of range"), "{e}");
+    assert!(Split::new(vec![5, 5], None, vec![], &ids[..2]).is_err());
+    assert!(Split::new(vec![0], Some(vec![]), vec![1], &ids).is_err());
+    // A split built by hand reaches identify: refused there, before any work.
+    let rs = RecordSet::new(
+        0.01,
+        vec!["y".into(), "u".into()],
+        (0..3)
+            .map(|r| {
+                run(
+                    &r.to_string(),
+                    vec![sine(300, r as f64), sine(300, 0.5 * r as f64)],
+                )
+            })
+            .collect(),
+    )
+    .unwrap();
+    let split = Split {
+        train: vec![0, 7],
+        validation: None,
+        test: vec![],
+    };
+    let s = Settings::new(vec!["y".into()], vec!["u".into()], 2);
+    assert!(identify(&rs, &split, &s).is_err());
+}
+
+#[test]
+fn discover_checks_its_run_lists() {
+    let case = cases::generate("coulomb", 0, 0.03).unwrap();
+    let n = case.records.runs.len();
+    for o in [
+        Options::new(vec![0, n], vec![4], vec![6]),
+        Options::new(vec![0, 1], vec![n + 3], vec![6]),
+        Options::new(vec![0, 1], vec![4], vec![99]),
+        Options::new(vec![0, 1], vec![1], vec![6]),
+    ] {
+        assert!(discover(&case.records, &case.nominal, &o).is_err());
+    }
+    let mut o = Options::new(vec![0, 1], vec![4], vec![6]);
+    o.half_width = Some(1_000_000_000);
+    let e = discover(&case.records, &case.nominal, &o).unwrap_err();
+    assert!(e.to_string().contains("half width"), "{e}");
+}
+
+#[test]
+fn derivative_overrides_are_checked() {
+    let y = sine(200, 0.0);
+    for opts in [
+        DerivativeOptions {
+            end_lambda: -0.5,
+            ..Default::default()
+        },
+        DerivativeOptions {
+            end_lambda: f64::NAN,
+            ..Default::default()
+        },
+        DerivativeOptions {
+            h: Some(1e20),
+            ..Default::default()
+        },
+    ] {
+        assert!(differentiate_with(&y, 0.01, 2, &opts).is_err(), "{opts:?}");
+    }
+    assert!(differentiate_with(&y, 1e-300, 2, &DerivativeOptions::default()).is_err());
+    let mut big = y.clone();
+    big[3] = 1e200;
+    assert!(differentiate_with(&big, 0.01, 2, &DerivativeOptions::default()).is_err());
+}
+
+#[test]
+fn a_constant_first_run_reports_the_record_sets_smoothing_level() {
+    let flat = vec![1.0; 300];
+    let live = sine(300, 0.0);
+    let d = differentiate_runs(&[&flat, &live], 0.01, 2, &DerivativeOptions::default()).unwrap();
+    assert_eq!(d[0].h, d[1].h);
+    assert_eq!(d[0].noise_sd, d[1].noise_sd);
+}
+
+#[test]
+fn record_sets_refuse_names_twice_and_huge_values() {
+    let e = RecordSet::new(
+        0.01,
+        vec!["y".into(), "y".into()],
+        vec![run("0", vec![sine(50, 0.0), sine(50, 1.0)])],
+    );
+    assert!(e.unwrap_err().to_string().contains("named twice"));
+    let mut v = sine(50, 0.0);
+    v[7] = 1e160;
+    assert!(RecordSet::new(0.01, vec!["y".into()], vec![run("0", vec![v])]).is_err());
+}
+
+#[test]
+fn model_exponents_are_bounded() {
+    let text = r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":4294967295,"u":1},"coefficient":1}]}]}"#;
+    let e = Model::from_json_str(text, "m.json")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("up to 64") || e.contains("0..=64"), "{e}");
+}
+
+#[test]
+fn simulation_settings_are_checked() {
+    let model = Model::from_json_str(
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-1}]}]}"#,
+        "m",
+    )
+    .unwrap()
+    .compile()
+    .unwrap();
+    let t: Vec<f64> = (0..10).map(|i| i as f64 * 0.1).collect();
+    let opts = ctsid::simulate::SimOptions {
+        h_max: Some(0.0),
+        ..Default::default()
+    };
+    let u = vec![vec![0.0; 10]];
+    assert!(ctsid::simulate::simulate_model(&model, &[1.0], &t, &u, &opts).is_err());
+}
+
+#[test]
+fn plots_of_nanosecond_time_stamps_end() {
+    let x: Vec<f64> = (0..100).map(|i| 1.7e18 + i as f64).collect();
+    let y = sine(100, 0.0);
+    let svg = line_plot(
+        "t",
+        "x",
+        "y",
+        &[Series {
+            label: "y",
+            x: &x,
+            y: &y,
+            color: "black",
+            band: None,
+            dashed: false,
+        }],
+    );
+    assert!(svg.starts_with("<svg"));
+}
+
+#[test]
+fn demo_settings_are_checked_first() {
+    let o = ctsid::demo::etc::EtcOptions {
+        train: 100,
+        ..Default::default()
+    };
+    assert!(ctsid::demo::etc::run(&o).is_err());
+}
