@@ -193,3 +193,40 @@ fn demo_settings_are_checked_first() {
     };
     assert!(ctsid::demo::etc::run(&o).is_err());
 }
+
+#[test]
+fn refinement_runs_of_the_wrong_shape_are_an_error() {
+    use ctsid::identify::refine::{free_run_nrmse, refine_gated, RefineOptions, RunData};
+    let model = Model::from_json_str(
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":1}]}]}"#,
+        "m",
+    )
+    .unwrap();
+    let t: Vec<f64> = (0..300).map(|i| i as f64 * 0.01).collect();
+    let good = RunData {
+        id: "0".into(),
+        t: t.clone(),
+        y: vec![sine(300, 0.0)],
+        u: vec![sine(300, 1.0)],
+        x0: vec![0.0],
+        states: None,
+    };
+    // Output shorter than the time grid, and an input channel missing.
+    let short = RunData {
+        y: vec![sine(100, 0.0)],
+        ..good.clone()
+    };
+    let no_input = RunData {
+        u: vec![],
+        ..good.clone()
+    };
+    for bad in [short, no_input] {
+        assert!(free_run_nrmse(&model, std::slice::from_ref(&bad)).is_err());
+        assert!(refine_gated(&model, &[good.clone()], &[bad], &RefineOptions::default()).is_err());
+    }
+    let reg = ctsid::regression::Regression::builder()
+        .degree(2)
+        .effective_samples(f64::NAN)
+        .build();
+    assert!(reg.is_err());
+}

@@ -452,7 +452,7 @@ impl Prepared<'_> {
     fn regression(&self, i: usize, used: usize, floor: f64) -> Result<Regression> {
         let h = self.eqs[i].outs[i].first().map_or(1.0, |d| d.h);
         Regression::builder()
-            .effective_samples(used as f64 * (h / std::f64::consts::PI).min(1.0))
+            .effective_samples((used as f64 * (h / std::f64::consts::PI).min(1.0)).max(2.0))
             // Reconstructed derivatives are never better than ~1e-4 relative (input kinks, ends):
             // below that, eBIC should treat a fit as exact rather than reward terms that fit the
             // smoother's own error.
@@ -951,7 +951,7 @@ fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<
 
 /// Free-run simulation of a model on some runs, starting from the smoothed derivatives at the
 /// first sample; a diverging run is reported, not fatal.
-pub fn simulate_runs(
+pub(crate) fn simulate_runs(
     model: &ModelFile,
     rs: &RecordSet,
     derivs: &[Vec<Derivatives>],

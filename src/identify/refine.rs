@@ -386,23 +386,14 @@ fn spread<'a>(values: impl Iterator<Item = &'a f64>) -> f64 {
     (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
 }
 
-/// Refines the nonzero coefficients of `model` (structure fixed) and the initial state of every
-/// run by minimising the simulation error on `runs` (see the module docs).
-///
-/// Fails with a typed error when the data do not fit the model, or when the starting model
-/// cannot be simulated over the segments from the given states.
-pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<Refined> {
-    let t_start = std::time::Instant::now();
-    let compiled = model.compile()?;
-    let n = compiled.n_state();
-    let n_out = compiled.n_outputs();
-    let n_in = compiled.n_inputs();
-    if runs.is_empty() {
-        return Err(Error::param("refine", "no runs to refine on"));
-    }
-    if opts.segment_len < 4 {
-        return Err(Error::param("segment_len", "needs at least 4 samples"));
-    }
+/// Every run has the model's channels, all of one length (at least 2 samples), an initial
+/// state of the model's size and, if given, state guesses of that shape.
+fn check_runs(compiled: &crate::model::CompiledModel, runs: &[RunData]) -> Result<()> {
+    let (n, n_out, n_in) = (
+        compiled.n_state(),
+        compiled.n_outputs(),
+        compiled.n_inputs(),
+    );
     for r in runs {
         let len = r.t.len();
         let bad = r.y.len() != n_out
@@ -427,6 +418,27 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
             });
         }
     }
+    Ok(())
+}
+
+/// Refines the nonzero coefficients of `model` (structure fixed) and the initial state of every
+/// run by minimising the simulation error on `runs` (see the module docs).
+///
+/// Fails with a typed error when the data do not fit the model, or when the starting model
+/// cannot be simulated over the segments from the given states.
+pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<Refined> {
+    let t_start = std::time::Instant::now();
+    let compiled = model.compile()?;
+    let n = compiled.n_state();
+    let n_out = compiled.n_outputs();
+
+    if runs.is_empty() {
+        return Err(Error::param("refine", "no runs to refine on"));
+    }
+    if opts.segment_len < 4 {
+        return Err(Error::param("segment_len", "needs at least 4 samples"));
+    }
+    check_runs(&compiled, runs)?;
     let all_coef = compiled.coefficients();
     let free: Vec<usize> = (0..all_coef.len())
         .filter(|&k| all_coef[k] != 0.0)
@@ -636,6 +648,7 @@ pub const GATE_INIT_WINDOW: usize = 200;
 /// diverges makes the error infinite.
 pub fn free_run_nrmse(model: &Model, runs: &[RunData]) -> Result<Vec<f64>> {
     let compiled = model.compile()?;
+    check_runs(&compiled, runs)?;
     let n_out = compiled.n_outputs();
     let per_run: Vec<Vec<f64>> = runs
         .par_iter()

@@ -187,6 +187,14 @@ impl RegressionBuilder {
         if self.max_terms == 0 {
             return Err(Error::param("max_terms", "must be at least 1"));
         }
+        if let Some(n) = self.effective_samples {
+            if !(n >= 2.0 && n.is_finite()) {
+                return Err(Error::param(
+                    "effective_samples",
+                    format!("{n:?}; give a finite number >= 2"),
+                ));
+            }
+        }
         if self.max_steps == Some(0) {
             return Err(Error::param("max_steps", "must be at least 1"));
         }

@@ -386,6 +386,13 @@ pub fn lars_path_monitored(
     opts: &PathOptions,
     monitor: &mut dyn FnMut(&Path, usize) -> bool,
 ) -> Result<Path> {
+    // The builder checks these; a PathOptions built by hand is checked here.
+    if !(opts.alpha_min >= 0.0 && opts.alpha_min.is_finite()) || opts.max_terms == 0 {
+        return Err(Error::param(
+            "path options",
+            "alpha_min must be a finite number >= 0 and max_terms at least 1",
+        ));
+    }
     let begun = match begin(engine, y, weights, opts.method)? {
         Ok(b) => b,
         Err(done) => return Ok(done),

@@ -1137,7 +1137,10 @@ pub fn fit_initial_state(
 ) -> Vec<f64> {
     let w = window.min(t.len());
     let n = model.n_state();
-    if w < 2 || guess.len() != n {
+    let shaped = ys.len() == model.n_outputs()
+        && us.len() == model.n_inputs()
+        && ys.iter().chain(us).all(|c| c.len() >= w);
+    if w < 2 || guess.len() != n || !shaped {
         return guess.to_vec();
     }
     let scale: Vec<f64> = ys
