@@ -222,7 +222,13 @@ fn refinement_runs_of_the_wrong_shape_are_an_error() {
     };
     for bad in [short, no_input] {
         assert!(free_run_nrmse(&model, std::slice::from_ref(&bad)).is_err());
-        assert!(refine_gated(&model, &[good.clone()], &[bad], &RefineOptions::default()).is_err());
+        assert!(refine_gated(
+            &model,
+            std::slice::from_ref(&good),
+            &[bad],
+            &RefineOptions::default()
+        )
+        .is_err());
     }
     let reg = ctsid::regression::Regression::builder()
         .degree(2)
