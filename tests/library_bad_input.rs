@@ -236,3 +236,13 @@ fn refinement_runs_of_the_wrong_shape_are_an_error() {
         .build();
     assert!(reg.is_err());
 }
+
+#[test]
+fn plant_excitation_and_dataset_sizes_are_checked() {
+    let mut p = ctsid::plants::Plant::mimo();
+    p.excitation.u_bar = -1.0;
+    assert!(ctsid::plants::dataset(&p, 1, 100, 1e-3, 0.0, 0).is_err());
+    let p = ctsid::plants::Plant::mimo();
+    let e = ctsid::plants::dataset(&p, 1 << 20, 1 << 20, 1e-3, 0.0, 0).unwrap_err();
+    assert!(e.to_string().contains("MiB"), "{e}");
+}

@@ -44,6 +44,30 @@ impl ExcitationConfig {
         }
     }
 
+    /// Checks the settings (the fields are public): a positive saturation level, a bounded
+    /// bandwidth (the saturation corners are searched at a step set by it), finite gain and
+    /// offset.
+    pub fn check(&self) -> crate::Result<()> {
+        let ok = self.u_bar > 0.0
+            && self.u_bar.is_finite()
+            && self.mu >= 0.0
+            && self.w_max > 0.0
+            && self.w_max + self.mu <= 1e6
+            && self.gain.is_finite()
+            && self.offset.is_finite();
+        if ok {
+            Ok(())
+        } else {
+            Err(crate::Error::param(
+                "excitation",
+                format!(
+                    "u_bar {:?}, mu {:?}, w_max {:?}, gain {:?}, offset {:?}: need u_bar > 0, mu >= 0, 0 < w_max, w_max + mu <= 1e6 rad/s, finite gain and offset",
+                    self.u_bar, self.mu, self.w_max, self.gain, self.offset
+                ),
+            ))
+        }
+    }
+
     /// Draws one signal from `rng`.
     pub fn draw(&self, rng: &mut Rng) -> Excitation {
         let mut a = Vec::with_capacity(self.n_b);

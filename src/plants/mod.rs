@@ -209,6 +209,16 @@ pub fn dataset(
     seed: u64,
 ) -> Result<Vec<Run>> {
     crate::records::check_tau(tau)?;
+    plant.excitation.check()?;
+    // Each run holds its states and outputs: refuse sizes that cannot be allocated.
+    if n_runs.saturating_mul(n_samples) > 1 << 30 {
+        return Err(Error::TooLarge {
+            what: format!("{n_runs} runs x {n_samples} samples"),
+            needed_mib: (n_runs as f64) * (n_samples as f64) * 8.0 / 1048576.0,
+            budget_mib: (1u64 << 30) as f64 * 8.0 / 1048576.0,
+            hint: "generate fewer or shorter runs".into(),
+        });
+    }
     if n_samples < 2 {
         return Err(Error::param("n_samples", "need at least 2 samples per run"));
     }
