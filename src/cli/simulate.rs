@@ -20,6 +20,7 @@ use ctsid::simulate::{
     SimOptions,
 };
 use ctsid::Result;
+use rayon::prelude::*;
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
@@ -74,12 +75,16 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         "RMS",
         "NRMSE %"
     )?;
-    for run in &rs.runs {
+    let window = args.init_window.max(initial_window(
+        compiled.orders().iter().copied().max().unwrap_or(1),
+    ));
+    // One run's simulated outputs (runs are independent: simulated in parallel).
+    let simulate_run = |run: &ctsid::records::Run| -> Result<Vec<Vec<f64>>> {
         let id = &run.id;
         // Time since the run's start: the model is time invariant, and stamps far from zero
         // (Unix time) would leave the integrator a few digits of resolution.
         let t: Vec<f64> = (0..run.len()).map(|k| k as f64 * rs.tau).collect();
-        let ys: Vec<Vec<f64>> = run.channels[..n_out].to_vec();
+        let ys = &run.channels[..n_out];
         let us: Vec<Vec<f64>> = run.channels[n_out..].to_vec();
         let mut x0 = Vec::with_capacity(compiled.n_state());
         for (i, o) in model.outputs.iter().enumerate() {
@@ -95,27 +100,32 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             run: id.clone(),
             ..Default::default()
         };
-        let window = args.init_window.max(initial_window(
-            compiled.orders().iter().copied().max().unwrap_or(1),
-        ));
-        let x0 = fit_initial_state(&compiled, &t, &ys, &us, &x0, window, &opts);
+        let x0 = fit_initial_state(&compiled, &t, ys, &us, &x0, window, &opts);
         let traj = simulate_model(&compiled, &x0, &t, &us, &opts)?;
-        let mut per_run = Vec::with_capacity(n_out);
-        for (i, o) in model.outputs.iter().enumerate() {
-            let sim = traj.series(compiled.offset(i));
-            let (rms, nrmse) = rms_nrmse(&sim, &ys[i]);
-            outln!(
-                "{:<12} {:<12} {:>14.6e} {:>10.4}",
-                id,
-                o.name,
-                rms,
-                100.0 * nrmse
-            )?;
-            pooled_sim[i].extend_from_slice(&sim);
-            pooled_meas[i].extend_from_slice(&ys[i]);
-            per_run.push(sim);
+        Ok((0..n_out)
+            .map(|i| traj.series(compiled.offset(i)))
+            .collect())
+    };
+    // In chunks, so that rows appear while a long record is still being simulated.
+    let chunk = 2 * rayon::current_num_threads().max(1);
+    for runs in rs.runs.chunks(chunk) {
+        let results: Vec<Result<Vec<Vec<f64>>>> = runs.par_iter().map(simulate_run).collect();
+        for (run, per_run) in runs.iter().zip(results) {
+            let per_run = per_run?;
+            for (i, o) in model.outputs.iter().enumerate() {
+                let (rms, nrmse) = rms_nrmse(&per_run[i], &run.channels[i]);
+                outln!(
+                    "{:<12} {:<12} {:>14.6e} {:>10.4}",
+                    run.id,
+                    o.name,
+                    rms,
+                    100.0 * nrmse
+                )?;
+                pooled_sim[i].extend_from_slice(&per_run[i]);
+                pooled_meas[i].extend_from_slice(&run.channels[i]);
+            }
+            simulated.push(per_run);
         }
-        simulated.push(per_run);
     }
     for (i, o) in model.outputs.iter().enumerate() {
         let (rms, nrmse) = rms_nrmse(&pooled_sim[i], &pooled_meas[i]);
