@@ -588,8 +588,13 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
             if !norm.is_finite() {
                 return StepOutcome::NoConvergence;
             }
-            // Converged well below the tolerance: Newton error cannot pollute the estimate.
-            if norm < 1e-3 {
+            // Converged well below the tolerance: Newton error cannot pollute the estimate. A
+            // correction that no longer shrinks but is a few hundredths of the tolerance is
+            // round-off (a stiff mode times a state near zero, whose tolerance is the absolute
+            // one): accepting it is what RADAU5's test does (fnewt ~ 0.02); the step's error
+            // estimate still judges the result.
+            let stalled = _iter >= 1 && norm >= 0.5 * prev_norm && norm < 0.02;
+            if norm < 1e-3 || stalled {
                 let mut x1 = vec![0.0; n];
                 for k in 0..n {
                     x1[k] = x0[k] + z[2 * n + k];
