@@ -269,7 +269,7 @@ fn a_stiff_stable_model_is_simulated_not_called_divergent() {
         &model,
         &x0,
         &t,
-        &[u.clone()],
+        std::slice::from_ref(&u),
         &ctsid::simulate::SimOptions::default(),
     )
     .unwrap();
