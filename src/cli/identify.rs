@@ -119,17 +119,23 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             "p98",
             "p99",
             "p100",
+            "free-run p95",
+            "free-run p100",
             "selected",
         ]);
+        let cell = |v: f64| {
+            if v.is_finite() {
+                format!("{v:.4}")
+            } else {
+                "-".into()
+            }
+        };
         for c in &rep.candidates {
             let mut row = vec![c.order.to_string(), c.n_terms.to_string()];
-            row.extend(c.validation.0.iter().map(|v| {
-                if v.is_finite() {
-                    format!("{v:.4}")
-                } else {
-                    "-".into()
-                }
-            }));
+            row.extend(c.validation.0.iter().map(|&v| cell(v)));
+            let sim = c.simulation.as_ref();
+            row.push(sim.map_or("-".into(), |s| cell(s.p95())));
+            row.push(sim.map_or("-".into(), |s| cell(s.p100())));
             row.push(if c.order == rep.order {
                 "<-".into()
             } else {
@@ -138,6 +144,9 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             t.row(row);
         }
         text += &format!("## Output '{}': order {} ({} samples, {} left out for uncertain labels; engine {})\n\n{}\n    {}\n\n", rep.name, rep.order, rep.samples_used, rep.samples_excluded, rep.engine, t.markdown(), rep.equation);
+        if rep.candidates.iter().any(|c| c.simulation.is_some()) {
+            text += "The eta-rule chose on the free-run profiles (simulation on held-out runs); the derivative-domain validation profiles are shown beside them.\n\n";
+        }
         if rep
             .candidates
             .iter()

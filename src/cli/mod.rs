@@ -51,7 +51,7 @@ pub enum Command {
     Simulate(simulate::SimulateArgs),
     /// Score the derivative method on the shared test signals against the reference anchors.
     ScoreDerivatives(score::ScoreArgs),
-    /// Sparse polynomial regression of a label column on feature columns (LARS / LassoLars + eBIC).
+    /// Sparse polynomial regression of a label column on feature columns (LARS / LassoLars / forward OLS + eBIC).
     Regress(regress::RegressArgs),
     /// Find missing physics: compare a nominal model with runs, name, gate and add effects.
     Discover(discover::DiscoverArgs),

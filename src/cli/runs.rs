@@ -9,8 +9,8 @@ use ctsid::Result;
 /// How samples are timed: a sampling period, or a time column it is read from.
 #[derive(Args, Debug)]
 pub struct SamplingArgs {
-    /// Sampling period in seconds (default: from --time-column; `simulate` falls back to the
-    /// model's tau).
+    /// Sampling period in seconds (default: from --time-column; for `simulate`, the model's tau
+    /// when neither is given).
     #[arg(long)]
     pub tau: Option<f64>,
     /// Time column in seconds: strictly increasing and uniform within each run.
