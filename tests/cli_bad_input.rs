@@ -40,6 +40,22 @@ fn fails(args: &[&str], needles: &[&str]) -> String {
     err
 }
 
+/// `ctsid simulate ARGS`, which must succeed: its pooled NRMSE in percent (the "all" row).
+fn simulated_nrmse(args: &[&str]) -> f64 {
+    let out = run(&[&["simulate"], args].concat());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    text.lines()
+        .find(|l| l.starts_with("all"))
+        .and_then(|l| l.split_whitespace().last())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no 'all' row in:\n{text}"))
+}
+
 /// `run,t,u,y` with two runs of 300 samples, tau 0.01: y = sin(t + r) + 0.1 u, u = cos(3 t).
 fn good_csv() -> String {
     let mut s = String::from("run,t,u,y\n");
@@ -446,28 +462,8 @@ fn large_signals_are_not_called_divergent() {
         s += &format!("0,1e13,{}\n", 1e13 * (1.0 - (-t).exp()));
     }
     let data = file("lag.csv", &s);
-    let out = run(&[
-        "simulate",
-        &model,
-        &data,
-        "--run-column",
-        "run",
-        "--tau",
-        "0.01",
-    ]);
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let nrmse: f64 = text
-        .lines()
-        .find(|l| l.starts_with("all"))
-        .and_then(|l| l.split_whitespace().last())
-        .and_then(|v| v.parse().ok())
-        .unwrap();
-    assert!(nrmse < 0.1, "NRMSE {nrmse} %\n{text}");
+    let nrmse = simulated_nrmse(&[&model, &data, "--run-column", "run", "--tau", "0.01"]);
+    assert!(nrmse < 0.1, "NRMSE {nrmse} %");
 }
 
 #[test]
@@ -558,27 +554,7 @@ fn pipes_hard_links_and_far_time_stamps() {
         "lag2.json",
         r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":2}]}]}"#,
     );
-    let out = run(&[
-        "simulate",
-        &model,
-        &unix,
-        "--run-column",
-        "run",
-        "--time-column",
-        "t",
-    ]);
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let nrmse: f64 = text
-        .lines()
-        .find(|l| l.starts_with("all"))
-        .and_then(|l| l.split_whitespace().last())
-        .and_then(|v| v.parse().ok())
-        .unwrap();
+    let nrmse = simulated_nrmse(&[&model, &unix, "--run-column", "run", "--time-column", "t"]);
     assert!(nrmse < 1e-3, "NRMSE {nrmse} %");
 }
 
