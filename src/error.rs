@@ -34,7 +34,7 @@ pub enum Error {
         value: String,
     },
 
-    #[error("{path}: row {row}, column '{column}': {value:e} is too large in magnitude to compute with (limit 1e150); rescale the column, e.g. to other units")]
+    #[error("{path}: row {row}, column '{column}': {value:e} is too large in magnitude to compute with (limit {:e}); rescale the column, e.g. to other units", crate::records::MAX_MAGNITUDE)]
     ValueTooLarge {
         path: String,
         row: usize,
@@ -62,7 +62,7 @@ pub enum Error {
         tau: f64,
     },
 
-    #[error("tau must be a number of seconds between 1e-12 and 1e9, got {0:?}")]
+    #[error("tau must be a number of seconds between {min:e} and {max:e}, got {0:?}", min = crate::records::TAU_MIN, max = crate::records::TAU_MAX)]
     InvalidTau(f64),
 
     #[error("--tau {given:?} disagrees with the time column '{column}' (step {from_time:?}); drop --tau or fix it")]

@@ -40,5 +40,6 @@ pub mod records;
 pub mod regression;
 pub mod report;
 pub mod simulate;
+mod util;
 
 pub use error::{Error, Result};

@@ -162,20 +162,10 @@ pub fn differentiate_runs(
                 what: format!("derivatives up to order {max_order}"),
             });
         }
-        if let Some(i) = y.iter().position(|v| !v.is_finite()) {
+        if let Some(i) = crate::records::first_unusable(y) {
             return Err(Error::InvalidData(format!(
-                "run {r}, sample {i} is not a finite number ({})",
-                y[i]
-            )));
-        }
-        if let Some(i) = y
-            .iter()
-            .position(|v| v.abs() >= crate::records::MAX_MAGNITUDE)
-        {
-            return Err(Error::InvalidData(format!(
-                "run {r}, sample {i}: {:e} is too large in magnitude to compute with (limit {:e}); rescale the signal",
-                y[i],
-                crate::records::MAX_MAGNITUDE
+                "run {r}, sample {i}: {}",
+                crate::records::unusable_reason(y[i])
             )));
         }
     }
@@ -197,12 +187,7 @@ pub fn differentiate_runs(
             format!("{:?}; give a damping in [1e-3, 1e3]", opts.end_lambda),
         ));
     }
-    if !(opts.smooth_window.is_finite() && opts.smooth_window >= 0.0) {
-        return Err(Error::param(
-            "smooth_window",
-            format!("{}; give a finite number >= 0", opts.smooth_window),
-        ));
-    }
+    crate::util::finite_nonneg("smooth_window", opts.smooth_window)?;
 
     let means: Vec<f64> = runs
         .iter()
@@ -342,8 +327,6 @@ pub fn differentiate_runs(
                 d.sigma[k][i] = (second[k][i] - mu * mu).max(0.0).sqrt();
             }
         }
-        d.noise_sd = fit.sigma2.sqrt();
-        d.h = h;
     }
     Ok(out)
 }

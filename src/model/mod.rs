@@ -444,13 +444,7 @@ impl Model {
             )));
         }
         if let Some(tau) = self.tau {
-            if crate::records::check_tau(tau).is_err() {
-                return Err(err(format!(
-                    "tau must be a number of seconds between {:e} and {:e}, got {tau:?}",
-                    crate::records::TAU_MIN,
-                    crate::records::TAU_MAX
-                )));
-            }
+            crate::records::check_tau(tau).map_err(|e| err(e.to_string()))?;
         }
         if self.outputs.is_empty() {
             return Err(err("no outputs".into()));

@@ -13,6 +13,23 @@ use std::path::Path;
 /// Relative tolerance on the sampling period.
 pub const TAU_RTOL: f64 = 1e-6;
 
+/// The first sample that is not a finite number below [`MAX_MAGNITUDE`] in magnitude (one test
+/// for NaN, infinities and values too large to square).
+pub fn first_unusable(v: &[f64]) -> Option<usize> {
+    v.iter().position(|x| !(x.abs() < MAX_MAGNITUDE))
+}
+
+/// What is wrong with an unusable sample (see [`first_unusable`]), for messages.
+pub fn unusable_reason(v: f64) -> String {
+    if v.is_finite() {
+        format!(
+            "{v:e} is too large in magnitude to compute with (limit {MAX_MAGNITUDE:e}); rescale it"
+        )
+    } else {
+        format!("{v} is not a finite number")
+    }
+}
+
 /// Largest magnitude a sample may have: its square must stay finite in f64 (overflow at 1.8e308).
 /// Higher powers, in polynomial features, are checked where a regression chooses the precision
 /// of its sweeps (f64 on the CPU when f32 monomials would overflow).
@@ -63,14 +80,11 @@ impl RecordSet {
     /// Builds a record set from in-memory runs (validated like a file).
     pub fn new(tau: f64, channel_names: Vec<String>, runs: Vec<Run>) -> Result<RecordSet> {
         check_tau(tau)?;
-        if let Some((i, name)) = channel_names
-            .iter()
-            .enumerate()
-            .find(|(i, n)| channel_names[..*i].contains(n))
-        {
+        if let Some((_, j)) = crate::util::first_repeat(&channel_names) {
             return Err(Error::InvalidData(format!(
-                "channel '{name}' is named twice (channel {})",
-                i + 1
+                "channel '{}' is named twice (channel {})",
+                channel_names[j],
+                j + 1
             )));
         }
         for r in &runs {
@@ -92,16 +106,12 @@ impl RecordSet {
                         ch.len()
                     )));
                 }
-                if let Some(i) = ch.iter().position(|v| !v.is_finite()) {
+                if let Some(i) = first_unusable(ch) {
                     return Err(Error::InvalidData(format!(
-                        "run '{}': channel '{}' sample {i} is not a finite number ({})",
-                        r.id, channel_names[c], ch[i]
-                    )));
-                }
-                if let Some(i) = ch.iter().position(|v| v.abs() >= MAX_MAGNITUDE) {
-                    return Err(Error::InvalidData(format!(
-                        "run '{}': channel '{}' sample {i} is {:e}, too large in magnitude to compute with (limit {MAX_MAGNITUDE:e}); rescale it",
-                        r.id, channel_names[c], ch[i]
+                        "run '{}': channel '{}' sample {i}: {}",
+                        r.id,
+                        channel_names[c],
+                        unusable_reason(ch[i])
                     )));
                 }
             }
@@ -243,14 +253,14 @@ impl RecordSet {
         let mut index: std::collections::HashMap<String, usize> = Default::default();
         let parse = |s: &str, row: usize, col: &str| -> Result<f64> {
             match s.parse::<f64>() {
+                Ok(v) if first_unusable(&[v]).is_none() => Ok(v),
                 // Squares and low powers of larger values overflow f64.
-                Ok(v) if v.is_finite() && v.abs() >= MAX_MAGNITUDE => Err(Error::ValueTooLarge {
+                Ok(v) if v.is_finite() => Err(Error::ValueTooLarge {
                     path: label.into(),
                     row,
                     column: col.into(),
                     value: v,
                 }),
-                Ok(v) if v.is_finite() => Ok(v),
                 _ => Err(Error::NonFinite {
                     path: label.into(),
                     row,
@@ -341,9 +351,7 @@ impl RecordSet {
                     let step = r.times[w] - r.times[w - 1];
                     // Compare absolute times with the grid, so slow drift is caught too.
                     let expect = r.times[0] + w as f64 * median;
-                    if (step - median).abs() > tol
-                        && (r.times[w] - expect).abs() > tol * (w as f64).max(1.0)
-                    {
+                    if (step - median).abs() > tol && (r.times[w] - expect).abs() > tol * w as f64 {
                         return Err(Error::TimeNonUniform {
                             path: label.into(),
                             row: r.rows[w],
@@ -383,7 +391,6 @@ struct Acc {
 /// The record set from the grouped runs, once tau is settled.
 fn finish(tau: Option<f64>, runs: Vec<Acc>, spec: &CsvSpec) -> Result<RecordSet> {
     let tau = tau.ok_or(Error::MissingTau)?;
-    check_tau(tau)?;
     let runs = runs
         .into_iter()
         .map(|a| Run {
@@ -393,11 +400,7 @@ fn finish(tau: Option<f64>, runs: Vec<Acc>, spec: &CsvSpec) -> Result<RecordSet>
             rows: a.rows,
         })
         .collect();
-    Ok(RecordSet {
-        tau,
-        channel_names: spec.columns.clone(),
-        runs,
-    })
+    RecordSet::new(tau, spec.columns.clone(), runs)
 }
 
 /// Sampling periods outside [TAU_MIN, TAU_MAX] seconds are refused: beyond them the powers of
