@@ -70,7 +70,8 @@ pub fn cost(r: &[f64]) -> f64 {
 
 /// Minimises the problem from `theta`: the final parameters and cost, or `None` when the
 /// residuals cannot be evaluated at the start or the damping settings are degenerate (a
-/// non-positive `lambda0` or `lambda_min`, `shrink` outside (0, 1), an infinite `lambda_max`).
+/// non-positive `lambda0` or `lambda_min`, `shrink` outside (0, 1), an infinite `lambda_max` or
+/// one below `lambda0`).
 pub fn minimize(
     p: &dyn LeastSquares,
     mut theta: Vec<f64>,

@@ -142,6 +142,18 @@ pub struct Basis {
     parents: Vec<u32>,
 }
 
+/// A model or basis degree a user may ask for: 1..=[`MAX_DEGREE`] (0 leaves only the constant).
+pub fn check_degree(degree: usize) -> Result<()> {
+    if (1..=MAX_DEGREE).contains(&degree) {
+        Ok(())
+    } else {
+        Err(Error::param(
+            "degree",
+            format!("{degree} is outside 1..={MAX_DEGREE}"),
+        ))
+    }
+}
+
 impl Basis {
     /// Enumerates the basis, refusing sizes beyond `limits` before allocating.
     pub fn new(names: &[String], degree: usize, limits: BasisLimits) -> Result<Basis> {
@@ -161,16 +173,12 @@ impl Basis {
                 format!("{degree}; at most {MAX_DEGREE} is supported"),
             ));
         }
-        if let Some((i, name)) = names
-            .iter()
-            .enumerate()
-            .find(|(i, a)| names[..*i].contains(a))
-        {
-            let first = names.iter().position(|a| a == name).unwrap_or(0);
+        if let Some((first, i)) = crate::util::first_repeat(names) {
             return Err(Error::param(
                 "features",
                 format!(
-                    "'{name}' is named twice (positions {} and {})",
+                    "'{}' is named twice (positions {} and {})",
+                    names[i],
                     first + 1,
                     i + 1
                 ),

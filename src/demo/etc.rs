@@ -13,7 +13,7 @@ use crate::identify::{identify, profile::Profile, Identification, Orders, Settin
 use crate::plants::{dataset, Plant, ThrottlePreset};
 use crate::regression::EngineChoice;
 use crate::report::{svg, write_file, Table};
-use crate::{Error, Result};
+use crate::Result;
 use std::fmt::Write;
 use std::path::PathBuf;
 
@@ -62,15 +62,10 @@ fn prof_cells(p: &Profile) -> Vec<String> {
 /// Runs the experiment; returns the report text (also printed by the CLI).
 pub fn run(o: &EtcOptions) -> Result<String> {
     // Settings are checked before the minutes of simulation and fitting, not after.
-    super::check_noise(o.noise)?;
-    super::check_degree(o.degree)?;
+    crate::util::finite_nonneg("noise", o.noise)?;
+    crate::basis::check_degree(o.degree)?;
     super::check_runs(o.train, o.runs)?;
-    if !(o.patm.is_finite() && o.patm >= 0.0) {
-        return Err(Error::param(
-            "patm",
-            format!("{:?}; give a pressure in Pa, >= 0", o.patm),
-        ));
-    }
+    crate::util::finite_nonneg("patm", o.patm)?;
     let t_all = std::time::Instant::now();
     let plant = if o.physical {
         Plant::throttle(ThrottlePreset::Physical)
@@ -232,7 +227,7 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         // (same runs, same order-3 derivatives, same fit and refinement): no need to repeat it.
         let id = if d == o.degree && id_noisy.outputs[0].order == 3 {
             id_noisy.clone()
-        } else if let Some(done) = if d == 1 { d1.take() } else { None } {
+        } else if let Some(done) = d1.take_if(|_| d == 1) {
             done?
         } else {
             fixed(d, &runs)?

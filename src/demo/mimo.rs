@@ -46,10 +46,10 @@ impl Default for MimoOptions {
 }
 
 pub fn run(o: &MimoOptions) -> Result<String> {
-    super::check_noise(o.noise)?;
+    crate::util::finite_nonneg("noise", o.noise)?;
     super::check_runs(o.train, o.runs)?;
     for &d in &o.degrees {
-        super::check_degree(d)?;
+        crate::basis::check_degree(d)?;
     }
     let plant = Plant::mimo();
     let inputs = plant.input_names();

@@ -131,30 +131,6 @@ pub fn coefficient_errors(
     (rows, extra)
 }
 
-/// A demonstration's noise level eta: finite and >= 0.
-fn check_noise(noise: f64) -> Result<()> {
-    if noise.is_finite() && noise >= 0.0 {
-        Ok(())
-    } else {
-        Err(Error::param(
-            "noise",
-            format!("{noise:?}; give a level >= 0, e.g. 0.03"),
-        ))
-    }
-}
-
-/// A demonstration's basis degree: 1..=MAX_DEGREE.
-fn check_degree(degree: usize) -> Result<()> {
-    if (1..=crate::basis::MAX_DEGREE).contains(&degree) {
-        Ok(())
-    } else {
-        Err(Error::param(
-            "degree",
-            format!("{degree} is outside 1..={}", crate::basis::MAX_DEGREE),
-        ))
-    }
-}
-
 /// A demonstration's split: at least one training and one test run.
 fn check_runs(train: usize, runs: usize) -> Result<()> {
     if train >= 1 && train < runs {

@@ -36,11 +36,12 @@ enum Fun {
     Relu,
 }
 
-/// A parsed expression over a fixed list of variable names.
-/// Longest expression, in tokens, and deepest nesting of parentheses or signs.
+/// Longest expression, in tokens, and deepest nesting of parentheses, calls or signs: parsing
+/// and evaluation recurse along both, so they bound the stack an expression can take.
 const MAX_TOKENS: usize = 2000;
 const MAX_NESTING: usize = 64;
 
+/// A parsed expression over a fixed list of variable names.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Expr {
     text: String,
@@ -51,44 +52,16 @@ impl Expr {
     /// Parses `text` over `vars` (the names of the entries of `z` in [`Expr::eval`]).
     pub fn parse(text: &str, vars: &[String]) -> Result<Expr> {
         let toks = lex(text)?;
-        // Parsing and evaluation recurse along the nesting: bound it (and the length) so that
-        // no expression can exhaust the stack.
-        let too = |what: String| {
-            let shown: String = text.trim().chars().take(40).collect();
-            let more = if text.trim().chars().count() > 40 {
-                "..."
-            } else {
-                ""
-            };
-            Error::param("expression", format!("'{shown}{more}': {what}"))
-        };
-        if toks.len() > MAX_TOKENS {
-            return Err(too(format!("longer than {MAX_TOKENS} tokens")));
-        }
-        let (mut depth, mut deepest, mut signs, mut most_signs) = (0usize, 0usize, 0usize, 0usize);
-        for t in &toks {
-            match t {
-                Tok::Op('(') => depth += 1,
-                Tok::Op(')') => depth = depth.saturating_sub(1),
-                _ => {}
-            }
-            signs = if matches!(t, Tok::Op('-') | Tok::Op('+')) {
-                signs + 1
-            } else {
-                0
-            };
-            deepest = deepest.max(depth);
-            most_signs = most_signs.max(signs);
-        }
-        if deepest > MAX_NESTING || most_signs > MAX_NESTING {
-            return Err(too(format!("nested more than {MAX_NESTING} levels deep")));
-        }
         let mut p = Parser {
             toks,
             pos: 0,
             vars,
             text,
+            depth: 0,
         };
+        if p.toks.len() > MAX_TOKENS {
+            return Err(p.err(&format!("longer than {MAX_TOKENS} tokens")));
+        }
         let root = p.expr()?;
         if p.pos != p.toks.len() {
             return Err(p.err("unexpected text after the end of the expression"));
@@ -265,14 +238,30 @@ struct Parser<'a> {
     pos: usize,
     vars: &'a [String],
     text: &'a str,
+    /// Current nesting of parentheses, calls and signs (bounded by MAX_NESTING).
+    depth: usize,
 }
 
 impl Parser<'_> {
     fn err(&self, what: &str) -> Error {
+        // Long texts are cut: the message stays one readable line.
+        let text = self.text.trim();
+        let shown: String = text.chars().take(60).collect();
+        let more = if text.chars().count() > 60 { "..." } else { "" };
         Error::param(
             "expression",
-            format!("'{}': {what} (at token {})", self.text, self.pos + 1),
+            format!("'{shown}{more}': {what} (at token {})", self.pos + 1),
         )
+    }
+    /// Parses one nesting level deeper with `f`, refusing to go past MAX_NESTING.
+    fn nested(&mut self, f: impl FnOnce(&mut Self) -> Result<Node>) -> Result<Node> {
+        if self.depth >= MAX_NESTING {
+            return Err(self.err(&format!("nested more than {MAX_NESTING} levels deep")));
+        }
+        self.depth += 1;
+        let r = f(self);
+        self.depth -= 1;
+        r
     }
     fn peek_op(&self, ops: &str) -> Option<char> {
         match self.toks.get(self.pos) {
@@ -309,11 +298,11 @@ impl Parser<'_> {
     fn unary(&mut self) -> Result<Node> {
         if self.peek_op("-").is_some() {
             self.pos += 1;
-            return Ok(Node::Neg(Box::new(self.unary()?)));
+            return self.nested(|p| Ok(Node::Neg(Box::new(p.unary()?))));
         }
         if self.peek_op("+").is_some() {
             self.pos += 1;
-            return self.unary();
+            return self.nested(|p| p.unary());
         }
         self.power()
     }
@@ -348,7 +337,7 @@ impl Parser<'_> {
             }
             Some(Tok::Op('(')) => {
                 self.pos += 1;
-                let e = self.expr()?;
+                let e = self.nested(|p| p.expr())?;
                 if self.peek_op(")").is_none() {
                     return Err(self.err("missing ')'"));
                 }
@@ -375,7 +364,7 @@ impl Parser<'_> {
                         }
                     };
                     self.pos += 1;
-                    let e = self.expr()?;
+                    let e = self.nested(|p| p.expr())?;
                     if self.peek_op(")").is_none() {
                         return Err(self.err("missing ')'"));
                     }

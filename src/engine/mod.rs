@@ -49,13 +49,11 @@ impl Features {
                 names[0]
             )));
         }
-        let f = Features {
+        Ok(Features {
             n_samples,
             names,
             data: columns.concat(),
-        };
-        f.check()?;
-        Ok(f)
+        })
     }
 
     /// The shape the engines rely on (the fields are public: a value built by hand is checked

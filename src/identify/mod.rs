@@ -71,6 +71,9 @@ pub const LABEL_FLOOR: f64 = 1.0;
 
 /// Samples used to refine each simulated run's initial state.
 pub const INIT_WINDOW: usize = 200;
+
+/// Highest order an identification searches or fits (its derivatives go one order higher).
+pub const MAX_ORDER: usize = 6;
 use profile::{eta_rule, Profile};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -152,42 +155,33 @@ impl Settings {
         if self.outputs.is_empty() {
             return Err(Error::param("output", "name at least one output"));
         }
-        let mut all: Vec<&String> = self.outputs.iter().chain(&self.inputs).collect();
-        all.sort();
-        if let Some(w) = all.windows(2).find(|w| w[0] == w[1]) {
+        let all: Vec<&String> = self.outputs.iter().chain(&self.inputs).collect();
+        if let Some((_, j)) = crate::util::first_repeat(&all) {
             return Err(Error::param(
                 "channels",
-                format!("'{}' is named twice", w[0]),
+                format!("'{}' is named twice", all[j]),
             ));
         }
-        if !(self.label_floor.is_finite() && self.label_floor >= 0.0) {
+        crate::util::finite_nonneg("label_floor", self.label_floor)?;
+        let (c, name) = match &self.orders {
+            Orders::Search(c) => (c, "orders"),
+            Orders::Fixed(c) => (c, "order"),
+        };
+        if c.is_empty() {
+            return Err(Error::param(name, "no candidate order"));
+        }
+        if let Some(o) = c.iter().find(|&&o| o == 0 || o > MAX_ORDER) {
             return Err(Error::param(
-                "label_floor",
-                format!("{}; give a finite number >= 0", self.label_floor),
+                name,
+                format!("order {o} is outside 1..={MAX_ORDER}"),
             ));
         }
-        match &self.orders {
-            Orders::Search(c) if c.is_empty() => {
-                return Err(Error::param("orders", "no candidate order"))
-            }
-            Orders::Search(c) | Orders::Fixed(c) => {
-                if let Orders::Search(_) = &self.orders {
-                    let twice = c.iter().enumerate().find(|(i, o)| c[..*i].contains(o));
-                    if let Some((_, o)) = twice {
-                        return Err(Error::param("orders", format!("order {o} is listed twice")));
-                    }
-                }
-                if let Some(o) = c.iter().find(|&&o| o == 0 || o > 6) {
-                    let name = if matches!(self.orders, Orders::Fixed(_)) {
-                        "order"
-                    } else {
-                        "orders"
-                    };
-                    return Err(Error::param(
-                        name,
-                        format!("order {o} is outside 1..=6 (identification goes up to 6)"),
-                    ));
-                }
+        if let Orders::Search(c) = &self.orders {
+            if let Some((_, j)) = crate::util::first_repeat(c) {
+                return Err(Error::param(
+                    "orders",
+                    format!("order {} is listed twice", c[j]),
+                ));
             }
         }
         if let Orders::Fixed(c) = &self.orders {
@@ -208,16 +202,7 @@ impl Settings {
                 format!("{:?}; give a finite number >= 1", self.eta),
             ));
         }
-        if self.degree == 0 || self.degree > crate::basis::MAX_DEGREE {
-            return Err(Error::param(
-                "degree",
-                format!(
-                    "{} is outside 1..={}",
-                    self.degree,
-                    crate::basis::MAX_DEGREE
-                ),
-            ));
-        }
+        crate::basis::check_degree(self.degree)?;
         Ok(())
     }
 

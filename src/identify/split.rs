@@ -100,16 +100,7 @@ impl Split {
             test,
         };
         split.check(ids.len())?;
-        let Split {
-            train,
-            validation,
-            test,
-        } = split;
-        let groups: [(&str, &[usize]); 3] = [
-            ("train", &train),
-            ("validation", validation.as_deref().unwrap_or(&[])),
-            ("test", &test),
-        ];
+        let groups = split.lists();
         for (a, (na, la)) in groups.iter().enumerate() {
             for (nb, lb) in groups.iter().skip(a + 1) {
                 if let Some(r) = la.iter().find(|r| lb.contains(r)) {
@@ -122,30 +113,29 @@ impl Split {
                     ));
                 }
             }
-            let mut seen = std::collections::HashSet::new();
-            if let Some(r) = la.iter().find(|r| !seen.insert(**r)) {
+            if let Some((_, j)) = crate::util::first_repeat(la) {
                 return Err(Error::param(
                     *na,
-                    format!("run '{}' is listed twice", ids[*r]),
+                    format!("run '{}' is listed twice", ids[la[j]]),
                 ));
             }
         }
-        Ok(Split {
-            train,
-            validation,
-            test,
-        })
+        Ok(split)
+    }
+
+    /// The three lists by name (no validation runs: an empty one).
+    fn lists(&self) -> [(&'static str, &[usize]); 3] {
+        [
+            ("train", &self.train),
+            ("validation", self.validation.as_deref().unwrap_or(&[])),
+            ("test", &self.test),
+        ]
     }
 
     /// Every index names one of `n_runs` runs (the fields are public: a split built by hand is
     /// checked again where it is used).
     pub fn check(&self, n_runs: usize) -> Result<()> {
-        let lists = [
-            ("train", self.train.as_slice()),
-            ("validation", self.validation.as_deref().unwrap_or(&[])),
-            ("test", self.test.as_slice()),
-        ];
-        for (name, list) in lists {
+        for (name, list) in self.lists() {
             if let Some(r) = list.iter().find(|&&r| r >= n_runs) {
                 return Err(Error::param(
                     name,

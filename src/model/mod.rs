@@ -170,6 +170,15 @@ pub struct Model {
     pub extra: Map<String, Value>,
 }
 
+/// `y_d0` is another name of output `y` itself: the one name of a variable, so that monomials
+/// written either way compare equal.
+fn canonical_var<'a>(name: &'a str, outputs: &[String]) -> &'a str {
+    match name.strip_suffix("_d0") {
+        Some(base) if outputs.iter().any(|o| o == base) => base,
+        _ => name,
+    }
+}
+
 /// Name of the k-th derivative of output `y`: `y` for k = 0, else `y_dk`.
 pub fn derivative_name(output: &str, k: usize) -> String {
     if k == 0 {
@@ -310,15 +319,9 @@ impl Model {
                 "unknown format \"{format}\"; this version reads \"{FORMAT}\""
             )));
         }
-        // `y_d0` is another name of output `y` itself; stored as `y`, so that one variable has one
-        // name everywhere (monomials compare equal, discover's expressions know it).
+        // Stored under the canonical name, so that discover's expressions know it.
         let output_names: Vec<String> = raw.outputs.iter().map(|o| o.name.clone()).collect();
-        let canonical = |name: String| -> String {
-            match name.strip_suffix("_d0") {
-                Some(base) if output_names.iter().any(|o| o == base) => base.to_string(),
-                _ => name,
-            }
-        };
+        let canonical = |name: String| canonical_var(&name, &output_names).to_string();
         let mut outputs = Vec::with_capacity(raw.outputs.len());
         for o in raw.outputs {
             let Some(raw_terms) = o.terms else {
@@ -357,7 +360,8 @@ impl Model {
                     }
                 }
                 for (name, v) in pairs {
-                    let e = v.as_u64().filter(|&e| e <= MAX_EXPONENT as u64).ok_or_else(|| {
+                    // The range is validate_at's; here only what a u32 can hold.
+                    let e = v.as_u64().and_then(|e| u32::try_from(e).ok()).ok_or_else(|| {
                         err(format!(
                             "output '{}', term {}: exponent of '{name}' is {v}; exponents must be integers in 0..={MAX_EXPONENT}",
                             o.name,
@@ -365,7 +369,7 @@ impl Model {
                         ))
                     })?;
                     if e > 0 {
-                        exponents.insert(name, e as u32);
+                        exponents.insert(name, e);
                     }
                 }
                 terms.push(Term {
@@ -464,10 +468,16 @@ impl Model {
             }
             // Two terms with one monomial add up, but a file that says so is almost surely a
             // slip (and a million copies would only slow every evaluation).
-            let mut seen: std::collections::HashMap<&BTreeMap<String, u32>, usize> =
+            let outputs: Vec<String> = self.outputs.iter().map(|o| o.name.clone()).collect();
+            let mut seen: std::collections::HashMap<BTreeMap<&str, u32>, usize> =
                 Default::default();
             for (k, t) in o.terms.iter().enumerate() {
-                if let Some(first) = seen.insert(&t.exponents, k) {
+                let mono = t
+                    .exponents
+                    .iter()
+                    .map(|(v, &e)| (canonical_var(v, &outputs), e))
+                    .collect();
+                if let Some(first) = seen.insert(mono, k) {
                     return Err(err(format!(
                         "output '{}': terms {} and {} have the same monomial {}; combine them into one",
                         o.name,

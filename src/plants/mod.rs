@@ -198,6 +198,9 @@ pub fn truth_options(run: usize) -> SimOptions {
     }
 }
 
+/// Most samples (runs x samples per run) a generated dataset may have.
+pub const MAX_DATASET_SAMPLES: usize = 1 << 30;
+
 /// Generates `n_runs` runs of `n_samples` samples at `tau` from rest, with noise level `noise`
 /// (the paper's eta, e.g. 0.03 for 3 %), deterministically from `seed`.
 pub fn dataset(
@@ -211,23 +214,18 @@ pub fn dataset(
     crate::records::check_tau(tau)?;
     plant.excitation.check()?;
     // Each run holds its states and outputs: refuse sizes that cannot be allocated.
-    if n_runs.saturating_mul(n_samples) > 1 << 30 {
+    if n_runs.saturating_mul(n_samples) > MAX_DATASET_SAMPLES {
         return Err(Error::TooLarge {
             what: format!("{n_runs} runs x {n_samples} samples"),
             needed_mib: (n_runs as f64) * (n_samples as f64) * 8.0 / 1048576.0,
-            budget_mib: (1u64 << 30) as f64 * 8.0 / 1048576.0,
+            budget_mib: MAX_DATASET_SAMPLES as f64 * 8.0 / 1048576.0,
             hint: "generate fewer or shorter runs".into(),
         });
     }
     if n_samples < 2 {
         return Err(Error::param("n_samples", "need at least 2 samples per run"));
     }
-    if !(noise.is_finite() && noise >= 0.0) {
-        return Err(Error::param(
-            "noise",
-            format!("must be a non-negative number, got {noise}"),
-        ));
-    }
+    crate::util::finite_nonneg("noise", noise)?;
     let t: Vec<f64> = (0..n_samples).map(|k| k as f64 * tau).collect();
     let n_in = plant.input_names().len();
     let n_out = plant.output_names().len();

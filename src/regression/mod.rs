@@ -165,25 +165,7 @@ impl RegressionBuilder {
 
     /// Checks every setting; the error names the first bad one.
     pub fn build(self) -> Result<Regression> {
-        if self.degree == 0 {
-            return Err(Error::param(
-                "degree",
-                format!(
-                    "0 leaves only the constant; give 1..={}",
-                    crate::basis::MAX_DEGREE
-                ),
-            ));
-        }
-        if self.degree > crate::basis::MAX_DEGREE {
-            return Err(Error::param(
-                "degree",
-                format!(
-                    "{} is above the maximum {}",
-                    self.degree,
-                    crate::basis::MAX_DEGREE
-                ),
-            ));
-        }
+        crate::basis::check_degree(self.degree)?;
         if self.max_terms == 0 {
             return Err(Error::param("max_terms", "must be at least 1"));
         }
@@ -198,16 +180,7 @@ impl RegressionBuilder {
         if self.max_steps == Some(0) {
             return Err(Error::param("max_steps", "must be at least 1"));
         }
-        let finite_nonneg = |name: &str, v: f64| {
-            if v.is_finite() && v >= 0.0 {
-                Ok(())
-            } else {
-                Err(Error::param(
-                    name,
-                    format!("{v} must be a finite number >= 0"),
-                ))
-            }
-        };
+        use crate::util::finite_nonneg;
         finite_nonneg("alpha_min", self.alpha_min)?;
         finite_nonneg("epsilon", self.epsilon)?;
         finite_nonneg("rss_floor", self.rss_floor)?;
@@ -485,11 +458,13 @@ impl Regression {
                 self.degree
             ));
         }
-        if decision.kind == EngineKind::Gpu && !f32_safe && self.engine == EngineChoice::Gpu {
+        // An explicit request for f32 (the GPU, or CPU f32) is refused rather than overflowed.
+        let f32_asked = self.engine == EngineChoice::Gpu || self.precision == Some(Precision::F32);
+        if !f32_safe && f32_asked {
             return Err(Error::param(
                 "engine",
                 format!(
-                    "the GPU sweeps in f32, and features up to {largest:.1e} at degree {} overflow it; rescale the features or use the CPU engine",
+                    "f32 sweeps were asked for (GPU or f32 precision), and features up to {largest:.1e} at degree {} overflow them; rescale the features or use the CPU engine in f64",
                     self.degree
                 ),
             ));
@@ -516,6 +491,7 @@ impl Regression {
             None if f32_safe => Precision::F32,
             None => Precision::F64,
         };
+
         let mut engine = CpuEngine::new(
             &basis,
             features,
