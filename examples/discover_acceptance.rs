@@ -26,6 +26,8 @@ fn main() {
         let mut pass = 0;
         let mut ratios = Vec::new();
         let mut truth_ratios = Vec::new();
+        // Largest time-invariance z among the named effects (the figure behind DRIFT_Z).
+        let mut max_z = f64::NAN;
         for seed in 0..seeds {
             let t = std::time::Instant::now();
             let case = match generate_scaled(name, seed, eta, scale) {
@@ -49,6 +51,9 @@ fn main() {
                     pass += ok as usize;
                     ratios.push(d.nrmse_before / d.nrmse_after.max(1e-300));
                     truth_ratios.push(j.truth_ratio);
+                    for e in &d.effects {
+                        max_z = max_z.max(e.halves_z);
+                    }
                     let extra = d
                         .closest
                         .clone()
@@ -82,7 +87,7 @@ fn main() {
         let (med, min) = med_min(ratios);
         let (tmed, tmin) = med_min(truth_ratios);
         summary.push(format!(
-            "{name}: {pass}/{seeds} pass; test NRMSE before/after vs truth median {tmed:.2}x, min {tmin:.2}x; vs measurement median {med:.2}x, min {min:.2}x"
+            "{name}: {pass}/{seeds} pass; test NRMSE before/after vs truth median {tmed:.2}x, min {tmin:.2}x; vs measurement median {med:.2}x, min {min:.2}x; named effects' largest over-time z {max_z:.1}"
         ));
     }
     println!("\n== acceptance at eta = {eta} ==");

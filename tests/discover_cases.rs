@@ -176,7 +176,7 @@ fn stribeck_hump_beside_coulomb_at_high_noise_is_left_out() {
 }
 
 /// A slow sensor drift (a ramp in the measured y) at 1 % noise: an offset force fits the residual
-/// and would pass the other gates (it did in 7 of 10 seeds), but its coefficient on the first
+/// and would pass the other gates, but its coefficient on the first
 /// half of the runs differs from the second by several standard deviations: nothing is added.
 #[test]
 fn sensor_drift_at_low_noise_is_not_named_an_offset() {
@@ -220,8 +220,14 @@ fn a_user_effect_the_data_cannot_carry_is_an_error_not_a_silent_omission() {
             .to_string();
         assert!(e.contains(needle), "'{name}={expr}': {e}");
     }
-    // A user effect the data do carry is a candidate like any other.
-    let mut o = base.clone();
-    o.user_effects = vec![("dead_zone".into(), "relu(abs(y)-0.1)*sign(y)".into())];
-    discover(&case.records, &case.nominal, &o).unwrap();
+    // A user effect the data do carry is a candidate like any other, one that switches only
+    // now and then (a step at y = 0.3) included.
+    for (name, expr) in [
+        ("dead_zone", "relu(abs(y)-0.1)*sign(y)"),
+        ("step", "sign(y-0.3)"),
+    ] {
+        let mut o = base.clone();
+        o.user_effects = vec![(name.into(), expr.into())];
+        discover(&case.records, &case.nominal, &o).unwrap();
+    }
 }

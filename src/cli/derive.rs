@@ -48,10 +48,7 @@ pub fn run(a: DeriveArgs) -> Result<()> {
         .sampling
         .spec(vec![a.column.clone()], a.run_column.clone(), None);
     let rs = RecordSet::from_csv(&a.input, &spec)?;
-    rs.require_min_len(
-        ctsid::derivatives::min_samples(a.order),
-        &format!("derivatives up to order {}", a.order),
-    )?;
+    rs.require_derivable(a.order)?;
     let runs: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[0].as_slice()).collect();
     let opts = DerivativeOptions::default();
     let ders = if a.per_run_tuning {

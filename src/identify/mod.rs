@@ -648,10 +648,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         rs.require_varies(c, &split.train, "input")?;
     }
     let max_order = settings.max_order();
-    rs.require_min_len(
-        crate::derivatives::min_samples(max_order),
-        &format!("derivatives up to order {max_order}"),
-    )?;
+    rs.require_derivable(max_order)?;
     let say = |msg: String| {
         if settings.progress {
             eprintln!("{msg}");

@@ -16,7 +16,8 @@ pub const TAU_RTOL: f64 = 1e-6;
 /// The first sample that is not a finite number below [`MAX_MAGNITUDE`] in magnitude (one test
 /// for NaN, infinities and values too large to square).
 pub fn first_unusable(v: &[f64]) -> Option<usize> {
-    v.iter().position(|x| x.is_nan() || x.abs() >= MAX_MAGNITUDE)
+    v.iter()
+        .position(|x| x.is_nan() || x.abs() >= MAX_MAGNITUDE)
 }
 
 /// What is wrong with an unusable sample (see [`first_unusable`]), for messages.
@@ -163,6 +164,14 @@ impl RecordSet {
             )));
         }
         Ok(())
+    }
+
+    /// Refuses any run too short for derivatives up to `order` (named by its id).
+    pub fn require_derivable(&self, order: usize) -> Result<()> {
+        self.require_min_len(
+            crate::derivatives::min_samples(order),
+            &format!("derivatives up to order {order}"),
+        )
     }
 
     /// Refuses any run shorter than `min` samples, naming `what` needs them.
