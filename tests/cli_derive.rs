@@ -1,26 +1,12 @@
 //! The `derive` subcommand end to end: output columns, row order across interleaved runs, and
 //! one-line errors with a non-zero exit for bad input.
 
-use std::process::Command;
+mod common;
 
-fn ctsid(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ctsid"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
+use common::cli::ctsid;
 
 fn temp(name: &str, text: &str) -> String {
-    let dir = std::env::temp_dir().join(format!("ctsid-cli-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let p = dir.join(name);
-    std::fs::write(&p, text).unwrap();
-    p.display().to_string()
+    common::cli::temp_file("cli", name, text)
 }
 
 #[test]

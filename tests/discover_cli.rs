@@ -1,21 +1,10 @@
 //! `ctsid discover` end to end on a generated case: explicit run lists are honoured (the same
 //! verdict as the library call with that split), overlapping or unknown lists are one-line errors.
 
-use ctsid::discover::{cases, discover, Options};
-use std::process::Command;
+mod common;
 
-fn ctsid(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ctsid"))
-        .args(args)
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
+use common::cli::ctsid;
+use ctsid::discover::{cases, discover, Options};
 
 #[test]
 fn discover_cli_uses_the_given_split() {

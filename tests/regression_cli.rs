@@ -1,6 +1,8 @@
 //! `ctsid regress` end to end: equation, JSON model, one-line errors.
 
-use std::process::Command;
+mod common;
+
+use common::cli::ctsid;
 
 fn dir() -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!("ctsid-regress-cli-{}", std::process::id()));
@@ -25,18 +27,6 @@ fn write_csv(path: &std::path::Path, bad_row: Option<usize>) {
         }
     }
     std::fs::write(path, s).unwrap();
-}
-
-fn ctsid(args: &[&str]) -> (bool, String, String) {
-    let o = Command::new(env!("CARGO_BIN_EXE_ctsid"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        o.status.success(),
-        String::from_utf8_lossy(&o.stdout).into(),
-        String::from_utf8_lossy(&o.stderr).into(),
-    )
 }
 
 #[test]

@@ -1,7 +1,9 @@
 //! `ctsid simulate`: true models reproduce generated data; errors are one line and non-zero.
 
+mod common;
+
+use common::cli::{ctsid, fails, overall_nrmse};
 use std::path::PathBuf;
-use std::process::Command;
 
 use ctsid::plants::{dataset, write_csv, Plant, ThrottlePreset};
 
@@ -9,40 +11,6 @@ fn tmpdir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("ctsid-simcli-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-fn ctsid(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_ctsid"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
-}
-
-/// NRMSE (%) on the `all` line for `output`.
-fn overall_nrmse(stdout: &str, output: &str) -> f64 {
-    let line = stdout
-        .lines()
-        .find(|l| l.split_whitespace().take(2).eq(["all", output]))
-        .expect(stdout);
-    line.split_whitespace().last().unwrap().parse().unwrap()
-}
-
-fn fails_with(args: &[&str], needle: &str) {
-    let (code, _, err) = ctsid(args);
-    assert_ne!(code, 0, "{args:?} succeeded");
-    let lines: Vec<&str> = err.trim_end().lines().collect();
-    assert_eq!(lines.len(), 1, "not one line: {err}");
-    assert!(
-        lines[0].starts_with("error: ") && lines[0].contains(needle),
-        "{:?}: {}",
-        args,
-        lines[0]
-    );
 }
 
 #[test]
@@ -59,7 +27,7 @@ fn true_throttle_model_reproduces_its_data() {
         .write(model.to_str().unwrap())
         .unwrap();
     let sim = d.join("sim.csv");
-    let (code, out, err) = ctsid(&[
+    let (ok, out, err) = ctsid(&[
         "simulate",
         model.to_str().unwrap(),
         data.to_str().unwrap(),
@@ -70,7 +38,7 @@ fn true_throttle_model_reproduces_its_data() {
         "-o",
         sim.to_str().unwrap(),
     ]);
-    assert_eq!(code, 0, "{err}");
+    assert!(ok, "{err}");
     assert!(overall_nrmse(&out, "y") < 0.1, "{out}");
     // y_sim beside the data, close to the truth on every row.
     let mut rdr = csv::Reader::from_path(&sim).unwrap();
@@ -103,7 +71,7 @@ fn true_mimo_model_reproduces_noisy_data() {
         .unwrap();
     let sim = d.join("sim.csv");
     // tau from the model file, no time column.
-    let (code, out, err) = ctsid(&[
+    let (ok, out, err) = ctsid(&[
         "simulate",
         model.to_str().unwrap(),
         data.to_str().unwrap(),
@@ -112,7 +80,7 @@ fn true_mimo_model_reproduces_noisy_data() {
         "-o",
         sim.to_str().unwrap(),
     ]);
-    assert_eq!(code, 0, "{err}");
+    assert!(ok, "{err}");
     // Against the truth (the measured output carries 3 % noise): NRMSE of y_sim vs y_true.
     let mut rdr = csv::Reader::from_path(&sim).unwrap();
     let h = rdr.headers().unwrap().clone();
@@ -171,13 +139,13 @@ fn errors_are_one_line() {
     std::fs::write(&data, &s).unwrap();
     let (m, dp) = (model.to_str().unwrap(), data.to_str().unwrap());
     // Works as a baseline.
-    let (code, _, err) = ctsid(&["simulate", m, dp, "--run-column", "run"]);
-    assert_eq!(code, 0, "{err}");
-    fails_with(
+    let (ok, _, err) = ctsid(&["simulate", m, dp, "--run-column", "run"]);
+    assert!(ok, "{err}");
+    fails(
         &["simulate", m, dp, "--run-column", "batch"],
-        "no column named 'batch'",
+        &["no column named 'batch'"],
     );
-    fails_with(
+    fails(
         &[
             "simulate",
             m,
@@ -187,35 +155,35 @@ fn errors_are_one_line() {
             "--time-column",
             "time",
         ],
-        "no column named 'time'",
+        &["no column named 'time'"],
     );
     // Missing output / input columns.
     let nod = d.join("noy.csv");
     std::fs::write(&nod, "run,u\n0,1\n").unwrap();
-    fails_with(
+    fails(
         &["simulate", m, nod.to_str().unwrap(), "--run-column", "run"],
-        "no column named 'y'",
+        &["no column named 'y'"],
     );
     // Model file that does not parse, or names unknown variables.
     let bad = d.join("bad.json");
     std::fs::write(&bad, "{\"format\": \"ctsid-model/1\", \"inputs\": [").unwrap();
-    fails_with(
+    fails(
         &["simulate", bad.to_str().unwrap(), dp, "--run-column", "run"],
-        "model file",
+        &["model file"],
     );
     std::fs::write(
         &bad,
         r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"w":1},"coefficient":1}]}]}"#,
     )
     .unwrap();
-    fails_with(
+    fails(
         &["simulate", bad.to_str().unwrap(), dp, "--run-column", "run"],
-        "unknown variable 'w'",
+        &["unknown variable 'w'"],
     );
     // Too-short run.
     let short = d.join("short.csv");
     std::fs::write(&short, "run,u,y\n0,1,0\n0,1,0\n0,1,0\n").unwrap();
-    fails_with(
+    fails(
         &[
             "simulate",
             m,
@@ -223,14 +191,14 @@ fn errors_are_one_line() {
             "--run-column",
             "run",
         ],
-        "needs at least",
+        &["needs at least"],
     );
     // Non-numeric value, named by row and column.
     let nan = d.join("nan.csv");
     std::fs::write(&nan, s.replacen("0,0,1,0\n", "0,0,1,abc\n", 1)).unwrap();
-    fails_with(
+    fails(
         &["simulate", m, nan.to_str().unwrap(), "--run-column", "run"],
-        "row 2, column 'y'",
+        &["row 2, column 'y'"],
     );
     // No tau anywhere.
     let notau = d.join("notau.json");
@@ -241,7 +209,7 @@ fn errors_are_one_line() {
             .replace("\"tau\":0.01,", ""),
     )
     .unwrap();
-    fails_with(
+    fails(
         &[
             "simulate",
             notau.to_str().unwrap(),
@@ -249,11 +217,11 @@ fn errors_are_one_line() {
             "--run-column",
             "run",
         ],
-        "--tau",
+        &["--tau"],
     );
-    fails_with(
+    fails(
         &["simulate", m, dp, "--run-column", "run", "--tau=-1"],
-        "tau",
+        &["tau"],
     );
     std::fs::remove_dir_all(&d).ok();
 }
