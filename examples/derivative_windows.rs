@@ -2,7 +2,8 @@
 //! (`DerivativeOptions::smooth_window`, default 6): trimmed p95 on the shared signals at 0 (no
 //! smoother level), 2 and 6, and the rows that meet every gate of the derivative issue.
 //!
-//! `cargo run --release --example derivative_windows [-- SIGNALS_DIR]`
+//! `cargo run --release --example derivative_windows [-- SIGNALS_DIR]` (default: the repository's
+//! copy, tests/data/signals, identical to ../shared/signals)
 use ctsid::derivatives::benchmark::{gates_pass, run_with};
 use ctsid::derivatives::DerivativeOptions;
 use std::path::PathBuf;
@@ -11,7 +12,9 @@ fn main() {
     let dir = std::env::args()
         .nth(1)
         .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from("../shared/signals"));
+        .unwrap_or_else(|| {
+            PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/signals"))
+        });
     let settings = [0.0, 2.0, 6.0];
     let results: Vec<_> = settings
         .iter()

@@ -2,13 +2,15 @@
 //! For every signal and noise level, this draws R fresh realisations of the same noise model
 //! (the paper's: y + L * p99(|y|) * N(0,1), seeded) on the exact signal and prints, per order
 //! 1..4, the median and the 10-90 % range of our trimmed p95 and full p100 across them, beside
-//! our score on the shared realisation and the anchor for that cell. A gate the shared
+//! our score on the shared realisation and the gate for that cell. A gate the shared
 //! realisation fails while the median passes is a property of that draw, not of the method;
-//! the anchors themselves are single draws too.
+//! the anchors behind the gates are single draws too.
 //!
-//! `cargo run --release --example derive_realisations -- [R]` (default R = 50; ../shared/signals
-//! or tests/data/signals)
-use ctsid::derivatives::benchmark::{anchors, load_signal, score_one, NOISES, SIGNALS};
+//! `cargo run --release --example derive_realisations -- [R]` (default R = 50);
+//! `... -- swap` instead scores each smooth signal at each level with each shared noise vector's
+//! shape (rescaled to that level): order 1, trimmed p95. The signals are the repository's copy
+//! (tests/data/signals, identical to ../shared/signals).
+use ctsid::derivatives::benchmark::{gates, load_signal, score_one, NOISES, SIGNALS};
 use ctsid::derivatives::differentiate;
 use ctsid::derivatives::score::percentile;
 use ctsid::plants::noise::add_noise;
@@ -16,16 +18,13 @@ use ctsid::plants::rng::Rng;
 use std::path::Path;
 
 fn main() {
-    let r: usize = std::env::args()
-        .nth(1)
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(50);
-    let dir = ["../shared/signals", "tests/data/signals"]
-        .iter()
-        .map(Path::new)
-        .find(|p| p.join("sines.csv").exists())
-        .expect("no signals directory");
-    println!("{r} realisations per cell; median [10 %, 90 %] across them; shared: the shared draw; anchor: the issue's gate value\n");
+    let arg = std::env::args().nth(1);
+    let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/signals"));
+    if arg.as_deref() == Some("swap") {
+        return swap(dir);
+    }
+    let r: usize = arg.and_then(|v| v.parse().ok()).unwrap_or(50);
+    println!("{r} realisations per cell; median [10 %, 90 %] across them; shared: the shared draw; gate: the issue's target for the cell\n");
     for name in SIGNALS {
         let sig = load_signal(dir, name).unwrap();
         for (ni, &noise) in NOISES.iter().enumerate() {
@@ -43,20 +42,13 @@ fn main() {
                     p100[o].push(row.full_p100[o]);
                 }
             }
-            let (ml, kal, mlfull) = anchors(name, noise).unwrap();
+            let (gate95, gate100) = gates(name, noise).unwrap();
             for o in 0..4 {
-                let gate95 = if name == "etc_s1" && noise > 1 {
-                    0.5 * ml[o]
-                } else if name == "etc_s1" {
-                    ml[o].min(kal[o])
-                } else {
-                    (0.5 * ml[o]).min(kal[o])
-                };
                 let cell = |v: &[f64], shared: f64, gate: Option<f64>| -> String {
                     let med = percentile(v, 50.0);
                     let share = gate.map_or(String::new(), |g| {
                         let n = v.iter().filter(|x| **x <= g).count();
-                        format!(" anchor {g:.3}, met in {n}/{}", v.len())
+                        format!(" gate {g:.3}, met in {n}/{}", v.len())
                     });
                     format!(
                         "{med:.3} [{:.3}, {:.3}] shared {shared:.3}{share}",
@@ -67,10 +59,37 @@ fn main() {
                 println!(
                     "{name:15} {noise}% order {}  trimmed p95 {} | full p100 {}",
                     o + 1,
-                    cell(&p95[o], shared.trimmed_p95[o], Some(gate95)),
-                    cell(&p100[o], shared.full_p100[o], mlfull.map(|m| m[o]))
+                    cell(&p95[o], shared.trimmed_p95[o], Some(gate95[o])),
+                    cell(&p100[o], shared.full_p100[o], gate100.map(|m| m[o]))
                 );
             }
+        }
+    }
+}
+
+/// Order-1 trimmed p95 at every level with every shared noise vector, rescaled to that level.
+fn swap(dir: &Path) {
+    for name in ["sys3_multisine", "sines", "chirp"] {
+        let sig = load_signal(dir, name).unwrap();
+        for &level in &NOISES {
+            let cells: Vec<String> = NOISES
+                .iter()
+                .map(|&shape| {
+                    let ym = &sig.noisy.iter().find(|(n, _)| *n == shape).unwrap().1;
+                    let scale = level as f64 / shape as f64;
+                    let y: Vec<f64> = ym
+                        .iter()
+                        .zip(&sig.truth[0])
+                        .map(|(m, t)| t + (m - t) * scale)
+                        .collect();
+                    let row = score_one(&sig, &differentiate(&y, sig.tau, 4).unwrap(), level);
+                    format!("{:.3}", row.trimmed_p95[0])
+                })
+                .collect();
+            println!(
+                "{name:15} at {level} % with the shape of the 1/3/5 % vectors: {}",
+                cells.join(" ")
+            );
         }
     }
 }

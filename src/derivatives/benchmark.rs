@@ -203,22 +203,24 @@ pub fn table(rows: &[Row]) -> String {
     s
 }
 
+/// The gates for one (signal, noise %): per order 1..4, the largest trimmed p95 and, where
+/// it applies, the largest full p100. Smooth signals: half of ml-derivatives' and the Kalman
+/// smoother's trimmed p95, ml-derivatives' p100; etc_s1: either anchor at 1 %, half of
+/// ml-derivatives' above.
+pub fn gates(signal: &str, noise: u32) -> Option<([f64; 4], Option<[f64; 4]>)> {
+    let (ml, kal, mlfull) = anchors(signal, noise)?;
+    let p95 = std::array::from_fn(|k| match (signal, noise) {
+        ("etc_s1", 1) => ml[k].min(kal[k]),
+        ("etc_s1", _) => 0.5 * ml[k],
+        _ => (0.5 * ml[k]).min(kal[k]),
+    });
+    Some((p95, mlfull.filter(|_| signal != "etc_s1")))
+}
+
 /// The accuracy gates for one row.
 pub fn gates_pass(r: &Row) -> bool {
-    let Some((ml, kal, mlfull)) = anchors(&r.signal, r.noise) else {
+    let Some((p95, p100)) = gates(&r.signal, r.noise) else {
         return true;
     };
-    (0..4).all(|k| {
-        let t = r.trimmed_p95[k];
-        if r.signal == "etc_s1" {
-            if r.noise == 1 {
-                // No worse than either anchor.
-                t <= ml[k].min(kal[k])
-            } else {
-                t <= 0.5 * ml[k]
-            }
-        } else {
-            t <= 0.5 * ml[k] && t <= kal[k] && mlfull.is_none_or(|f| r.full_p100[k] <= f[k])
-        }
-    })
+    (0..4).all(|k| r.trimmed_p95[k] <= p95[k] && p100.is_none_or(|f| r.full_p100[k] <= f[k]))
 }
