@@ -10,6 +10,32 @@ use std::collections::HashMap;
 use std::io::Write;
 use std::path::Path;
 
+/// Checks, before any work, what [`write_with_columns`] needs: an output (when given) that is
+/// none of the inputs, in a folder that exists; and an input it can read a second time, to copy
+/// its rows (a pipe or a device would give them only once, and the output would lose them).
+/// `what` names the command in the message.
+pub fn check(
+    input: &Path,
+    output: Option<&Path>,
+    other_inputs: &[&Path],
+    what: &str,
+) -> Result<()> {
+    if let Some(o) = output {
+        let mut inputs = vec![input];
+        inputs.extend_from_slice(other_inputs);
+        super::check_output_file(o, &inputs)?;
+    }
+    match std::fs::metadata(input) {
+        Ok(m) if !m.is_file() => Err(Error::Io {
+            path: input.display().to_string(),
+            message: format!(
+                "{what} reads its input twice (to copy its rows): give a regular file, not a pipe or a device"
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// Copies `input` to `output` (standard output when `None`) with the columns `names` appended;
 /// `cell(run, sample, k)` gives column k's text for a row. Extra names that already exist in
 /// the file are refused.

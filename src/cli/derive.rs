@@ -40,10 +40,7 @@ pub fn run(a: DeriveArgs) -> Result<()> {
             ),
         ));
     }
-    if let Some(o) = &a.output {
-        super::check_output_file(o, &[&a.input])?;
-    }
-    super::require_regular_file(&a.input, "derive")?;
+    super::csvout::check(&a.input, a.output.as_deref(), &[], "derive")?;
     let spec = a
         .sampling
         .spec(vec![a.column.clone()], a.run_column.clone(), None);

@@ -51,11 +51,12 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
         super::check_output_dir(d)?;
     }
     let mut conf = BTreeMap::new();
-    for c in &a.confidence {
-        let (t, p) = c
-            .split_once('=')
-            .ok_or_else(|| Error::param("confidence", format!("'{c}': use TERM=PCT")))?;
-        let v = match p.trim() {
+    for (c, (t, p)) in a
+        .confidence
+        .iter()
+        .zip(pairs(&a.confidence, "confidence", "TERM=PCT")?)
+    {
+        let v = match p.as_str() {
             "fixed" => 0.0,
             "approximate" => 1.0,
             s => {
@@ -74,26 +75,12 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
                 v / 100.0
             }
         };
-        if conf.insert(t.trim().to_string(), v).is_some() {
-            return Err(Error::param(
-                "confidence",
-                format!("'{}' is given twice", t.trim()),
-            ));
+        if conf.insert(t.clone(), v).is_some() {
+            return Err(Error::param("confidence", format!("'{t}' is given twice")));
         }
     }
-    let mut user_effects = Vec::new();
-    for e in &a.effect {
-        let (name, ex) = e
-            .split_once('=')
-            .ok_or_else(|| Error::param("effect", format!("'{e}': use NAME=EXPRESSION")))?;
-        if user_effects.iter().any(|(n, _)| n == name.trim()) {
-            return Err(Error::param(
-                "effect",
-                format!("'{}' is given twice", name.trim()),
-            ));
-        }
-        user_effects.push((name.trim().to_string(), ex.trim().to_string()));
-    }
+    let user_effects = pairs(&a.effect, "effect", "NAME=EXPRESSION")?;
+    ctsid::discover::dictionary::check_user_names(&user_effects)?;
     let nominal = Model::read(&a.nominal.to_string_lossy())?;
     let mut columns: Vec<String> = nominal.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(nominal.inputs.iter().cloned());
@@ -111,13 +98,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     }
     // Omitted lists share, in order, the runs no given list names: training half of them,
     // validation a quarter, test the rest (by these weights among the omitted lists only).
-    let named: Vec<usize> = [&given.train, &given.validation, &given.test]
-        .into_iter()
-        .flatten()
-        .flatten()
-        .copied()
-        .collect();
-    let mut rest: Vec<usize> = (0..n).filter(|r| !named.contains(r)).collect();
+    let mut rest = given.unnamed(n);
     let mut lists = [given.train, given.validation, given.test];
     let weights = [2usize, 1, 1];
     let omitted: Vec<usize> = (0..3).filter(|&i| lists[i].is_none()).collect();
@@ -160,4 +141,15 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `KEY=VALUE` arguments as trimmed pairs; `usage` shows the form in the error.
+fn pairs(args: &[String], what: &str, usage: &str) -> Result<Vec<(String, String)>> {
+    args.iter()
+        .map(|a| {
+            a.split_once('=')
+                .map(|(k, v)| (k.trim().to_string(), v.trim().to_string()))
+                .ok_or_else(|| Error::param(what, format!("'{a}': use {usage}")))
+        })
+        .collect()
 }

@@ -96,15 +96,16 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     let rs = RecordSet::from_csv(&a.data, &spec)?;
     let ids: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
     let given = a.split.resolve(&ids)?;
-    let validation = given.validation;
-    let test = given.test.unwrap_or_default();
-    let train = match given.train {
-        Some(t) => t,
-        None => (0..ids.len())
-            .filter(|r| !test.contains(r) && !validation.as_ref().is_some_and(|v| v.contains(r)))
-            .collect(),
-    };
-    let split = Split::new(train, validation, test, &ids)?;
+    let train = given
+        .train
+        .clone()
+        .unwrap_or_else(|| given.unnamed(ids.len()));
+    let split = Split::new(
+        train,
+        given.validation,
+        given.test.unwrap_or_default(),
+        &ids,
+    )?;
     let id = identify(&rs, &split, &s)?;
 
     let mut text = String::new();

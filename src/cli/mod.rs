@@ -111,14 +111,10 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
             )));
         }
     }
-    if let Ok(o) = out.canonicalize() {
-        for i in inputs {
-            if i.canonicalize().is_ok_and(|c| c == o) || same_file(out, i) {
-                return Err(err(
-                    "is also an input file; writing it would destroy the input, so give another output file".into(),
-                ));
-            }
-        }
+    if inputs.iter().any(|i| same_file(out, i)) {
+        return Err(err(
+            "is also an input file; writing it would destroy the input, so give another output file".into(),
+        ));
     }
     Ok(())
 }
@@ -149,7 +145,7 @@ pub fn trimmed(s: &str) -> std::result::Result<String, String> {
     Ok(s.trim().to_string())
 }
 
-/// Whether two paths are one file (hard links included).
+/// Whether two existing paths are one file (hard and symbolic links included).
 #[cfg(unix)]
 fn same_file(a: &Path, b: &Path) -> bool {
     use std::os::unix::fs::MetadataExt;
@@ -160,20 +156,6 @@ fn same_file(a: &Path, b: &Path) -> bool {
 }
 
 #[cfg(not(unix))]
-fn same_file(_: &Path, _: &Path) -> bool {
-    false
-}
-
-/// Commands that copy the input's rows into their output read it twice: refuse a pipe or a
-/// device, which would give its rows only once (the output would silently lose them).
-pub fn require_regular_file(input: &Path, what: &str) -> Result<()> {
-    match std::fs::metadata(input) {
-        Ok(m) if !m.is_file() => Err(Error::Io {
-            path: input.display().to_string(),
-            message: format!(
-                "{what} reads its input twice (to copy its rows): give a regular file, not a pipe or a device"
-            ),
-        }),
-        _ => Ok(()),
-    }
+fn same_file(a: &Path, b: &Path) -> bool {
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
 }

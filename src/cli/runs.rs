@@ -60,6 +60,19 @@ pub struct Given {
     pub test: Option<Vec<usize>>,
 }
 
+impl Given {
+    /// The runs of `0..n` that no given list names (where omitted lists take their runs from).
+    pub fn unnamed(&self, n: usize) -> Vec<usize> {
+        let named = |r: &usize| {
+            [&self.train, &self.validation, &self.test]
+                .into_iter()
+                .flatten()
+                .any(|l| l.contains(r))
+        };
+        (0..n).filter(|r| !named(r)).collect()
+    }
+}
+
 impl SplitArgs {
     pub fn resolve(&self, ids: &[String]) -> Result<Given> {
         let pick = |t: &Option<String>, what: &str| -> Result<Option<Vec<usize>>> {

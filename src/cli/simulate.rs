@@ -43,15 +43,17 @@ pub struct SimulateArgs {
 }
 
 pub fn run(args: SimulateArgs) -> Result<()> {
+    // The data are read twice only to write them out again with -o.
     if let Some(o) = &args.output {
-        super::check_output_file(o.as_ref(), &[args.data.as_ref(), args.model.as_ref()])?;
-        super::require_regular_file(args.data.as_ref(), "simulate -o")?;
+        super::csvout::check(
+            args.data.as_ref(),
+            Some(o.as_ref()),
+            &[args.model.as_ref()],
+            "simulate -o",
+        )?;
     }
     let model = Model::read(&args.model)?;
     let compiled = model.compile()?;
-    if let Some(tau) = args.sampling.tau {
-        ctsid::records::check_tau(tau)?;
-    }
     let mut columns: Vec<String> = model.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(model.inputs.iter().cloned());
     // Without a time column the model's own tau is the sampling period.

@@ -47,6 +47,25 @@ pub fn num(x: f64) -> String {
     }
 }
 
+/// User effects need a name each, and a name once (checked before any data are read by the CLI,
+/// and again by [`build`]).
+pub fn check_user_names(user: &[(String, String)]) -> Result<()> {
+    let names: Vec<&str> = user.iter().map(|(n, _)| n.trim()).collect();
+    if let Some(i) = names.iter().position(|n| n.is_empty()) {
+        return Err(Error::param(
+            "effect",
+            format!("'={}' has no name; write NAME=EXPRESSION", user[i].1),
+        ));
+    }
+    if let Some((_, j)) = crate::util::first_repeat(&names) {
+        return Err(Error::param(
+            "effect",
+            format!("'{}' is given twice", names[j]),
+        ));
+    }
+    Ok(())
+}
+
 /// Builds the dictionary for an output of order `order` over `vars` (the `order` state names
 /// first, then the inputs), leaving out monomials already in the nominal model
 /// (`nominal_monomials`, as exponent lists over `vars`).
@@ -140,22 +159,14 @@ pub fn build(
         add("polynomial", txt);
     }
     let built_in = list.len();
+    check_user_names(user)?;
     for (name, e) in user {
         let name = name.trim();
-        if name.is_empty() {
-            return Err(Error::param(
-                "effect",
-                format!("'={e}' has no name; write NAME=EXPRESSION"),
-            ));
-        }
         if list[..built_in].iter().any(|(f, _)| f == name) {
             return Err(Error::param(
                 "effect",
                 format!("'{name}' is the name of a built-in effect; choose another"),
             ));
-        }
-        if list[built_in..].iter().any(|(f, _)| f == name) {
-            return Err(Error::param("effect", format!("'{name}' is given twice")));
         }
         list.push((name.to_string(), e.clone()));
     }
