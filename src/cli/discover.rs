@@ -17,11 +17,13 @@ pub struct DiscoverArgs {
     /// The nominal model file (ctsid-model/1, one output).
     #[arg(long)]
     pub nominal: PathBuf,
-    /// Run (experiment) id column.
+    /// Run (experiment) id column (without it the file is one run: cut it with --segment).
     #[arg(long)]
-    pub run_column: String,
+    pub run_column: Option<String>,
     #[command(flatten)]
     pub sampling: super::runs::SamplingArgs,
+    #[command(flatten)]
+    pub segment: super::runs::SegmentArgs,
     /// Omitted lists: training = the first half of the runs, validation = the next quarter,
     /// test = the rest (of the runs no given list names).
     #[command(flatten)]
@@ -81,11 +83,12 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     }
     let user_effects = pairs(&a.effect, "effect", "NAME=EXPRESSION")?;
     ctsid::discover::dictionary::check_user_names(&user_effects)?;
+    a.segment.check()?;
     let nominal = Model::read(&a.nominal.to_string_lossy())?;
     let mut columns: Vec<String> = nominal.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(nominal.inputs.iter().cloned());
-    let spec = a.sampling.spec(columns, Some(a.run_column.clone()), None);
-    let rs = RecordSet::from_csv(&a.data, &spec)?;
+    let spec = a.sampling.spec(columns, a.run_column.clone(), None);
+    let rs = a.segment.apply(RecordSet::from_csv(&a.data, &spec)?)?;
     let names: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
     let n = names.len();
     let given = a.split.resolve(&names)?;
@@ -93,7 +96,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     if n < 3 && (sp.train.is_none() || sp.validation.is_none() || sp.test.is_none()) {
         return Err(Error::param(
             "split",
-            format!("{n} runs; give --train, --validation and --test explicitly (one run each at least)"),
+            format!("{n} run(s); give --train, --validation and --test explicitly (one run each at least), or cut long runs into pieces with --segment SECONDS"),
         ));
     }
     // Omitted lists share, in order, the runs no given list names: training half of them,
@@ -126,7 +129,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     o.seed = a.seed;
     o.confidence = conf;
     o.user_effects = user_effects;
-    let d = discover(&rs, &nominal, &o)?;
+    let d = discover(&rs, &nominal, &o).map_err(|e| a.segment.explain(e))?;
     out!("{}", d.text())?;
     if let Some(p) = &a.output_model {
         d.augmented_model(&nominal)?.write(&p.to_string_lossy())?;

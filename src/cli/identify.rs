@@ -28,6 +28,8 @@ pub struct IdentifyArgs {
     /// 5-fold over the training runs; no test runs.
     #[command(flatten)]
     pub split: super::runs::SplitArgs,
+    #[command(flatten)]
+    pub segment: super::runs::SegmentArgs,
     /// Candidate orders searched with the eta-rule, like `1..4` or `1,2,3`.
     #[arg(long, default_value = "1..4", conflicts_with = "order")]
     pub orders: String,
@@ -90,10 +92,11 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     s.method = a.method.into();
     s.progress = super::show_progress(a.quiet);
     s.validate()?;
+    a.segment.check()?;
     let mut columns = a.output.clone();
     columns.extend(a.input.iter().cloned());
     let spec = a.sampling.spec(columns, a.run_column.clone(), None);
-    let rs = RecordSet::from_csv(&a.data, &spec)?;
+    let rs = a.segment.apply(RecordSet::from_csv(&a.data, &spec)?)?;
     let ids: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
     let given = a.split.resolve(&ids)?;
     let train = given
@@ -106,7 +109,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         given.test.unwrap_or_default(),
         &ids,
     )?;
-    let id = identify(&rs, &split, &s)?;
+    let id = identify(&rs, &split, &s).map_err(|e| a.segment.explain(e))?;
 
     let mut text = String::new();
     for rep in &id.outputs {

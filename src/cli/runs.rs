@@ -3,8 +3,8 @@
 
 use clap::Args;
 use ctsid::identify::split::{parse_list, resolve};
-use ctsid::records::CsvSpec;
-use ctsid::Result;
+use ctsid::records::{CsvSpec, RecordSet};
+use ctsid::{Error, Result};
 
 /// How samples are timed: a sampling period, or a time column it is read from.
 #[derive(Args, Debug)]
@@ -85,5 +85,68 @@ impl SplitArgs {
             validation: pick(&self.validation, "validation")?,
             test: pick(&self.test, "test")?,
         })
+    }
+}
+
+/// Long runs cut into pieces that count as runs (`RecordSet::segmented`).
+#[derive(Args, Debug)]
+pub struct SegmentArgs {
+    /// Cut every run into consecutive pieces of this many seconds, each then a run of its own (a
+    /// remainder shorter than half a piece joins the last): a file of one run gives runs 0, 1,
+    /// ..., several runs give RUN#0, RUN#1, ..., and a list naming RUN takes all its pieces.
+    #[arg(long, value_name = "SECONDS")]
+    pub segment: Option<f64>,
+}
+
+impl SegmentArgs {
+    /// Checks the length before any data are read.
+    pub fn check(&self) -> Result<()> {
+        match self.segment {
+            Some(s) if !(s.is_finite() && s > 0.0) => Err(Error::param(
+                "segment",
+                format!("{s} s; give the length of a piece in seconds, > 0"),
+            )),
+            _ => Ok(()),
+        }
+    }
+
+    /// The record set cut into pieces (unchanged without --segment).
+    pub fn apply(&self, rs: RecordSet) -> Result<RecordSet> {
+        let Some(s) = self.segment else {
+            return Ok(rs);
+        };
+        let len = (s / rs.tau).round();
+        if len < 2.0 {
+            return Err(Error::param(
+                "segment",
+                format!(
+                    "{s} s is less than 2 samples at tau = {} s; give a longer piece",
+                    rs.tau
+                ),
+            ));
+        }
+        rs.segmented(len.min(usize::MAX as f64) as usize)
+    }
+
+    /// A run too short for the method is a piece too short when pieces were cut: the fix is a
+    /// longer --segment, not longer runs.
+    pub fn explain(&self, e: Error) -> Error {
+        match (self.segment, e) {
+            (
+                Some(s),
+                Error::RunTooShort {
+                    run,
+                    len,
+                    min,
+                    what,
+                },
+            ) => Error::param(
+                "segment",
+                format!(
+                    "piece '{run}' of {s} s has {len} samples but {what} needs at least {min}; give a longer --segment"
+                ),
+            ),
+            (_, e) => e,
+        }
     }
 }

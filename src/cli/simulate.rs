@@ -1,4 +1,4 @@
-//! `ctsid simulate MODEL.json DATA.csv --run-column R [--tau T] [--time-column C] [-o SIM.csv]`
+//! `ctsid simulate MODEL.json DATA.csv [--run-column R] [--tau T] [--time-column C] [--segment S] [-o SIM.csv]`
 //!
 //! Simulates every run of a record from an initial state estimated from its first samples, with
 //! the inputs interpolated linearly between samples. The initial state is found in two steps:
@@ -28,11 +28,14 @@ pub struct SimulateArgs {
     pub model: String,
     /// Data file (CSV with a header row).
     pub data: String,
-    /// Column holding the run id; rows with the same id form one run, in file order.
+    /// Column holding the run id; rows with the same id form one run, in file order (without
+    /// it the file is one run).
     #[arg(long)]
-    pub run_column: String,
+    pub run_column: Option<String>,
     #[command(flatten)]
     pub sampling: super::runs::SamplingArgs,
+    #[command(flatten)]
+    pub segment: super::runs::SegmentArgs,
     /// Samples at the start of each run used to estimate its initial state (at least the
     /// local fit's window; the model-based refinement uses all of them).
     #[arg(long, default_value_t = 200)]
@@ -52,6 +55,7 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             "simulate -o",
         )?;
     }
+    args.segment.check()?;
     let model = Model::read(&args.model)?;
     let compiled = model.compile()?;
     let mut columns: Vec<String> = model.outputs.iter().map(|o| o.name.clone()).collect();
@@ -59,8 +63,10 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     // Without a time column the model's own tau is the sampling period.
     let spec = args
         .sampling
-        .spec(columns, Some(args.run_column.clone()), model.tau);
-    let rs = RecordSet::from_csv(&args.data, &spec)?;
+        .spec(columns, args.run_column.clone(), model.tau);
+    let rs = args
+        .segment
+        .apply(RecordSet::from_csv(&args.data, &spec)?)?;
     let n_out = model.outputs.len();
     let sim_names: Vec<String> = model
         .outputs
@@ -113,7 +119,7 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     for runs in rs.runs.chunks(chunk) {
         let results: Vec<Result<Vec<Vec<f64>>>> = runs.par_iter().map(simulate_run).collect();
         for (run, per_run) in runs.iter().zip(results) {
-            let per_run = per_run?;
+            let per_run = per_run.map_err(|e| args.segment.explain(e))?;
             for (i, o) in model.outputs.iter().enumerate() {
                 let (rms, nrmse) = rms_nrmse(&per_run[i], &run.channels[i]);
                 outln!(

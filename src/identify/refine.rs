@@ -643,9 +643,9 @@ pub const GATE_INIT_WINDOW: usize = 200;
 
 /// Free-run simulation error of `model` on `runs`: per output, the root mean square over runs
 /// of the NRMSE (RMS error over the measured output's standard deviation). Each run starts from
-/// its `x0` refined by [`fit_initial_state`] on its first [`GATE_INIT_WINDOW`] samples, as
-/// [`super::simulate_runs`] does, so that two models are compared on equal terms. A run that
-/// diverges makes the error infinite.
+/// its `x0` refined by [`fit_initial_state`] on its first [`GATE_INIT_WINDOW`] samples, as the
+/// identification's test simulation does, so that two models are compared on equal terms. A
+/// run that diverges makes the error infinite.
 pub fn free_run_nrmse(model: &Model, runs: &[RunData]) -> Result<Vec<f64>> {
     let compiled = model.compile()?;
     check_runs(&compiled, runs)?;

@@ -12,6 +12,12 @@ pub fn parse_runs(text: &str) -> Result<Vec<String>> {
 pub fn parse_list(text: &str, what: &str) -> Result<Vec<String>> {
     let mut out = Vec::new();
     for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        // Pieces of a cut run (`RUN#0-4`, see `RecordSet::segmented`) take ranges too.
+        let whole = part;
+        let (prefix, part) = match part.rsplit_once('#') {
+            Some((run, rest)) => (format!("{run}#"), rest),
+            None => (String::new(), part),
+        };
         match part.split_once('-') {
             Some((a, b)) if a.trim().parse::<i64>().is_ok() && b.trim().parse::<i64>().is_ok() => {
                 let (a, b) = (
@@ -21,15 +27,15 @@ pub fn parse_list(text: &str, what: &str) -> Result<Vec<String>> {
                 if b < a {
                     return Err(Error::param(
                         what,
-                        format!("range '{part}' runs backwards; write {b}-{a}"),
+                        format!("range '{whole}' runs backwards; write {prefix}{b}-{a}"),
                     ));
                 }
                 if b - a > 10_000_000 {
-                    return Err(Error::param(what, format!("range '{part}' is too long")));
+                    return Err(Error::param(what, format!("range '{whole}' is too long")));
                 }
-                out.extend((a..=b).map(|i| i.to_string()));
+                out.extend((a..=b).map(|i| format!("{prefix}{i}")));
             }
-            _ => out.push(part.to_string()),
+            _ => out.push(format!("{prefix}{part}")),
         }
     }
     if out.is_empty() {
@@ -38,35 +44,42 @@ pub fn parse_list(text: &str, what: &str) -> Result<Vec<String>> {
     Ok(out)
 }
 
-/// Indices of the named runs in `ids`, with an error naming the first unknown one.
+/// Indices of the named runs in `ids`, with an error naming the first unknown one. A name
+/// that is not an id itself but the run a piece was cut from (`RUN` for `RUN#0`, `RUN#1`, ...:
+/// [`crate::records::RecordSet::segmented`]) names all its pieces.
 pub fn resolve(names: &[String], ids: &[String], what: &str) -> Result<Vec<usize>> {
-    names
-        .iter()
-        .map(|n| {
-            // An exact id first; only then a numeric match ("1" for a run written "01").
-            ids.iter()
-                .position(|id| id == n)
-                .or_else(|| {
-                    ids.iter().position(|id| {
-                        id.parse::<f64>()
-                            .ok()
-                            .zip(n.parse::<f64>().ok())
-                            .is_some_and(|(a, b)| a == b)
-                    })
-                })
-                .ok_or_else(|| {
-                    let shown: Vec<&str> = ids.iter().take(8).map(String::as_str).collect();
-                    Error::param(
-                        what,
-                        format!(
-                            "run '{n}' does not exist (runs are: {}{})",
-                            shown.join(", "),
-                            if ids.len() > 8 { ", ..." } else { "" }
-                        ),
-                    )
-                })
-        })
-        .collect()
+    let mut out = Vec::new();
+    for n in names {
+        // An exact id first; only then a numeric match ("1" for a run written "01").
+        let one = ids.iter().position(|id| id == n).or_else(|| {
+            ids.iter().position(|id| {
+                id.parse::<f64>()
+                    .ok()
+                    .zip(n.parse::<f64>().ok())
+                    .is_some_and(|(a, b)| a == b)
+            })
+        });
+        if let Some(i) = one {
+            out.push(i);
+            continue;
+        }
+        let pieces: Vec<usize> = (0..ids.len())
+            .filter(|&i| ids[i].rsplit_once('#').is_some_and(|(run, _)| run == n))
+            .collect();
+        if pieces.is_empty() {
+            let shown: Vec<&str> = ids.iter().take(8).map(String::as_str).collect();
+            return Err(Error::param(
+                what,
+                format!(
+                    "run '{n}' does not exist (runs are: {}{})",
+                    shown.join(", "),
+                    if ids.len() > 8 { ", ..." } else { "" }
+                ),
+            ));
+        }
+        out.extend(pieces);
+    }
+    Ok(out)
 }
 
 /// A checked split into train, validation (optional: k-fold over train) and test runs.
@@ -193,6 +206,27 @@ mod tests {
         assert_eq!(resolve(&["1.0".into()], &id, "test").unwrap(), [1]);
         let e = parse_list("4-1", "orders").unwrap_err().to_string();
         assert!(e.contains("'orders'"), "{e}");
+    }
+
+    #[test]
+    fn pieces_of_cut_runs_take_ranges_and_their_run_name() {
+        assert_eq!(
+            parse_runs("est#0-2,b#4").unwrap(),
+            ["est#0", "est#1", "est#2", "b#4"]
+        );
+        let e = parse_runs("est#3-1").unwrap_err().to_string();
+        assert!(e.contains("'est#3-1' runs backwards; write est#1-3"), "{e}");
+        let id: Vec<String> = ["est#0", "est#1", "test#0", "test#1"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        // The run a piece was cut from names all its pieces; a piece names itself.
+        assert_eq!(resolve(&["test".into()], &id, "test").unwrap(), [2, 3]);
+        assert_eq!(resolve(&["est#1".into()], &id, "test").unwrap(), [1]);
+        let e = resolve(&["es".into()], &id, "test")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("run 'es' does not exist"), "{e}");
     }
 
     #[test]

@@ -189,6 +189,47 @@ impl RecordSet {
         Ok(())
     }
 
+    /// The runs cut into consecutive pieces of `len` samples, each piece a run of its own.
+    ///
+    /// Most measured records are one long run; identification needs several (folds, a
+    /// validation run, a test run), so a long run is cut where the experiment itself has no
+    /// boundary. A remainder shorter than half a piece joins the last piece (no stub runs); a
+    /// run shorter than `len` stays whole. Pieces are named `0`, `1`, ... when the set has one
+    /// run, `RUN#0`, `RUN#1`, ... otherwise; [`crate::identify::split::resolve`] lets a list name
+    /// `RUN` for all its pieces. Each piece keeps its own start time and CSV rows.
+    pub fn segmented(&self, len: usize) -> Result<RecordSet> {
+        if len < 2 {
+            return Err(Error::param(
+                "segment",
+                format!("{len} samples per piece; give at least 2"),
+            ));
+        }
+        let single = self.runs.len() == 1;
+        let mut runs = Vec::new();
+        for r in &self.runs {
+            let n = r.len();
+            let mut k = (n / len).max(1);
+            if n > k * len && n - k * len >= len.div_ceil(2) {
+                k += 1;
+            }
+            for p in 0..k {
+                let a = p * len;
+                let b = if p + 1 == k { n } else { a + len };
+                runs.push(Run {
+                    id: if single {
+                        p.to_string()
+                    } else {
+                        format!("{}#{p}", r.id)
+                    },
+                    channels: r.channels.iter().map(|c| c[a..b].to_vec()).collect(),
+                    t0: r.t0 + a as f64 * self.tau,
+                    rows: r.rows.get(a..b).map(<[usize]>::to_vec).unwrap_or_default(),
+                });
+            }
+        }
+        RecordSet::new(self.tau, self.channel_names.clone(), runs)
+    }
+
     /// Loads channels from a CSV file with a header row.
     pub fn from_csv(path: impl AsRef<Path>, spec: &CsvSpec) -> Result<RecordSet> {
         let path = path.as_ref();
@@ -441,6 +482,33 @@ mod tests {
             time_column: time.map(Into::into),
             tau,
         }
+    }
+
+    #[test]
+    fn segmented_cuts_runs_into_pieces_that_keep_time_and_rows() {
+        let run = |id: &str, n: usize| Run {
+            id: id.into(),
+            channels: vec![(0..n).map(|i| i as f64).collect()],
+            t0: 10.0,
+            rows: (2..n + 2).collect(),
+        };
+        let one = RecordSet::new(0.5, vec!["y".into()], vec![run("a", 23)]).unwrap();
+        let s = one.segmented(10).unwrap();
+        // 23 = 10 + 13: a remainder of 3 (< half a piece) joins the last piece.
+        let ids: Vec<&str> = s.runs.iter().map(|r| r.id.as_str()).collect();
+        assert_eq!(ids, ["0", "1"]);
+        assert_eq!(s.runs[1].len(), 13);
+        assert_eq!(s.runs[1].channels[0][0], 10.0);
+        assert_eq!(s.runs[1].t0, 15.0);
+        assert_eq!(s.runs[1].rows[0], 12);
+        // A remainder of at least half a piece is a piece; a short run stays whole.
+        let two = RecordSet::new(0.5, vec!["y".into()], vec![run("a", 25), run("b", 4)]).unwrap();
+        let s = two.segmented(10).unwrap();
+        let ids: Vec<&str> = s.runs.iter().map(|r| r.id.as_str()).collect();
+        assert_eq!(ids, ["a#0", "a#1", "a#2", "b#0"]);
+        let lens: Vec<usize> = s.runs.iter().map(Run::len).collect();
+        assert_eq!(lens, [10, 10, 5, 4]);
+        assert!(two.segmented(1).is_err());
     }
 
     #[test]
