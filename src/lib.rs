@@ -17,6 +17,7 @@
 //! | identification | [`identify`] | order search (eta-rule), sigma-weighted fits, test profiles, free-run simulation |
 //! | demonstrations | [`demo`] | the paper's throttle experiment and a MIMO plant, judged against truth |
 //! | missing physics | [`discover`] | a nominal model file; one output; named effect dictionary |
+//! | feedback | [`control`] | one output, one input: observer and state feedback with integral action, pole placement |
 //! | reports | [`report`] | Markdown / CSV tables and SVG plots |
 //! | (shared) Levenberg-Marquardt | [`lm`] | residuals and normal equations from the caller |
 //!
@@ -27,6 +28,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod basis;
+pub mod control;
 pub mod demo;
 pub mod derivatives;
 pub mod discover;

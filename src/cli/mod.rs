@@ -13,6 +13,7 @@ macro_rules! outln {
     ($($t:tt)*) => { $crate::cli::write_stdout(&format!("{}\n", format_args!($($t)*))) };
 }
 
+mod control;
 mod csvout;
 mod demo;
 mod derive;
@@ -55,6 +56,8 @@ pub enum Command {
     Regress(regress::RegressArgs),
     /// Find missing physics: compare a nominal model with runs, name, gate and add effects.
     Discover(discover::DiscoverArgs),
+    /// Observer and state feedback with integral action designed on a model; a setpoint step simulated around a plant.
+    Control(control::ControlArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -66,6 +69,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::ScoreDerivatives(a) => score::run(a),
         Command::Regress(a) => regress::run(a),
         Command::Discover(a) => discover::run(a),
+        Command::Control(a) => control::run(a),
     }
 }
 

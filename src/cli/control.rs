@@ -1,0 +1,210 @@
+//! `ctsid control MODEL.json --setpoint R --from Y0 [--bandwidth W] [--observer-speed F]
+//! [--tau T] [--plant PLANT.json] [--noise SD] [--seed S] [--duration T] [--u-min A --u-max B]
+//! [-o TRACE.csv]`
+//!
+//! Designs an observer and state feedback with integral action on a one-output, one-input model
+//! ([`ctsid::control`]), prints the operating point, the linearisation's poles, the gains and
+//! the placed poles, then runs the digital loop for a setpoint step from rest at `--from` around
+//! the plant (the model itself, or `--plant`, another model file: say the design was made on a
+//! simple model and the plant is a richer one) and prints the step figures. `-o` writes the
+//! trace (t, setpoint, y, measured y, estimates, u).
+
+use clap::Args;
+use ctsid::control::{self, DesignOptions, Scenario};
+use ctsid::model::Model;
+use ctsid::{Error, Result};
+use std::io::Write;
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct ControlArgs {
+    /// Model file (ctsid-model/1, one output and one input) the controller is designed on.
+    pub model: PathBuf,
+    /// The output value to hold.
+    #[arg(long, allow_hyphen_values = true)]
+    pub setpoint: f64,
+    /// The plant starts at rest at this output value.
+    #[arg(long, allow_hyphen_values = true)]
+    pub from: f64,
+    /// Closed-loop bandwidth in rad/s (default: the geometric mean of the open-loop eigenvalue
+    /// magnitudes at the setpoint).
+    #[arg(long)]
+    pub bandwidth: Option<f64>,
+    /// Observer poles at this factor times the bandwidth.
+    #[arg(long, default_value_t = 3.0)]
+    pub observer_speed: f64,
+    /// Controller sampling period in seconds (default: the model's tau).
+    #[arg(long)]
+    pub tau: Option<f64>,
+    /// The plant the loop runs around (default: the model itself).
+    #[arg(long)]
+    pub plant: Option<PathBuf>,
+    /// Standard deviation of the measurement noise.
+    #[arg(long, default_value_t = 0.0)]
+    pub noise: f64,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Simulated time in seconds (default: 15 / bandwidth).
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Input limits (both or neither).
+    #[arg(long, allow_hyphen_values = true, requires = "u_max")]
+    pub u_min: Option<f64>,
+    #[arg(long, allow_hyphen_values = true, requires = "u_min")]
+    pub u_max: Option<f64>,
+    /// Write the loop's trace here (CSV).
+    #[arg(short = 'o', long)]
+    pub output: Option<PathBuf>,
+}
+
+pub fn run(a: ControlArgs) -> Result<()> {
+    let mut inputs = vec![a.model.as_path()];
+    if let Some(p) = &a.plant {
+        inputs.push(p.as_path());
+    }
+    if let Some(o) = &a.output {
+        super::check_output_file(o, &inputs)?;
+    }
+    if !a.from.is_finite() {
+        return Err(Error::param(
+            "from",
+            format!("{}; give a finite value", a.from),
+        ));
+    }
+    let model = Model::read(&a.model.to_string_lossy())?;
+    let tau = a.tau.or(model.tau).ok_or_else(|| {
+        Error::param(
+            "tau",
+            "the model file has no tau; give the controller's sampling period with --tau",
+        )
+    })?;
+    let mut o = DesignOptions::new(a.setpoint, tau);
+    o.bandwidth = a.bandwidth;
+    o.observer_speed = a.observer_speed;
+    let d = control::design(&model, &o)?;
+    let plant_model = match &a.plant {
+        Some(p) => {
+            let m = Model::read(&p.to_string_lossy())?;
+            control::design::siso_order(&m).map_err(|e| match e {
+                Error::InvalidParameter { reason, .. } => Error::param("plant", reason),
+                e => e,
+            })?;
+            m
+        }
+        None => model.clone(),
+    };
+    let compiled = plant_model.compile()?;
+    let u_guess = control::steady_input(&plant_model, a.from).unwrap_or(d.u_star);
+    let (x0, u0) = control::rest_state(&compiled, 0, a.from, u_guess)?;
+    let scenario = Scenario {
+        duration: a.duration.unwrap_or(15.0 / d.bandwidth),
+        noise_sd: a.noise,
+        seed: a.seed,
+        u_limits: a.u_min.zip(a.u_max),
+    };
+    let plant = control::Plant {
+        system: &compiled,
+        output: 0,
+        x0,
+        u0,
+    };
+    let tr = control::run(&d, &plant, &scenario)?;
+    let m = control::metrics(&tr, &d, a.from);
+
+    let y = &d.output;
+    outln!(
+        "# Feedback on {} ({} -> {y}, order {})",
+        a.model.display(),
+        d.input,
+        d.order
+    )?;
+    outln!("")?;
+    outln!(
+        "operating point: {y} = {}, steady {} = {:.6e}",
+        d.setpoint,
+        d.input,
+        d.u_star
+    )?;
+    outln!(
+        "open-loop poles at the setpoint: {}",
+        control::format_poles(&d.open_loop)
+    )?;
+    outln!(
+        "design: bandwidth {:.4} rad/s, tau {} s; controller poles (with integral action): {}",
+        d.bandwidth,
+        d.tau,
+        control::format_poles(&d.closed_loop)
+    )?;
+    outln!("observer poles: {}", control::format_poles(&d.observer))?;
+    let names: Vec<String> = (0..d.order)
+        .map(|k| ctsid::model::derivative_name(y, k))
+        .collect();
+    let gains = |g: &[f64]| {
+        names
+            .iter()
+            .zip(g)
+            .map(|(n, v)| format!("{n} {v:.6e}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    outln!(
+        "gains: u = u* - K (x_hat - x*) - k_i * integral({y} - setpoint); K: {}; k_i {:.6e}",
+        gains(&d.k),
+        d.k_i
+    )?;
+    outln!("observer gains L (on {y} - {y}_hat): {}", gains(&d.l))?;
+    outln!("")?;
+    let plant_name = a
+        .plant
+        .as_ref()
+        .map_or("the model itself".to_string(), |p| p.display().to_string());
+    outln!(
+        "step {} -> {} around {plant_name} (rest input {:.6e}), {} s, noise sd {}:",
+        a.from,
+        a.setpoint,
+        u0,
+        scenario.duration,
+        a.noise
+    )?;
+    outln!(
+        "rise time (10-90 %) {:.4} s, overshoot {:.2} %, settling (2 %) {:.4} s, final error {:.3} % of the step, input {:.4e}..{:.4e}, observer RMS error {:.3e}; largest difference from the designed response {:.2} % of the step",
+        m.rise_time,
+        m.overshoot,
+        m.settling_time,
+        m.final_error,
+        m.u_min,
+        m.u_max,
+        m.observer_rms,
+        m.design_deviation
+    )?;
+    if let Some(path) = &a.output {
+        write_trace(path, &tr, d.setpoint, &names)?;
+        eprintln!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+fn write_trace(path: &PathBuf, tr: &control::Trace, setpoint: f64, names: &[String]) -> Result<()> {
+    let io = |e: std::io::Error| Error::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
+    let mut w = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
+    let hats: Vec<String> = names.iter().map(|n| format!("{n}_hat")).collect();
+    writeln!(w, "t,setpoint,y,y_measured,{},u", hats.join(",")).map_err(io)?;
+    for i in 0..tr.t.len() {
+        let est: Vec<String> = tr.estimate.iter().map(|e| format!("{:e}", e[i])).collect();
+        writeln!(
+            w,
+            "{},{},{:e},{:e},{},{:e}",
+            tr.t[i],
+            setpoint,
+            tr.y[i],
+            tr.y_measured[i],
+            est.join(","),
+            tr.u[i]
+        )
+        .map_err(io)?;
+    }
+    w.flush().map_err(io)
+}

@@ -1,0 +1,311 @@
+//! Operating point, linearisation and pole placement.
+
+use super::Design;
+use crate::error::{Error, Result};
+use crate::model::{CompiledModel, Model};
+use nalgebra::{DMatrix, DVector};
+
+/// Largest model order the design handles (the model file's own limit).
+const MAX_ORDER: usize = 8;
+
+/// What the design needs besides the model.
+#[derive(Debug, Clone)]
+pub struct DesignOptions {
+    /// The output value to hold.
+    pub setpoint: f64,
+    /// Closed-loop bandwidth w in rad/s: the integrator's pole and every open-loop pole slower
+    /// than w go to -w, faster ones to minus their magnitude ([`placed_poles`]); `None`: the
+    /// geometric mean of the open-loop eigenvalue magnitudes at the setpoint, the plant's own
+    /// typical speed.
+    pub bandwidth: Option<f64>,
+    /// Observer poles at -observer_speed * w, or minus the open-loop pole's magnitude where that
+    /// is faster (default 3: fast enough that the observer does not shape the response, slow
+    /// enough that noise is not amplified much more).
+    pub observer_speed: f64,
+    /// Sampling period of the digital controller, in seconds.
+    pub tau: f64,
+}
+
+impl DesignOptions {
+    pub fn new(setpoint: f64, tau: f64) -> DesignOptions {
+        DesignOptions {
+            setpoint,
+            bandwidth: None,
+            observer_speed: 3.0,
+            tau,
+        }
+    }
+
+    fn validate(&self) -> Result<()> {
+        if !self.setpoint.is_finite() {
+            return Err(Error::param(
+                "setpoint",
+                format!("{}; give a finite value", self.setpoint),
+            ));
+        }
+        crate::records::check_tau(self.tau)?;
+        if let Some(w) = self.bandwidth {
+            if !(w.is_finite() && w > 0.0) {
+                return Err(Error::param(
+                    "bandwidth",
+                    format!("{w} rad/s; give a value > 0"),
+                ));
+            }
+        }
+        if !(self.observer_speed.is_finite() && (1.0..=100.0).contains(&self.observer_speed)) {
+            return Err(Error::param(
+                "observer_speed",
+                format!("{}; give a factor in [1, 100]", self.observer_speed),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The order of a one-output, one-input model, or an error saying what feedback design needs.
+pub fn siso_order(model: &Model) -> Result<usize> {
+    if model.outputs.len() != 1 || model.inputs.len() != 1 {
+        return Err(Error::param(
+            "model",
+            format!(
+                "{} output(s) and {} input(s); feedback design takes one output and one input",
+                model.outputs.len(),
+                model.inputs.len()
+            ),
+        ));
+    }
+    let n = model.outputs[0].order;
+    if n == 0 || n > MAX_ORDER {
+        return Err(Error::param(
+            "model",
+            format!("order {n}; give 1..={MAX_ORDER}"),
+        ));
+    }
+    Ok(n)
+}
+
+/// `P(y, 0, ..., 0, u)` and its derivative in u, at rest at output `y`.
+fn rest_eval(c: &CompiledModel, n: usize, y: f64, u: f64) -> (f64, f64) {
+    let mut z = vec![0.0; n + 1];
+    z[0] = y;
+    z[n] = u;
+    let mut g = vec![0.0; n + 1];
+    c.grad_output(0, &z, &mut g);
+    (c.eval_output(0, &z), g[n])
+}
+
+/// The steady input that holds the model at rest at output `y`: the root of
+/// `P(y, 0, ..., 0, u) = 0` that Newton's method reaches from u = 0 (one step when P is linear in
+/// u, as identified models mostly are).
+pub fn steady_input(model: &Model, y: f64) -> Result<f64> {
+    let n = siso_order(model)?;
+    let c = model.compile()?;
+    let mut u = 0.0;
+    let (p0, _) = rest_eval(&c, n, y, 0.0);
+    let scale = p0.abs().max(1e-300);
+    for _ in 0..100 {
+        let (p, dp) = rest_eval(&c, n, y, u);
+        if p.abs() <= 1e-12 * scale {
+            break;
+        }
+        if dp == 0.0 || !dp.is_finite() {
+            break;
+        }
+        let step = p / dp;
+        u -= step;
+        if !u.is_finite() {
+            break;
+        }
+        if step.abs() <= 1e-14 * u.abs() {
+            break;
+        }
+    }
+    let (p, dp) = rest_eval(&c, n, y, u);
+    if dp == 0.0 {
+        return Err(Error::InvalidData(format!(
+            "the input has no effect on the model at {} = {y} (dP/du = 0): it cannot be controlled there",
+            model.outputs[0].name
+        )));
+    }
+    if !(u.is_finite() && p.abs() <= 1e-8 * scale.max(1.0)) {
+        return Err(Error::InvalidData(format!(
+            "no steady input holds the model at {} = {y}: {} = P(..., u) has no root Newton's method finds; choose another setpoint",
+            model.outputs[0].name,
+            crate::model::derivative_name(&model.outputs[0].name, n)
+        )));
+    }
+    Ok(u)
+}
+
+/// Eigenvalues (re, im) of a square matrix, sorted by real part then imaginary part.
+pub fn eigenvalues(m: &DMatrix<f64>) -> Vec<(f64, f64)> {
+    let mut e: Vec<(f64, f64)> = m
+        .clone()
+        .complex_eigenvalues()
+        .iter()
+        .map(|c| (c.re, c.im))
+        .collect();
+    e.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
+    e
+}
+
+/// `prod (M + c I)` over the given shifts: the characteristic polynomial with roots at `-c`,
+/// evaluated at M.
+fn poly_at(m: &DMatrix<f64>, shifts: &[f64]) -> DMatrix<f64> {
+    let k = m.nrows();
+    let mut p = DMatrix::<f64>::identity(k, k);
+    for &c in shifts {
+        p = &p * (m + DMatrix::<f64>::identity(k, k) * c);
+    }
+    p
+}
+
+/// Where the design puts the poles, as positive rates (poles at minus them): for each open-loop
+/// eigenvalue l, `floor` if |l| <= floor, else |l|. Slow modes are brought to the bandwidth;
+/// fast ones keep their speed (a fast complex pair becomes a real double pole, an unstable one
+/// its mirror). Slowing a fast stable mode down would take gains that cancel the plant's own
+/// damping, which the sampling delay then destabilises.
+pub fn placed_poles(open_loop: &[(f64, f64)], floor: f64) -> Vec<f64> {
+    open_loop
+        .iter()
+        .map(|(r, i)| r.hypot(*i).max(floor))
+        .collect()
+}
+
+/// Ackermann: the gain row `k` with eig(A - B k) at `-shifts`.
+fn ackermann(a: &DMatrix<f64>, b: &DVector<f64>, shifts: &[f64]) -> Result<DVector<f64>> {
+    let k = a.nrows();
+    let mut ctrb = DMatrix::<f64>::zeros(k, k);
+    let mut col = b.clone();
+    for j in 0..k {
+        ctrb.set_column(j, &col);
+        col = a * &col;
+    }
+    let mut last = DVector::<f64>::zeros(k);
+    last[k - 1] = 1.0;
+    // k^T = e_last^T C^-1 p(A): solve C^T w = e_last, then k = p(A)^T w.
+    let w = ctrb.transpose().lu().solve(&last).ok_or_else(|| {
+        Error::InvalidData("the linearised model is not controllable at this setpoint".into())
+    })?;
+    Ok(poly_at(a, shifts).transpose() * w)
+}
+
+/// The design: linearisation at the setpoint, state feedback with integral action, observer.
+pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
+    o.validate()?;
+    let n = siso_order(model)?;
+    let u_star = steady_input(model, o.setpoint)?;
+    let c = model.compile()?;
+    let mut x = vec![0.0; n];
+    x[0] = o.setpoint;
+    let (mut jx, mut ju) = (vec![0.0; n * n], vec![0.0; n]);
+    c.jacobians(&x, &[u_star], &mut jx, &mut ju);
+    let a = DMatrix::from_row_slice(n, n, &jx);
+    let b = DVector::from_column_slice(&ju);
+    if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+        return Err(Error::InvalidData(
+            "the model's Jacobian at the setpoint is not finite".into(),
+        ));
+    }
+    let open_loop = eigenvalues(&a);
+    let w = match o.bandwidth {
+        Some(w) => w,
+        None => {
+            let mags: Vec<f64> = open_loop
+                .iter()
+                .map(|(r, i)| r.hypot(*i))
+                .filter(|m| *m > 0.0)
+                .collect();
+            if mags.is_empty() {
+                return Err(Error::param(
+                    "bandwidth",
+                    "the model's open-loop eigenvalues are all 0 at the setpoint; give a bandwidth",
+                ));
+            }
+            (mags.iter().map(|m| m.ln()).sum::<f64>() / mags.len() as f64).exp()
+        }
+    };
+    // The observer's poles must be slow against the sampling: the controller updates once per
+    // tau, and a pole at -p holds its value over a sample only while p tau is small.
+    let fastest = o.observer_speed * w;
+    if fastest * o.tau > 0.5 {
+        return Err(Error::param(
+            "bandwidth",
+            format!(
+                "{w:.4} rad/s puts the observer poles at {fastest:.4} rad/s, too fast for a controller sampled every {} s; give a bandwidth below {:.4} rad/s",
+                o.tau,
+                0.5 / (o.tau * o.observer_speed)
+            ),
+        ));
+    }
+
+    // Scaled time t' = w t and states y^(k) / w^k keep the matrices of order one (a throttle's
+    // companion row holds 1e6 next to 1).
+    let d: Vec<f64> = (0..n).map(|k| w.powi(k as i32)).collect();
+    let mut a_s = DMatrix::<f64>::zeros(n, n);
+    for i in 0..n {
+        for j in 0..n {
+            a_s[(i, j)] = a[(i, j)] * d[j] / d[i] / w;
+        }
+    }
+    let b_s = DVector::from_iterator(n, (0..n).map(|i| b[i] / d[i] / w));
+    // Integral action: q_s' = y - r in scaled units (q_s = w q, q = integral of y - r).
+    let mut a_aug = DMatrix::<f64>::zeros(n + 1, n + 1);
+    a_aug.view_mut((0, 0), (n, n)).copy_from(&a_s);
+    a_aug[(n, 0)] = 1.0;
+    let mut b_aug = DVector::<f64>::zeros(n + 1);
+    b_aug.rows_mut(0, n).copy_from(&b_s);
+    let mut shifts: Vec<f64> = placed_poles(&open_loop, w).iter().map(|p| p / w).collect();
+    shifts.push(1.0);
+    let k_aug = ackermann(&a_aug, &b_aug, &shifts)?;
+    // Observer of the state from y = x_0 (dual: gains for A^T, C^T).
+    let mut c_t = DVector::<f64>::zeros(n);
+    c_t[0] = 1.0;
+    let obs_shifts: Vec<f64> = placed_poles(&open_loop, o.observer_speed * w)
+        .iter()
+        .map(|p| p / w)
+        .collect();
+    let l_s = ackermann(&a_s.transpose(), &c_t, &obs_shifts)?;
+
+    let k: Vec<f64> = (0..n).map(|j| k_aug[j] / d[j]).collect();
+    let k_i = k_aug[n] * w;
+    let l: Vec<f64> = (0..n).map(|i| w * d[i] * l_s[i]).collect();
+    if k.iter().chain(&l).chain([&k_i]).any(|v| !v.is_finite()) {
+        return Err(Error::InvalidData(
+            "pole placement failed (gains not finite): the linearised model is too ill-conditioned at this setpoint".into(),
+        ));
+    }
+
+    // What the gains achieve, in original time: checks the placement and is reported.
+    let mut acl = DMatrix::<f64>::zeros(n + 1, n + 1);
+    for i in 0..n {
+        for j in 0..n {
+            acl[(i, j)] = a[(i, j)] - b[i] * k[j];
+        }
+        acl[(i, n)] = -b[i] * k_i;
+    }
+    acl[(n, 0)] = 1.0;
+    let mut aobs = a.clone();
+    for i in 0..n {
+        aobs[(i, 0)] -= l[i];
+    }
+    Ok(Design {
+        output: model.outputs[0].name.clone(),
+        input: model.inputs[0].clone(),
+        order: n,
+        setpoint: o.setpoint,
+        u_star,
+        tau: o.tau,
+        a,
+        b,
+        open_loop,
+        bandwidth: w,
+        observer_speed: o.observer_speed,
+        k,
+        k_i,
+        l,
+        closed_loop: eigenvalues(&acl),
+        observer: eigenvalues(&aobs),
+        model: model.clone(),
+    })
+}
