@@ -77,7 +77,7 @@ fn the_loop_around_its_own_model_follows_the_designed_response() {
         u_limits: None,
     };
     let tr = control::run(&d, &plant, &s).unwrap();
-    let m = control::metrics(&tr, &d, 0.0);
+    let m = control::metrics(&tr, &d, 0.0).unwrap();
     // Measured: 0.48 % off the continuous-time design (the controller is sampled), no overshoot.
     assert!(m.design_deviation < 1.0, "{m:?}");
     assert!(m.overshoot < 0.5 && m.final_error.abs() < 0.1, "{m:?}");
@@ -88,7 +88,7 @@ fn the_loop_around_its_own_model_follows_the_designed_response() {
         ..s.clone()
     };
     let tr = control::run(&d, &plant, &limited).unwrap();
-    let m = control::metrics(&tr, &d, 0.0);
+    let m = control::metrics(&tr, &d, 0.0).unwrap();
     assert!(m.u_max <= 2.5 && m.final_error.abs() < 0.5, "{m:?}");
     assert!(m.overshoot < 5.0, "{m:?}");
 }
@@ -121,7 +121,7 @@ fn a_design_on_a_wrong_model_holds_the_true_nonlinear_throttle() {
         u_limits: None,
     };
     let tr = control::run(&d, &plant, &s).unwrap();
-    let m = control::metrics(&tr, &d, from);
+    let m = control::metrics(&tr, &d, from).unwrap();
     // Measured: final error 0.24 % of the step (noise 1 % of it), 1.65 % off the design, overshoot
     // 0.11 %, rise 0.147 s.
     assert!(m.final_error.abs() < 0.75, "{m:?}");
@@ -145,6 +145,50 @@ fn bad_designs_are_errors_that_say_why() {
     let mut two = oscillator();
     two.inputs.push("v".into());
     assert!(e(&two, &DesignOptions::new(1.0, 0.01)).contains("one output and one input"));
+}
+
+/// `y'' = -y - y' + c2 u^2 + c3 u^3 + c1 u`: steady inputs where Newton from u = 0 alone fails.
+fn input_poly(c1: f64, c2: f64, c3: f64) -> Model {
+    let mut terms = vec![
+        Term::new(&[("y", 1)], -1.0),
+        Term::new(&[("y_d1", 1)], -1.0),
+    ];
+    for (p, c) in [(1, c1), (2, c2), (3, c3)] {
+        if c != 0.0 {
+            terms.push(Term::new(&[("u", p)], c));
+        }
+    }
+    Model::new(&["u"], vec![OutputEquation::new("y", 2, terms)], Some(0.01))
+}
+
+#[test]
+fn steady_inputs_are_found_where_newton_from_zero_fails() {
+    // u^2 = 1: the slope is 0 at u = 0, the root is +-1 (the smallest |u| wins; +1 first).
+    let u = control::steady_input(&input_poly(0.0, 1.0, 0.0), 1.0).unwrap();
+    assert!((u.abs() - 1.0).abs() < 1e-9, "{u}");
+    // u^3 - 2 u = 1: plain Newton from 0 cycles; damped Newton finds a root.
+    let u = control::steady_input(&input_poly(-2.0, 0.0, 1.0), 1.0).unwrap();
+    assert!((u * u * u - 2.0 * u - 1.0).abs() < 1e-9, "{u}");
+    // At y = -1 the input would need u^2 = -1: no root.
+    let e = control::steady_input(&input_poly(0.0, 1.0, 0.0), -1.0).unwrap_err();
+    assert!(e.to_string().contains("no steady input"), "{e}");
+    // A starting output where the model overflows is an error, not an endless eigenvalue loop.
+    let cubic = Model::new(
+        &["u"],
+        vec![OutputEquation::new(
+            "y",
+            2,
+            vec![
+                Term::new(&[("y", 1)], -1.0),
+                Term::new(&[("y", 3)], 0.001),
+                Term::new(&[("u", 1)], 1.0),
+            ],
+        )],
+        Some(0.01),
+    );
+    let c = cubic.compile().unwrap();
+    let e = control::rest_state(&c, 0, 1e160, 0.0).unwrap_err();
+    assert!(e.to_string().contains("--from"), "{e}");
 }
 
 #[test]
@@ -191,5 +235,30 @@ fn the_command_prints_the_design_and_writes_the_trace() {
     fails(
         &["control", &model, "--setpoint 1 --from 0 --plant", &trace],
         &["trace.csv"],
+    );
+    fails(
+        &["control", &model, "--setpoint 1 --from 1"],
+        &["'from'", "no step"],
+    );
+    fails(
+        &[
+            "control",
+            &model,
+            "--setpoint 1 --from 0 --u-min -1 --u-max 1.5",
+        ],
+        &["steady input of 2e0", "out of reach"],
+    );
+    fails(
+        &["control", &model, "--setpoint 1 --from 0 --duration 1e5"],
+        &["'duration'", "at most 1000000"],
+    );
+    let mut other = oscillator();
+    other.outputs[0].name = "z".into();
+    other.outputs[0].terms[0] = Term::new(&[("z", 1)], -4.0);
+    other.outputs[0].terms[1] = Term::new(&[("z_d1", 1)], -0.4);
+    let other = temp_file("control", "z.json", &other.to_json_string().unwrap());
+    fails(
+        &["control", &model, "--setpoint 1 --from 0 --plant", &other],
+        &["'plant'", "output 'z'", "same machine"],
     );
 }

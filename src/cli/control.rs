@@ -44,7 +44,7 @@ pub struct ControlArgs {
     pub noise: f64,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Simulated time in seconds (default: 15 / bandwidth).
+    /// Simulated time in seconds (default: (3 (n + 1) + 6) / bandwidth for a model of order n).
     #[arg(long)]
     pub duration: Option<f64>,
     /// Input limits (both or neither).
@@ -71,6 +71,12 @@ pub fn run(a: ControlArgs) -> Result<()> {
             format!("{}; give a finite value", a.from),
         ));
     }
+    if a.from == a.setpoint {
+        return Err(Error::param(
+            "from",
+            "the same as --setpoint: there is no step; give another starting output",
+        ));
+    }
     let model = Model::read(&a.model.to_string_lossy())?;
     let tau = a.tau.or(model.tau).ok_or_else(|| {
         Error::param(
@@ -89,6 +95,21 @@ pub fn run(a: ControlArgs) -> Result<()> {
                 Error::InvalidParameter { reason, .. } => Error::param("plant", reason),
                 e => e,
             })?;
+            // The loop connects the model's input and output to the plant's: by name, so that a
+            // plant file of another machine is not used by mistake.
+            if m.outputs[0].name != model.outputs[0].name || m.inputs != model.inputs {
+                return Err(Error::param(
+                    "plant",
+                    format!(
+                        "{} has output '{}' and input '{}', the model '{}' and '{}'; give a plant of the same machine",
+                        p.display(),
+                        m.outputs[0].name,
+                        m.inputs[0],
+                        model.outputs[0].name,
+                        model.inputs[0]
+                    ),
+                ));
+            }
             m
         }
         None => model.clone(),
@@ -97,7 +118,7 @@ pub fn run(a: ControlArgs) -> Result<()> {
     let u_guess = control::steady_input(&plant_model, a.from).unwrap_or(d.u_star);
     let (x0, u0) = control::rest_state(&compiled, 0, a.from, u_guess)?;
     let scenario = Scenario {
-        duration: a.duration.unwrap_or(15.0 / d.bandwidth),
+        duration: a.duration.unwrap_or(control::default_duration(&d)),
         noise_sd: a.noise,
         seed: a.seed,
         u_limits: a.u_min.zip(a.u_max),
@@ -109,7 +130,7 @@ pub fn run(a: ControlArgs) -> Result<()> {
         u0,
     };
     let tr = control::run(&d, &plant, &scenario)?;
-    let m = control::metrics(&tr, &d, a.from);
+    let m = control::metrics(&tr, &d, a.from)?;
 
     let y = &d.output;
     outln!(

@@ -92,8 +92,9 @@ impl SplitArgs {
 #[derive(Args, Debug)]
 pub struct SegmentArgs {
     /// Cut every run into consecutive pieces of this many seconds, each then a run of its own (a
-    /// remainder shorter than half a piece joins the last): a file of one run gives runs 0, 1,
-    /// ..., several runs give RUN#0, RUN#1, ..., and a list naming RUN takes all its pieces.
+    /// remainder shorter than half a piece joins the last): a file without a run column gives
+    /// runs 0, 1, ..., runs of a run column RUN#0, RUN#1, ..., and a list naming RUN takes all
+    /// its pieces.
     #[arg(long, value_name = "SECONDS")]
     pub segment: Option<f64>,
 }
@@ -128,8 +129,9 @@ impl SegmentArgs {
         rs.segmented(len.min(usize::MAX as f64) as usize)
     }
 
-    /// A run too short for the method is a piece too short when pieces were cut: the fix is a
-    /// longer --segment, not longer runs.
+    /// A run too short for the method is, when pieces were cut, a piece too short: mostly the
+    /// fix is a longer --segment (a run shorter than a piece was not cut, and needs more
+    /// samples or a lower order).
     pub fn explain(&self, e: Error) -> Error {
         match (self.segment, e) {
             (
@@ -143,7 +145,7 @@ impl SegmentArgs {
             ) => Error::param(
                 "segment",
                 format!(
-                    "piece '{run}' of {s} s has {len} samples but {what} needs at least {min}; give a longer --segment"
+                    "piece '{run}' of {s} s has {len} samples but {what} needs at least {min}; give a longer --segment (a run shorter than one piece needs more samples or a lower order)"
                 ),
             ),
             (_, e) => e,

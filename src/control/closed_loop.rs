@@ -2,8 +2,10 @@
 
 use super::Design;
 use crate::error::{Error, Result};
+use crate::model::CompiledModel;
 use crate::plants::rng::Rng;
-use crate::simulate::System;
+use crate::simulate::{simulate, ConstantInput, SimOptions, System};
+use nalgebra::{DMatrix, DVector};
 
 /// A setpoint step and how the loop is run.
 #[derive(Debug, Clone)]
@@ -61,90 +63,107 @@ pub struct StepMetrics {
     pub design_deviation: f64,
 }
 
-/// The designed step response at `times`: the model linearised at the setpoint under the
-/// continuous-time control law, at rest at `from` with the bumpless integrator (so the setpoint
-/// enters through the integrator only) and the setpoint applied from t = 0.
-pub fn designed_response(d: &Design, from: f64, times: &[f64]) -> Vec<f64> {
-    let n = d.order;
-    let delta = from - d.setpoint;
-    // z = [x - x*, q]; at rest at `from` the linearised model needs du = -A[n-1][0] delta / b.
-    let mut z = vec![0.0; n + 1];
-    z[0] = delta;
-    let du_from = -d.a[(n - 1, 0)] * delta / d.b[n - 1];
-    if d.k_i != 0.0 {
-        z[n] = (-d.k[0] * delta - du_from) / d.k_i;
+/// Longest loop the library runs, in samples (each is a stiff integration over one sample).
+pub const MAX_SAMPLES: usize = 1_000_000;
+
+/// A default simulated time: long enough for the designed response of an order-n model (n + 1
+/// poles at -w) to settle well within 1 % (three time constants per pole, plus six).
+pub fn default_duration(d: &Design) -> f64 {
+    (3.0 * (d.order as f64 + 1.0) + 6.0) / d.bandwidth
+}
+
+/// `exp(m)` by scaling and squaring with a Taylor series (small, well-scaled matrices).
+fn expm(m: &DMatrix<f64>) -> DMatrix<f64> {
+    let k = m.nrows();
+    let norm = m.iter().map(|v| v.abs()).sum::<f64>().max(1e-300);
+    let s = (norm / 0.5).log2().ceil().max(0.0) as i32;
+    let a = m / 2f64.powi(s);
+    let mut term = DMatrix::<f64>::identity(k, k);
+    let mut sum = term.clone();
+    for j in 1..=18 {
+        term = &term * &a / j as f64;
+        sum += &term;
     }
-    let f = |z: &[f64], dz: &mut [f64]| {
-        let du = -(0..n).map(|j| d.k[j] * z[j]).sum::<f64>() - d.k_i * z[n];
-        for i in 0..n {
-            dz[i] = (0..n).map(|j| d.a[(i, j)] * z[j]).sum::<f64>() + d.b[i] * du;
+    for _ in 0..s {
+        sum = &sum * &sum;
+    }
+    sum
+}
+
+/// The designed step response at the loop's sample times `k tau`, k < `samples`: the model
+/// linearised at the setpoint under the continuous-time control law, at rest at `from` with the
+/// bumpless integrator (so the setpoint enters through the integrator only), the setpoint
+/// applied from t = 0. Exact per sample (a matrix exponential of the closed loop, in the
+/// design's scaled time and states), whatever the stiffness.
+pub fn designed_response(d: &Design, from: f64, samples: usize) -> Vec<f64> {
+    let n = d.order;
+    let w = d.bandwidth;
+    let delta = from - d.setpoint;
+    // z = [x - x*, q] with x_k scaled by w^k and q by w (the design's scaling).
+    let sc: Vec<f64> = (0..=n)
+        .map(|k| if k < n { w.powi(k as i32) } else { 1.0 / w })
+        .collect();
+    let mut acl = DMatrix::<f64>::zeros(n + 1, n + 1);
+    for i in 0..n {
+        for j in 0..n {
+            acl[(i, j)] = d.a[(i, j)] - d.b[i] * d.k[j];
         }
-        dz[n] = z[0];
-    };
-    let rate = d
-        .closed_loop
-        .iter()
-        .map(|(r, i)| r.hypot(*i))
-        .fold(1e-300, f64::max);
-    let mut out = Vec::with_capacity(times.len());
-    let mut t = 0.0;
-    for &ti in times {
-        let steps = ((ti - t) * rate / 0.2).ceil().max(0.0) as usize;
-        if steps > 0 {
-            let h = (ti - t) / steps as f64;
-            for _ in 0..steps {
-                rk4(&mut z, h, f);
-            }
-            t = ti;
+        acl[(i, n)] = -d.b[i] * d.k_i;
+    }
+    acl[(n, 0)] = 1.0;
+    let mut scaled = DMatrix::<f64>::zeros(n + 1, n + 1);
+    for i in 0..=n {
+        for j in 0..=n {
+            scaled[(i, j)] = acl[(i, j)] * sc[j] / sc[i] / w;
         }
+    }
+    let phi = expm(&(scaled * (w * d.tau)));
+    // At rest at `from` the linearised model needs du = -A[n-1][0] delta / b.
+    let du_from = -d.a[(n - 1, 0)] * delta / d.b[n - 1];
+    let mut z = DVector::<f64>::zeros(n + 1);
+    z[0] = delta;
+    if d.k_i != 0.0 {
+        z[n] = (-d.k[0] * delta - du_from) / d.k_i / sc[n];
+    }
+    let mut out = Vec::with_capacity(samples);
+    for _ in 0..samples {
         out.push(d.setpoint + z[0]);
+        z = &phi * z;
     }
     out
 }
 
-/// Sub-steps per sample for RK4: the fastest linear rate times the sub-step stays below 0.5.
-fn substeps(rate: f64, tau: f64) -> Result<usize> {
-    let s = (rate * tau / 0.5).ceil().max(1.0);
-    if s > 10_000.0 {
-        return Err(Error::InvalidData(format!(
-            "the closed loop has rates near {rate:.3e} 1/s: too stiff for a loop sampled every {tau} s"
-        )));
-    }
-    Ok(s as usize)
+/// The plant and the observer as one system over a sample: inputs (u, measured y), both held.
+struct Loop<'a> {
+    plant: &'a (dyn System + Sync),
+    model: &'a CompiledModel,
+    l: &'a [f64],
 }
 
-/// Largest eigenvalue magnitude of a system's Jacobian at `x`, `u`.
-fn fastest_rate(sys: &(dyn System + Sync), x: &[f64], u: &[f64]) -> f64 {
-    let n = sys.dim();
-    let mut jac = vec![0.0; n * n];
-    sys.jacobian(x, u, &mut jac);
-    let m = nalgebra::DMatrix::from_row_slice(n, n, &jac);
-    super::design::eigenvalues(&m)
-        .iter()
-        .map(|(r, i)| r.hypot(*i))
-        .fold(0.0, f64::max)
-}
-
-/// One RK4 step of `f` over `h`.
-fn rk4(x: &mut [f64], h: f64, mut f: impl FnMut(&[f64], &mut [f64])) {
-    let n = x.len();
-    let (mut k1, mut k2, mut k3, mut k4) = (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    let mut tmp = vec![0.0; n];
-    f(x, &mut k1);
-    for i in 0..n {
-        tmp[i] = x[i] + 0.5 * h * k1[i];
+impl System for Loop<'_> {
+    fn dim(&self) -> usize {
+        self.plant.dim() + self.model.n_state()
     }
-    f(&tmp, &mut k2);
-    for i in 0..n {
-        tmp[i] = x[i] + 0.5 * h * k2[i];
+    fn n_inputs(&self) -> usize {
+        2
     }
-    f(&tmp, &mut k3);
-    for i in 0..n {
-        tmp[i] = x[i] + h * k3[i];
+    fn state_name(&self, k: usize) -> String {
+        let np = self.plant.dim();
+        if k < np {
+            format!("plant {}", self.plant.state_name(k))
+        } else {
+            format!("observer {}", self.model.names()[k - np])
+        }
     }
-    f(&tmp, &mut k4);
-    for i in 0..n {
-        x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        let np = self.plant.dim();
+        self.plant.rhs(&x[..np], &u[..1], &mut dx[..np]);
+        let (xh, dxh) = (&x[np..], &mut dx[np..]);
+        self.model.rhs(xh, &u[..1], dxh);
+        let e = u[1] - xh[0];
+        for (d, l) in dxh.iter_mut().zip(self.l) {
+            *d += l * e;
+        }
     }
 }
 
@@ -155,7 +174,8 @@ fn rk4(x: &mut [f64], h: f64, mut f: impl FnMut(&[f64], &mut [f64])) {
 ///
 /// Each sample: measure (plus noise), compute the input from the observer's state and the
 /// integral of the error, hold it over the sample; the plant and the observer (the design's
-/// nonlinear model corrected by its gain towards the held measurement) advance together by RK4.
+/// nonlinear model corrected by its gain towards the held measurement) advance together with
+/// the crate's stiff integrator ([`crate::simulate::simulate`]).
 pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
     if !(s.duration.is_finite() && s.duration > 0.0) {
         return Err(Error::param(
@@ -172,8 +192,17 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
     if let Some((lo, hi)) = s.u_limits {
         if !(lo.is_finite() && hi.is_finite() && lo < hi) {
             return Err(Error::param(
-                "u_limits",
+                "u-min/u-max",
                 format!("[{lo}, {hi}]; give finite limits, low < high"),
+            ));
+        }
+        if !(lo..=hi).contains(&d.u_star) {
+            return Err(Error::param(
+                "u-min/u-max",
+                format!(
+                    "the setpoint needs a steady input of {:e}, outside [{lo}, {hi}]: it is out of reach; widen the limits or choose another setpoint",
+                    d.u_star
+                ),
             ));
         }
     }
@@ -190,31 +219,48 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
             ),
         ));
     }
-    let samples = (s.duration / d.tau).round();
-    if samples > 1e7 {
+    if plant.x0.iter().any(|v| !v.is_finite()) || !plant.u0.is_finite() {
         return Err(Error::param(
-            "duration",
-            format!("{} s is {samples} samples; at most 1e7", s.duration),
+            "plant",
+            "the initial state or input is not finite",
         ));
     }
-    let samples = samples.max(1.0) as usize + 1;
+    let samples = (s.duration / d.tau).round() + 1.0;
+    if samples > MAX_SAMPLES as f64 {
+        return Err(Error::param(
+            "duration",
+            format!(
+                "{} s is {samples:e} samples at tau = {} s; at most {MAX_SAMPLES}: give a shorter duration, a larger tau or a faster bandwidth",
+                s.duration, d.tau
+            ),
+        ));
+    }
+    let samples = samples as usize;
     let n = d.order;
     let model = d.model.compile()?;
-    // The observer's fastest rate is its own design; the plant's from its Jacobian at the start.
-    let obs_rate = d
-        .observer
+    let sys_loop = Loop {
+        plant: sys,
+        model: &model,
+        l: &d.l,
+    };
+    let np = sys.dim();
+    // Divergence: the output beyond 1e12 times the scale of the step (derivative states scale
+    // with powers of the bandwidth, so only their finiteness is judged).
+    let scale = [d.setpoint, plant.x0[plant.output]]
         .iter()
-        .chain(&d.open_loop)
-        .map(|(r, i)| r.hypot(*i))
-        .fold(0.0, f64::max);
-    let rate = obs_rate.max(fastest_rate(sys, &plant.x0, &[d.u_star]));
-    let sub = substeps(rate, d.tau)?;
-    let h = d.tau / sub as f64;
+        .fold(0.0f64, |m, v| m.max(v.abs()))
+        .max((d.setpoint - plant.x0[plant.output]).abs())
+        .max(1e-300);
+    let opts = SimOptions {
+        bound: 1e290,
+        run: "closed loop".into(),
+        ..Default::default()
+    };
 
     let mut rng = Rng::new(s.seed);
-    let mut x = plant.x0.clone();
-    let mut xh = vec![0.0; n];
-    xh[0] = x[plant.output];
+    let mut z = plant.x0.clone();
+    z.extend(std::iter::repeat_n(0.0, n));
+    z[np] = plant.x0[plant.output];
     let law = |xh: &[f64]| -> f64 {
         let mut dev = 0.0;
         for j in 0..n {
@@ -224,24 +270,19 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
         d.u_star - dev
     };
     let mut q = if d.k_i != 0.0 {
-        (law(&xh) - plant.u0) / d.k_i
+        (law(&z[np..]) - plant.u0) / d.k_i
     } else {
         0.0
     };
-    let scale = plant
-        .x0
-        .iter()
-        .fold(d.setpoint.abs(), |m, v| m.max(v.abs()))
-        .max(1.0);
     let mut tr = Trace {
         estimate: vec![Vec::with_capacity(samples); n],
         ..Default::default()
     };
     for k in 0..samples {
         let t = k as f64 * d.tau;
-        let y = x[plant.output];
+        let y = z[plant.output];
         let ym = y + s.noise_sd * rng.normal();
-        let raw = law(&xh) - d.k_i * q;
+        let raw = law(&z[np..]) - d.k_i * q;
         let u = match s.u_limits {
             Some((lo, hi)) => raw.clamp(lo, hi),
             None => raw,
@@ -250,7 +291,7 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
         tr.y.push(y);
         tr.y_measured.push(ym);
         for j in 0..n {
-            tr.estimate[j].push(xh[j]);
+            tr.estimate[j].push(z[np + j]);
         }
         tr.u.push(u);
         if k + 1 == samples {
@@ -260,35 +301,43 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
         if u == raw {
             q += d.tau * (ym - d.setpoint);
         }
-        let uu = [u];
-        for _ in 0..sub {
-            rk4(&mut x, h, |x, dx| sys.rhs(x, &uu, dx));
-            rk4(&mut xh, h, |z, dz| {
-                model.rhs(z, &uu, dz);
-                let e = ym - z[0];
-                for j in 0..n {
-                    dz[j] += d.l[j] * e;
-                }
-            });
-        }
-        if x.iter()
-            .chain(&xh)
-            .any(|v| !v.is_finite() || v.abs() > 1e12 * scale)
-        {
-            return Err(Error::InvalidData(format!(
-                "the closed loop diverged at t = {:.6} s (plant or observer state beyond 1e12 times the setpoint's scale): lower the bandwidth or check the model",
+        let diverged = |why: String| {
+            Error::InvalidData(format!(
+                "the closed loop diverged between t = {t:.6} and {:.6} s ({why}): lower the bandwidth or check the model",
                 t + d.tau
-            )));
+            ))
+        };
+        let step = simulate(
+            &sys_loop,
+            &ConstantInput(vec![u, ym]),
+            &z,
+            &[t, t + d.tau],
+            &opts,
+        )
+        .map_err(|e| diverged(e.to_string()))?;
+        z.copy_from_slice(step.state(1));
+        let yn = z[plant.output];
+        if !yn.is_finite() || (yn - d.setpoint).abs() > 1e12 * scale {
+            return Err(diverged(format!("output {yn:e}")));
         }
     }
     Ok(tr)
 }
 
-/// Step metrics of a trace for a step from `from` to the design's setpoint.
-pub fn metrics(tr: &Trace, d: &Design, from: f64) -> StepMetrics {
+/// Step metrics of a trace of [`run`] for a step from `from` to the design's setpoint.
+pub fn metrics(tr: &Trace, d: &Design, from: f64) -> Result<StepMetrics> {
     let setpoint = d.setpoint;
     let step = setpoint - from;
-    let frac = |y: f64| if step == 0.0 { 1.0 } else { (y - from) / step };
+    if step == 0.0 || !step.is_finite() {
+        return Err(Error::param(
+            "from",
+            format!("{from}: the same as the setpoint, there is no step to judge; give another starting output"),
+        ));
+    }
+    if tr.y.is_empty() || tr.estimate.is_empty() || tr.estimate[0].len() != tr.y.len() {
+        return Err(Error::param("trace", "empty or not from a loop run"));
+    }
+    let frac = |y: f64| (y - from) / step;
     let first = |level: f64| {
         tr.t.iter()
             .zip(&tr.y)
@@ -308,11 +357,7 @@ pub fn metrics(tr: &Trace, d: &Design, from: f64) -> StepMetrics {
     };
     let tail = (tr.y.len() / 10).max(1);
     let mean_tail = tr.y[tr.y.len() - tail..].iter().sum::<f64>() / tail as f64;
-    let final_error = if step == 0.0 {
-        0.0
-    } else {
-        100.0 * (mean_tail - setpoint) / step.abs()
-    };
+    let final_error = 100.0 * (mean_tail - setpoint) / step.abs();
     let observer_rms = (tr
         .y
         .iter()
@@ -321,14 +366,14 @@ pub fn metrics(tr: &Trace, d: &Design, from: f64) -> StepMetrics {
         .sum::<f64>()
         / tr.y.len() as f64)
         .sqrt();
-    let design_deviation = designed_response(d, from, &tr.t)
+    let design_deviation = designed_response(d, from, tr.y.len())
         .iter()
         .zip(&tr.y)
         .map(|(yd, y)| (y - yd).abs())
         .fold(0.0, f64::max)
-        / step.abs().max(1e-300)
+        / step.abs()
         * 100.0;
-    StepMetrics {
+    Ok(StepMetrics {
         design_deviation,
         rise_time,
         overshoot,
@@ -337,7 +382,7 @@ pub fn metrics(tr: &Trace, d: &Design, from: f64) -> StepMetrics {
         u_min: tr.u.iter().copied().fold(f64::INFINITY, f64::min),
         u_max: tr.u.iter().copied().fold(f64::NEG_INFINITY, f64::max),
         observer_rms,
-    }
+    })
 }
 
 /// The state at rest at output `y` of a system whose state `output` is the measured output:
@@ -366,6 +411,11 @@ pub fn rest_state(
     let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
     sys.rhs(&x, &[u], &mut f);
     let f_start = norm(&f).max(1e-300);
+    if !(f_start.is_finite() && y.is_finite() && u.is_finite()) {
+        return Err(Error::InvalidData(format!(
+            "the plant is not finite at rest at output {y:?}; choose another starting output (--from)"
+        )));
+    }
     for _ in 0..100 {
         sys.rhs(&x, &[u], &mut f);
         if norm(&f) <= 1e-12 * f_start {
@@ -374,6 +424,9 @@ pub fn rest_state(
         sys.jacobian(&x, &[u], &mut jac);
         let du = 1e-7 * u.abs().max(1e-3);
         sys.rhs(&x, &[u + du], &mut f1);
+        if jac.iter().chain(&f1).any(|v| !v.is_finite()) {
+            break;
+        }
         // Unknowns: the free states, then u.
         let mut m = nalgebra::DMatrix::<f64>::zeros(n, n);
         for r in 0..n {
@@ -397,7 +450,7 @@ pub fn rest_state(
     sys.rhs(&x, &[u], &mut f);
     if x.iter().any(|v| !v.is_finite()) || !u.is_finite() || norm(&f) > 1e-6 * f_start.max(1.0) {
         return Err(Error::InvalidData(format!(
-            "the plant has no rest state at output {y} that Newton's method finds; choose another starting output"
+            "the plant has no rest state at output {y:?} that Newton's method finds; choose another starting output (--from)"
         )));
     }
     Ok((x, u))

@@ -54,7 +54,7 @@ impl DesignOptions {
         }
         if !(self.observer_speed.is_finite() && (1.0..=100.0).contains(&self.observer_speed)) {
             return Err(Error::param(
-                "observer_speed",
+                "observer-speed",
                 format!("{}; give a factor in [1, 100]", self.observer_speed),
             ));
         }
@@ -84,69 +84,116 @@ pub fn siso_order(model: &Model) -> Result<usize> {
     Ok(n)
 }
 
-/// `P(y, 0, ..., 0, u)` and its derivative in u, at rest at output `y`.
-fn rest_eval(c: &CompiledModel, n: usize, y: f64, u: f64) -> (f64, f64) {
+/// `P(y, 0, ..., 0, u)`, its derivative in u and the sum of its terms' magnitudes (the scale a
+/// root is judged against), at rest at output `y`.
+fn rest_eval(c: &CompiledModel, size: &CompiledModel, n: usize, y: f64, u: f64) -> (f64, f64, f64) {
     let mut z = vec![0.0; n + 1];
     z[0] = y;
     z[n] = u;
     let mut g = vec![0.0; n + 1];
     c.grad_output(0, &z, &mut g);
-    (c.eval_output(0, &z), g[n])
+    let za: Vec<f64> = z.iter().map(|v| v.abs()).collect();
+    (c.eval_output(0, &z), g[n], size.eval_output(0, &za))
 }
+
+/// Starting inputs for the steady-input search, nearest zero first.
+const STARTS: [f64; 13] = [
+    0.0, 1.0, -1.0, 0.1, -0.1, 10.0, -10.0, 1e-3, -1e-3, 1e3, -1e3, 1e-5, -1e-5,
+];
 
 /// The steady input that holds the model at rest at output `y`: the root of
-/// `P(y, 0, ..., 0, u) = 0` that Newton's method reaches from u = 0 (one step when P is linear in
-/// u, as identified models mostly are).
+/// `P(y, 0, ..., 0, u) = 0` with the smallest |u| among those damped Newton iterations reach
+/// from a few starting inputs (one step when P is linear in u, as identified models mostly are).
 pub fn steady_input(model: &Model, y: f64) -> Result<f64> {
     let n = siso_order(model)?;
+    if !y.is_finite() {
+        return Err(Error::param(
+            "setpoint",
+            format!("{y}; give a finite value"),
+        ));
+    }
     let c = model.compile()?;
-    let mut u = 0.0;
-    let (p0, _) = rest_eval(&c, n, y, 0.0);
-    let scale = p0.abs().max(1e-300);
-    for _ in 0..100 {
-        let (p, dp) = rest_eval(&c, n, y, u);
-        if p.abs() <= 1e-12 * scale {
-            break;
-        }
-        if dp == 0.0 || !dp.is_finite() {
-            break;
-        }
-        let step = p / dp;
-        u -= step;
-        if !u.is_finite() {
-            break;
-        }
-        if step.abs() <= 1e-14 * u.abs() {
-            break;
-        }
-    }
-    let (p, dp) = rest_eval(&c, n, y, u);
-    if dp == 0.0 {
+    let mut abs = model.clone();
+    abs.outputs[0]
+        .terms
+        .iter_mut()
+        .for_each(|t| t.coefficient = t.coefficient.abs());
+    let size = abs.compile()?;
+    let name = &model.outputs[0].name;
+    let (p0, _, _) = rest_eval(&c, &size, n, y, 0.0);
+    if !p0.is_finite() {
         return Err(Error::InvalidData(format!(
-            "the input has no effect on the model at {} = {y} (dP/du = 0): it cannot be controlled there",
-            model.outputs[0].name
+            "the model is not finite at rest at {name} = {y:?}; choose another value"
         )));
     }
-    if !(u.is_finite() && p.abs() <= 1e-8 * scale.max(1.0)) {
-        return Err(Error::InvalidData(format!(
-            "no steady input holds the model at {} = {y}: {} = P(..., u) has no root Newton's method finds; choose another setpoint",
-            model.outputs[0].name,
-            crate::model::derivative_name(&model.outputs[0].name, n)
-        )));
+    let mut best: Option<f64> = None;
+    let mut zero_slope_root = false;
+    for &start in &STARTS {
+        let mut u = start;
+        let (mut p, mut dp, mut sz) = rest_eval(&c, &size, n, y, u);
+        for _ in 0..100 {
+            if p.abs() <= 1e-12 * sz || dp == 0.0 || !dp.is_finite() {
+                break;
+            }
+            // Damped: halve the step until |P| decreases (cubic-like P makes plain Newton cycle).
+            let step = p / dp;
+            let mut lambda = 1.0;
+            let mut moved = false;
+            for _ in 0..40 {
+                let un = u - lambda * step;
+                let (pn, dpn, szn) = rest_eval(&c, &size, n, y, un);
+                if pn.is_finite() && pn.abs() < p.abs() {
+                    (u, p, dp, sz) = (un, pn, dpn, szn);
+                    moved = true;
+                    break;
+                }
+                lambda *= 0.5;
+            }
+            if !moved {
+                break;
+            }
+        }
+        if u.is_finite() && p.abs() <= 1e-9 * sz.max(1e-300) {
+            if dp == 0.0 {
+                zero_slope_root = true;
+            } else if best.is_none_or(|b| u.abs() < b.abs()) {
+                best = Some(u);
+            }
+        }
     }
-    Ok(u)
+    match best {
+        Some(u) => Ok(u),
+        None if zero_slope_root || (0..=3).all(|k| {
+            let (_, dp, _) = rest_eval(&c, &size, n, y, STARTS[k]);
+            dp == 0.0
+        }) => Err(Error::InvalidData(format!(
+            "the input has no effect on the model at {name} = {y:?} (dP/du = 0 where it would hold it): it cannot be controlled there; choose another setpoint"
+        ))),
+        None => Err(Error::InvalidData(format!(
+            "no steady input holds the model at {name} = {y:?} ({} = P(..., u) has no root in u that Newton's method finds); choose another setpoint",
+            crate::model::derivative_name(name, n)
+        ))),
+    }
 }
 
-/// Eigenvalues (re, im) of a square matrix, sorted by real part then imaginary part.
-pub fn eigenvalues(m: &DMatrix<f64>) -> Vec<(f64, f64)> {
-    let mut e: Vec<(f64, f64)> = m
-        .clone()
+/// Eigenvalues (re, im) of a square matrix, sorted by real part then imaginary part; an error
+/// when the matrix is not finite or the Schur iteration does not converge.
+pub fn eigenvalues(m: &DMatrix<f64>) -> Result<Vec<(f64, f64)>> {
+    if m.iter().any(|v| !v.is_finite()) {
+        return Err(Error::InvalidData(
+            "a linearisation is not finite (the model or plant overflows there)".into(),
+        ));
+    }
+    let schur = nalgebra::Schur::try_new(m.clone(), f64::EPSILON, 10_000).ok_or_else(|| {
+        Error::InvalidData("the eigenvalues of a linearisation did not converge".into())
+    })?;
+    let mut e: Vec<(f64, f64)> = schur
         .complex_eigenvalues()
         .iter()
         .map(|c| (c.re, c.im))
         .collect();
     e.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.total_cmp(&b.1)));
-    e
+    Ok(e)
 }
 
 /// `prod (M + c I)` over the given shifts: the characteristic polynomial with roots at `-c`,
@@ -207,7 +254,7 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
             "the model's Jacobian at the setpoint is not finite".into(),
         ));
     }
-    let open_loop = eigenvalues(&a);
+    let open_loop = eigenvalues(&a)?;
     let w = match o.bandwidth {
         Some(w) => w,
         None => {
@@ -225,8 +272,19 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
             (mags.iter().map(|m| m.ln()).sum::<f64>() / mags.len() as f64).exp()
         }
     };
-    // The observer's poles must be slow against the sampling: the controller updates once per
-    // tau, and a pole at -p holds its value over a sample only while p tau is small.
+    if w * o.tau < 1e-9 {
+        return Err(Error::param(
+            "bandwidth",
+            format!(
+                "{w:e} rad/s is too slow for a controller sampled every {} s (the loop would need over 1e9 samples to settle); give a bandwidth above {:.3e} rad/s",
+                o.tau,
+                1e-9 / o.tau
+            ),
+        ));
+    }
+    // The poles the observer places must be slow against the sampling: the controller updates
+    // once per tau, and a pole at -p holds its value over a sample only while p tau is small.
+    // (Faster open-loop poles it keeps are the model's own, integrated as such.)
     let fastest = o.observer_speed * w;
     if fastest * o.tau > 0.5 {
         return Err(Error::param(
@@ -304,8 +362,8 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
         k,
         k_i,
         l,
-        closed_loop: eigenvalues(&acl),
-        observer: eigenvalues(&aobs),
+        closed_loop: eigenvalues(&acl)?,
+        observer: eigenvalues(&aobs)?,
         model: model.clone(),
     })
 }

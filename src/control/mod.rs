@@ -33,7 +33,8 @@ pub mod closed_loop;
 pub mod design;
 
 pub use closed_loop::{
-    designed_response, metrics, rest_state, run, Plant, Scenario, StepMetrics, Trace,
+    default_duration, designed_response, metrics, rest_state, run, Plant, Scenario, StepMetrics,
+    Trace, MAX_SAMPLES,
 };
 pub use design::{design, steady_input, DesignOptions};
 

@@ -608,13 +608,13 @@ fn feedback(
                noise: f64|
      -> Result<()> {
         let scenario = Scenario {
-            duration: 15.0 / ours.bandwidth,
+            duration: control::default_duration(&ours),
             noise_sd: noise,
             seed,
             u_limits: None,
         };
         let tr = control::run(d, p, &scenario)?;
-        let m = control::metrics(&tr, d, from);
+        let m = control::metrics(&tr, d, from)?;
         t.row(vec![
             on.into(),
             name.into(),
@@ -651,7 +651,12 @@ fn feedback(
         }
         None => None,
     };
-    for noise in [0.0, noise_sd] {
+    let noises = if noise_sd > 0.0 {
+        vec![0.0, noise_sd]
+    } else {
+        vec![0.0]
+    };
+    for noise in noises {
         row(
             &mut t,
             &ours,

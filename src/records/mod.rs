@@ -194,9 +194,10 @@ impl RecordSet {
     /// Most measured records are one long run; identification needs several (folds, a
     /// validation run, a test run), so a long run is cut where the experiment itself has no
     /// boundary. A remainder shorter than half a piece joins the last piece (no stub runs); a
-    /// run shorter than `len` stays whole. Pieces are named `0`, `1`, ... when the set has one
-    /// run, `RUN#0`, `RUN#1`, ... otherwise; [`crate::identify::split::resolve`] lets a list name
-    /// `RUN` for all its pieces. Each piece keeps its own start time and CSV rows.
+    /// run shorter than `len` stays whole. Pieces are named `RUN#0`, `RUN#1`, ..., or `0`, `1`,
+    /// ... when the set is the single run `0` a file without a run column gives;
+    /// [`crate::identify::split::resolve`] lets a list name `RUN` for all its pieces, so run ids
+    /// may not contain `#` themselves. Each piece keeps its own start time and CSV rows.
     pub fn segmented(&self, len: usize) -> Result<RecordSet> {
         if len < 2 {
             return Err(Error::param(
@@ -204,7 +205,16 @@ impl RecordSet {
                 format!("{len} samples per piece; give at least 2"),
             ));
         }
-        let single = self.runs.len() == 1;
+        let single = self.runs.len() == 1 && self.runs[0].id == "0";
+        if let Some(r) = self.runs.iter().find(|r| r.id.contains('#')) {
+            return Err(Error::param(
+                "segment",
+                format!(
+                    "run '{}' has a '#' in its id, which names the pieces of cut runs; rename the run",
+                    r.id
+                ),
+            ));
+        }
         let mut runs = Vec::new();
         for r in &self.runs {
             let n = r.len();
@@ -492,11 +502,23 @@ mod tests {
             t0: 10.0,
             rows: (2..n + 2).collect(),
         };
-        let one = RecordSet::new(0.5, vec!["y".into()], vec![run("a", 23)]).unwrap();
+        // The one run of a file without a run column (id 0) gives plain numbers.
+        let one = RecordSet::new(0.5, vec!["y".into()], vec![run("0", 23)]).unwrap();
         let s = one.segmented(10).unwrap();
         // 23 = 10 + 13: a remainder of 3 (< half a piece) joins the last piece.
         let ids: Vec<&str> = s.runs.iter().map(|r| r.id.as_str()).collect();
         assert_eq!(ids, ["0", "1"]);
+        let named = RecordSet::new(0.5, vec!["y".into()], vec![run("est", 23)]).unwrap();
+        let ids: Vec<String> = named
+            .segmented(10)
+            .unwrap()
+            .runs
+            .into_iter()
+            .map(|r| r.id)
+            .collect();
+        assert_eq!(ids, ["est#0", "est#1"]);
+        let hash = RecordSet::new(0.5, vec!["y".into()], vec![run("a#1", 23)]).unwrap();
+        assert!(hash.segmented(10).unwrap_err().to_string().contains("'#'"));
         assert_eq!(s.runs[1].len(), 13);
         assert_eq!(s.runs[1].channels[0][0], 10.0);
         assert_eq!(s.runs[1].t0, 15.0);
