@@ -76,13 +76,6 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     let mut simulated: Vec<Vec<Vec<f64>>> = Vec::with_capacity(rs.runs.len());
     let mut pooled_sim: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let mut pooled_meas: Vec<Vec<f64>> = vec![Vec::new(); n_out];
-    outln!(
-        "{:<12} {:<12} {:>14} {:>10}",
-        "run",
-        "output",
-        "RMS",
-        "NRMSE %"
-    )?;
     let window = args.init_window.max(initial_window(
         compiled.orders().iter().copied().max().unwrap_or(1),
     ));
@@ -117,9 +110,23 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     // In chunks, so that rows appear while a long record is still being simulated.
     let chunk = 2 * rayon::current_num_threads().max(1);
     for runs in rs.runs.chunks(chunk) {
-        let results: Vec<Result<Vec<Vec<f64>>>> = runs.par_iter().map(simulate_run).collect();
+        // A chunk's first failing run stops the command before its rows are printed.
+        let results: Vec<Vec<Vec<f64>>> = runs
+            .par_iter()
+            .map(simulate_run)
+            .collect::<Result<_>>()
+            .map_err(|e| args.segment.explain(e))?;
+        // The header once the first runs are simulated: an error in them is the only output.
+        if simulated.is_empty() {
+            outln!(
+                "{:<12} {:<12} {:>14} {:>10}",
+                "run",
+                "output",
+                "RMS",
+                "NRMSE %"
+            )?;
+        }
         for (run, per_run) in runs.iter().zip(results) {
-            let per_run = per_run.map_err(|e| args.segment.explain(e))?;
             for (i, o) in model.outputs.iter().enumerate() {
                 let (rms, nrmse) = rms_nrmse(&per_run[i], &run.channels[i]);
                 outln!(
