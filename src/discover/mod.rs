@@ -172,7 +172,8 @@ pub struct Discovery {
     pub gates: Option<Gates>,
     pub runs: Vec<RunScore>,
     pub shares: Vec<Share>,
-    /// (run, start s, end s) where the nominal's free-run error exceeds three noise levels.
+    /// (run, start s, end s) where the nominal's free-run error exceeds three noise levels, in the
+    /// record's time (a piece cut by `--segment` keeps its place in the record).
     pub windows: Vec<(String, f64, f64)>,
     pub nrmse_before: f64,
     pub nrmse_after: f64,
@@ -197,6 +198,8 @@ struct Prepared {
     /// Per run: label residual r and columns [free nominal..., effects...].
     rows: Vec<(Vec<f64>, Vec<Vec<f64>>)>,
     simruns: Vec<SimRun>,
+    /// Per run: the time of its first sample (simulation runs on time since the start).
+    t0: Vec<f64>,
     zhat: Vec<Vec<Vec<f64>>>,
     top: Vec<Vec<f64>>,
     noise_sd: Vec<f64>,
@@ -413,6 +416,7 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         effects,
         rows,
         simruns,
+        t0: rs.runs.iter().map(|r| r.t0).collect(),
         zhat,
         top,
         noise_sd: der.iter().map(|d| d.noise_sd).collect(),
@@ -692,8 +696,10 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             None => (f64::INFINITY, f64::INFINITY),
         };
         if let Some(s) = &sim {
-            // Moving RMS of the error over a window, against three noise levels.
+            // Moving RMS of the error over a window, against three noise levels; reported in the
+            // record's own time.
             let m = p.half_width;
+            let t0 = p.t0[ri];
             let e2: Vec<f64> = s.iter().zip(&sr.y).map(|(a, b)| (a - b).powi(2)).collect();
             let mut inside = None;
             for i in 0..e2.len() {
@@ -704,14 +710,18 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
                 match (hot, inside) {
                     (true, None) => inside = Some(i),
                     (false, Some(st)) => {
-                        windows.push((sr.id.clone(), sr.t[st], sr.t[i]));
+                        windows.push((sr.id.clone(), t0 + sr.t[st], t0 + sr.t[i]));
                         inside = None;
                     }
                     _ => {}
                 }
             }
             if let Some(st) = inside {
-                windows.push((sr.id.clone(), sr.t[st], *sr.t.last().unwrap_or(&0.0)));
+                windows.push((
+                    sr.id.clone(),
+                    t0 + sr.t[st],
+                    t0 + *sr.t.last().unwrap_or(&0.0),
+                ));
             }
         }
         runs.push(RunScore {
