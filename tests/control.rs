@@ -199,13 +199,21 @@ fn the_command_prints_the_design_and_writes_the_trace() {
         &oscillator().to_json_string().unwrap(),
     );
     let trace = temp_file("control", "trace.csv", "");
+    let report = std::env::temp_dir().join(format!("ctsid-control-report-{}", std::process::id()));
     let (ok, out, err) = ctsid(&[
         "control",
         &model,
         "--setpoint 1 --from 0 --bandwidth 3 -o",
         &trace,
+        "--report",
+        &report.display().to_string(),
     ]);
     assert!(ok, "{err}");
+    for f in ["step.svg", "input.svg"] {
+        let svg = std::fs::read_to_string(report.join(f)).unwrap();
+        assert!(svg.starts_with("<svg") && !svg.contains("NaN"), "{f}");
+    }
+    std::fs::remove_dir_all(&report).ok();
     assert!(
         out.contains("K: y 1.150000e1, y_d1 4.300000e0; k_i 1.350000e1"),
         "{out}"

@@ -1,6 +1,6 @@
 //! `ctsid control MODEL.json --setpoint R --from Y0 [--bandwidth W] [--observer-speed F]
 //! [--tau T] [--plant PLANT.json] [--noise SD] [--seed S] [--duration T] [--u-min A --u-max B]
-//! [-o TRACE.csv]`
+//! [-o TRACE.csv] [--report DIR]`
 //!
 //! Designs an observer and state feedback with integral action on a one-output, one-input model
 //! ([`ctsid::control`]), prints the operating point, the linearisation's poles, the gains and
@@ -55,6 +55,10 @@ pub struct ControlArgs {
     /// Write the loop's trace here (CSV).
     #[arg(short = 'o', long)]
     pub output: Option<PathBuf>,
+    /// Write plots into this folder: step.svg (output, measured, designed response, setpoint)
+    /// and input.svg.
+    #[arg(long)]
+    pub report: Option<PathBuf>,
 }
 
 pub fn run(a: ControlArgs) -> Result<()> {
@@ -64,6 +68,9 @@ pub fn run(a: ControlArgs) -> Result<()> {
     }
     if let Some(o) = &a.output {
         super::check_output_file(o, &inputs)?;
+    }
+    if let Some(d) = &a.report {
+        super::check_output_dir(d)?;
     }
     if !a.from.is_finite() {
         return Err(Error::param(
@@ -202,6 +209,10 @@ pub fn run(a: ControlArgs) -> Result<()> {
         write_trace(path, &tr, d.setpoint, &names)?;
         eprintln!("wrote {}", path.display());
     }
+    if let Some(dir) = &a.report {
+        write_plots(dir, &d, &tr, a.from)?;
+        eprintln!("plots written to {}", dir.display());
+    }
     Ok(())
 }
 
@@ -228,4 +239,42 @@ fn write_trace(path: &PathBuf, tr: &control::Trace, setpoint: f64, names: &[Stri
         .map_err(io)?;
     }
     w.flush().map_err(io)
+}
+
+fn write_plots(
+    dir: &std::path::Path,
+    d: &control::Design,
+    tr: &control::Trace,
+    from: f64,
+) -> Result<()> {
+    use ctsid::report::{svg, write_file};
+    let designed = control::designed_response(d, from, tr.t.len());
+    let setpoint = vec![d.setpoint; tr.t.len()];
+    let series = |label, y, color, dashed| svg::Series {
+        label,
+        x: &tr.t,
+        y,
+        color,
+        band: None,
+        dashed,
+    };
+    let step = svg::line_plot(
+        &format!("{}: step {from} -> {} under feedback", d.output, d.setpoint),
+        "t (s)",
+        &d.output,
+        &[
+            series("measured", &tr.y_measured, "lightgray", false),
+            series("output", &tr.y, "black", false),
+            series("designed response", &designed, "blue", true),
+            series("setpoint", &setpoint, "green", true),
+        ],
+    );
+    write_file(dir, "step.svg", &step)?;
+    let input = svg::line_plot(
+        &format!("{}: input under feedback", d.input),
+        "t (s)",
+        &d.input,
+        &[series("input", &tr.u, "red", false)],
+    );
+    write_file(dir, "input.svg", &input)
 }
