@@ -81,16 +81,33 @@ fn the_loop_around_its_own_model_follows_the_designed_response() {
     // Measured: 0.48 % off the continuous-time design (the controller is sampled), no overshoot.
     assert!(m.design_deviation < 1.0, "{m:?}");
     assert!(m.overshoot < 0.5 && m.final_error.abs() < 0.1, "{m:?}");
-    // Input limits: the integrator holds while the input is clipped, so the output still settles
-    // without the overshoot a wound-up integrator gives.
-    let limited = Scenario {
-        u_limits: Some((-1.0, 2.5)),
-        ..s.clone()
+    // Input limits that clip: the rest input 0 is below the lower limit, so the loop starts
+    // clipped, and the upper limit cuts the peak of a faster design. The integrator integrates
+    // only what pulls the input back inside: the output still settles, without the overshoot of
+    // a wound-up integrator and without stalling at the limit.
+    let clipped = |lo: f64, hi: f64, w: f64| {
+        let mut o = DesignOptions::new(1.0, 0.01);
+        o.bandwidth = Some(w);
+        let d = control::design(&model, &o).unwrap();
+        let sc = Scenario {
+            u_limits: Some((lo, hi)),
+            ..s.clone()
+        };
+        let tr = control::run(&d, &plant, &sc).unwrap();
+        (control::metrics(&tr, &d, 0.0).unwrap(), tr)
     };
-    let tr = control::run(&d, &plant, &limited).unwrap();
-    let m = control::metrics(&tr, &d, 0.0).unwrap();
-    assert!(m.u_max <= 2.5 && m.final_error.abs() < 0.5, "{m:?}");
-    assert!(m.overshoot < 5.0, "{m:?}");
+    let (m, tr) = clipped(0.5, 2.5, 3.0);
+    assert!(
+        tr.u[0] == 0.5 && m.final_error.abs() < 0.1 && m.overshoot < 0.5,
+        "{m:?}"
+    );
+    let (free, _) = clipped(-100.0, 100.0, 5.0);
+    let (m, tr) = clipped(-100.0, 2.5, 5.0);
+    assert!(free.u_max > 3.0, "the limit must clip: {free:?}");
+    assert!(
+        tr.u.contains(&2.5) && m.final_error.abs() < 0.1 && m.overshoot < 5.0,
+        "{m:?}"
+    );
 }
 
 /// The throttle's true linear model with every coefficient halved (the common-scale error the
@@ -142,6 +159,29 @@ fn bad_designs_are_errors_that_say_why() {
         "{msg}"
     );
     assert!(e(&oscillator(), &DesignOptions::new(f64::NAN, 0.01)).contains("setpoint"));
+    // A fast unstable mode feedback must move needs faster sampling, whatever the bandwidth.
+    let unstable = Model::new(
+        &["u"],
+        vec![OutputEquation::new(
+            "y",
+            2,
+            vec![Term::new(&[("y", 1)], 1e4), Term::new(&[("u", 1)], 1.0)],
+        )],
+        Some(0.01),
+    );
+    let mut o = DesignOptions::new(1.0, 0.01);
+    o.bandwidth = Some(1.0);
+    let msg = e(&unstable, &o);
+    assert!(
+        msg.contains("'tau'") && msg.contains("below 5.000e-3"),
+        "{msg}"
+    );
+    o.tau = 1e-4;
+    assert!(control::design(&unstable, &o).is_ok());
+    // At y = 1, P = -(u - 1)^2: a double root in u would need unbounded gains: no effect there.
+    let double = input_poly(2.0, -1.0, 0.0);
+    let msg = e(&double, &DesignOptions::new(1.0, 0.01));
+    assert!(msg.contains("no effect"), "{msg}");
     let mut two = oscillator();
     two.inputs.push("v".into());
     assert!(e(&two, &DesignOptions::new(1.0, 0.01)).contains("one output and one input"));

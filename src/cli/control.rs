@@ -42,14 +42,17 @@ pub struct ControlArgs {
     /// Standard deviation of the measurement noise.
     #[arg(long, default_value_t = 0.0)]
     pub noise: f64,
+    /// Seed of the measurement noise.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Simulated time in seconds (default: (3 (n + 1) + 6) / bandwidth for a model of order n).
     #[arg(long)]
     pub duration: Option<f64>,
-    /// Input limits (both or neither).
+    /// Lower input limit (with --u-max): the input is clipped, and the integrator holds what
+    /// would wind up.
     #[arg(long, allow_hyphen_values = true, requires = "u_max")]
     pub u_min: Option<f64>,
+    /// Upper input limit (with --u-min).
     #[arg(long, allow_hyphen_values = true, requires = "u_min")]
     pub u_max: Option<f64>,
     /// Write the loop's trace here (CSV).
@@ -136,8 +139,6 @@ pub fn run(a: ControlArgs) -> Result<()> {
         x0,
         u0,
     };
-    let tr = control::run(&d, &plant, &scenario)?;
-    let m = control::metrics(&tr, &d, a.from)?;
 
     let y = &d.output;
     outln!(
@@ -182,6 +183,9 @@ pub fn run(a: ControlArgs) -> Result<()> {
     )?;
     outln!("observer gains L (on {y} - {y}_hat): {}", gains(&d.l))?;
     outln!("")?;
+    // The design is printed before the loop runs: when the loop fails, it explains why.
+    let tr = control::run(&d, &plant, &scenario)?;
+    let m = control::metrics(&tr, &d, a.from)?;
     let plant_name = a
         .plant
         .as_ref()
@@ -248,7 +252,7 @@ fn write_plots(
     from: f64,
 ) -> Result<()> {
     use ctsid::report::{svg, write_file};
-    let designed = control::designed_response(d, from, tr.t.len());
+    let designed = control::designed_response(d, from, tr.t.len())?;
     let setpoint = vec![d.setpoint; tr.t.len()];
     let series = |label, y, color, dashed| svg::Series {
         label,

@@ -72,22 +72,37 @@ pub fn default_duration(d: &Design) -> f64 {
     (3.0 * (d.order as f64 + 1.0) + 6.0) / d.bandwidth
 }
 
-/// `exp(m)` by scaling and squaring with a Taylor series (small, well-scaled matrices).
-fn expm(m: &DMatrix<f64>) -> DMatrix<f64> {
-    let k = m.nrows();
-    let norm = m.iter().map(|v| v.abs()).sum::<f64>().max(1e-300);
-    let s = (norm / 0.5).log2().ceil().max(0.0) as i32;
-    let a = m / 2f64.powi(s);
-    let mut term = DMatrix::<f64>::identity(k, k);
-    let mut sum = term.clone();
-    for j in 1..=18 {
-        term = &term * &a / j as f64;
-        sum += &term;
+/// Most integrator steps one loop may take (over all its samples): stiff or nearly unstable
+/// loops are refused rather than left running for hours.
+const MAX_STEPS: usize = 50_000_000;
+
+/// The design's fields agree with each other (they are public: a hand-edited design is checked
+/// before it indexes anything).
+fn check(d: &Design) -> Result<()> {
+    let n = d.order;
+    let ok = n >= 1
+        && d.k.len() == n
+        && d.l.len() == n
+        && d.a.nrows() == n
+        && d.a.ncols() == n
+        && d.b.len() == n
+        && d.model.outputs.len() == 1
+        && d.model.outputs[0].order == n
+        && d.bandwidth.is_finite()
+        && d.bandwidth > 0.0
+        && d.b[n - 1] != 0.0
+        && d.k
+            .iter()
+            .chain(&d.l)
+            .chain([&d.k_i, &d.u_star, &d.setpoint])
+            .all(|v| v.is_finite());
+    if !ok {
+        return Err(Error::param(
+            "design",
+            "its fields disagree (order, gains, linearisation); build it with control::design",
+        ));
     }
-    for _ in 0..s {
-        sum = &sum * &sum;
-    }
-    sum
+    crate::records::check_tau(d.tau)
 }
 
 /// The designed step response at the loop's sample times `k tau`, k < `samples`: the model
@@ -95,7 +110,8 @@ fn expm(m: &DMatrix<f64>) -> DMatrix<f64> {
 /// bumpless integrator (so the setpoint enters through the integrator only), the setpoint
 /// applied from t = 0. Exact per sample (a matrix exponential of the closed loop, in the
 /// design's scaled time and states), whatever the stiffness.
-pub fn designed_response(d: &Design, from: f64, samples: usize) -> Vec<f64> {
+pub fn designed_response(d: &Design, from: f64, samples: usize) -> Result<Vec<f64>> {
+    check(d)?;
     let n = d.order;
     let w = d.bandwidth;
     let delta = from - d.setpoint;
@@ -117,7 +133,7 @@ pub fn designed_response(d: &Design, from: f64, samples: usize) -> Vec<f64> {
             scaled[(i, j)] = acl[(i, j)] * sc[j] / sc[i] / w;
         }
     }
-    let phi = expm(&(scaled * (w * d.tau)));
+    let phi = (scaled * (w * d.tau)).exp();
     // At rest at `from` the linearised model needs du = -A[n-1][0] delta / b.
     let du_from = -d.a[(n - 1, 0)] * delta / d.b[n - 1];
     let mut z = DVector::<f64>::zeros(n + 1);
@@ -130,7 +146,7 @@ pub fn designed_response(d: &Design, from: f64, samples: usize) -> Vec<f64> {
         out.push(d.setpoint + z[0]);
         z = &phi * z;
     }
-    out
+    Ok(out)
 }
 
 /// The plant and the observer as one system over a sample: inputs (u, measured y), both held.
@@ -155,6 +171,26 @@ impl System for Loop<'_> {
             format!("observer {}", self.model.names()[k - np])
         }
     }
+    /// Block diagonal: the plant's Jacobian (its own, exact for models) and the model's minus
+    /// the observer gain in column 0; the held measurement couples nothing.
+    fn jacobian(&self, x: &[f64], u: &[f64], jac: &mut [f64]) {
+        let np = self.plant.dim();
+        let n = self.model.n_state();
+        let dim = np + n;
+        jac.iter_mut().for_each(|v| *v = 0.0);
+        let mut jp = vec![0.0; np * np];
+        self.plant.jacobian(&x[..np], &u[..1], &mut jp);
+        for i in 0..np {
+            jac[i * dim..i * dim + np].copy_from_slice(&jp[i * np..(i + 1) * np]);
+        }
+        let (mut jm, mut ju) = (vec![0.0; n * n], vec![0.0; n]);
+        self.model.jacobians(&x[np..], &u[..1], &mut jm, &mut ju);
+        for i in 0..n {
+            let row = (np + i) * dim + np;
+            jac[row..row + n].copy_from_slice(&jm[i * n..(i + 1) * n]);
+            jac[row] -= self.l[i];
+        }
+    }
     fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
         let np = self.plant.dim();
         self.plant.rhs(&x[..np], &u[..1], &mut dx[..np]);
@@ -177,6 +213,7 @@ impl System for Loop<'_> {
 /// nonlinear model corrected by its gain towards the held measurement) advance together with
 /// the crate's stiff integrator ([`crate::simulate::simulate`]).
 pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
+    check(d)?;
     if !(s.duration.is_finite() && s.duration > 0.0) {
         return Err(Error::param(
             "duration",
@@ -235,6 +272,15 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
             ),
         ));
     }
+    if samples < 10.0 {
+        return Err(Error::param(
+            "duration",
+            format!(
+                "{} s is fewer than 10 samples at tau = {} s; give a longer duration",
+                s.duration, d.tau
+            ),
+        ));
+    }
     let samples = samples as usize;
     let n = d.order;
     let model = d.model.compile()?;
@@ -251,11 +297,15 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
         .fold(0.0f64, |m, v| m.max(v.abs()))
         .max((d.setpoint - plant.x0[plant.output]).abs())
         .max(1e-300);
+    // Absolute tolerance on the scale of the step (the default 1e-10 would be the whole step of
+    // a plant measured in units of 1e-10).
     let opts = SimOptions {
         bound: 1e290,
+        atol: 1e-10 * scale,
         run: "closed loop".into(),
         ..Default::default()
     };
+    let mut steps = 0usize;
 
     let mut rng = Rng::new(s.seed);
     let mut z = plant.x0.clone();
@@ -297,9 +347,12 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
         if k + 1 == samples {
             break;
         }
-        // Conditional integration: while the input is clipped, integrating would only wind up.
-        if u == raw {
-            q += d.tau * (ym - d.setpoint);
+        // Conditional integration: while the input is clipped, integrate only what pulls it back
+        // inside the limits (the rest would wind up).
+        let dq = d.tau * (ym - d.setpoint);
+        let pull = -d.k_i * dq;
+        if u == raw || (raw > u && pull < 0.0) || (raw < u && pull > 0.0) {
+            q += dq;
         }
         let diverged = |why: String| {
             Error::InvalidData(format!(
@@ -316,12 +369,28 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
         )
         .map_err(|e| diverged(e.to_string()))?;
         z.copy_from_slice(step.state(1));
+        steps += step.steps;
+        if steps > MAX_STEPS {
+            return Err(Error::InvalidData(format!(
+                "the closed loop took over {MAX_STEPS} integrator steps by t = {:.6} s (stiff or nearly unstable); give a lower bandwidth or a shorter duration",
+                t + d.tau
+            )));
+        }
         let yn = z[plant.output];
         if !yn.is_finite() || (yn - d.setpoint).abs() > 1e12 * scale {
             return Err(diverged(format!("output {yn:e}")));
         }
     }
     Ok(tr)
+}
+
+/// `max` that keeps a NaN (`f64::max` drops it, and a NaN figure would read as a good one).
+fn nan_max(a: f64, b: f64) -> f64 {
+    if a.is_nan() || b.is_nan() {
+        f64::NAN
+    } else {
+        a.max(b)
+    }
 }
 
 /// Step metrics of a trace of [`run`] for a step from `from` to the design's setpoint.
@@ -334,6 +403,7 @@ pub fn metrics(tr: &Trace, d: &Design, from: f64) -> Result<StepMetrics> {
             format!("{from}: the same as the setpoint, there is no step to judge; give another starting output"),
         ));
     }
+    check(d)?;
     if tr.y.is_empty() || tr.estimate.is_empty() || tr.estimate[0].len() != tr.y.len() {
         return Err(Error::param("trace", "empty or not from a loop run"));
     }
@@ -348,7 +418,7 @@ pub fn metrics(tr: &Trace, d: &Design, from: f64) -> Result<StepMetrics> {
     let overshoot =
         tr.y.iter()
             .map(|y| 100.0 * (frac(*y) - 1.0))
-            .fold(0.0, f64::max);
+            .fold(0.0, nan_max);
     let band = 0.02 * step.abs();
     let settling_time = match tr.y.iter().rposition(|y| (y - setpoint).abs() > band) {
         None => 0.0,
@@ -358,19 +428,21 @@ pub fn metrics(tr: &Trace, d: &Design, from: f64) -> Result<StepMetrics> {
     let tail = (tr.y.len() / 10).max(1);
     let mean_tail = tr.y[tr.y.len() - tail..].iter().sum::<f64>() / tail as f64;
     let final_error = 100.0 * (mean_tail - setpoint) / step.abs();
-    let observer_rms = (tr
-        .y
-        .iter()
-        .zip(&tr.estimate[0])
-        .map(|(y, e)| (y - e).powi(2))
-        .sum::<f64>()
-        / tr.y.len() as f64)
-        .sqrt();
-    let design_deviation = designed_response(d, from, tr.y.len())
+    // In units of the step before squaring: outputs near 1e300 would overflow.
+    let observer_rms = step.abs()
+        * (tr
+            .y
+            .iter()
+            .zip(&tr.estimate[0])
+            .map(|(y, e)| ((y - e) / step).powi(2))
+            .sum::<f64>()
+            / tr.y.len() as f64)
+            .sqrt();
+    let design_deviation = designed_response(d, from, tr.y.len())?
         .iter()
         .zip(&tr.y)
         .map(|(yd, y)| (y - yd).abs())
-        .fold(0.0, f64::max)
+        .fold(0.0, nan_max)
         / step.abs()
         * 100.0;
     Ok(StepMetrics {
@@ -379,8 +451,8 @@ pub fn metrics(tr: &Trace, d: &Design, from: f64) -> Result<StepMetrics> {
         overshoot,
         settling_time,
         final_error,
-        u_min: tr.u.iter().copied().fold(f64::INFINITY, f64::min),
-        u_max: tr.u.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+        u_min: -tr.u.iter().map(|u| -u).fold(f64::NEG_INFINITY, nan_max),
+        u_max: tr.u.iter().copied().fold(f64::NEG_INFINITY, nan_max),
         observer_rms,
     })
 }
@@ -448,7 +520,20 @@ pub fn rest_state(
         }
     }
     sys.rhs(&x, &[u], &mut f);
-    if x.iter().any(|v| !v.is_finite()) || !u.is_finite() || norm(&f) > 1e-6 * f_start.max(1.0) {
+    // At rest each equation balances its terms: judged against their size (|J||x| + |B||u|),
+    // not against how far the first guess was.
+    sys.jacobian(&x, &[u], &mut jac);
+    let du = 1e-7 * u.abs().max(1e-3);
+    sys.rhs(&x, &[u + du], &mut f1);
+    let sizes: Vec<f64> = (0..n)
+        .map(|r| {
+            (0..n).map(|j| (jac[r * n + j] * x[j]).abs()).sum::<f64>()
+                + ((f1[r] - f[r]) / du * u).abs()
+        })
+        .collect();
+    let floor = 1e-12 * sizes.iter().fold(0.0f64, |a, b| a.max(*b));
+    let unbalanced = (0..n).any(|r| f[r].is_nan() || f[r].abs() > 1e-8 * sizes[r] + floor);
+    if x.iter().any(|v| !v.is_finite()) || !u.is_finite() || unbalanced {
         return Err(Error::InvalidData(format!(
             "the plant has no rest state at output {y:?} that Newton's method finds; choose another starting output (--from)"
         )));

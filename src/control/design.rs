@@ -154,7 +154,9 @@ pub fn steady_input(model: &Model, y: f64) -> Result<f64> {
             }
         }
         if u.is_finite() && p.abs() <= 1e-9 * sz.max(1e-300) {
-            if dp == 0.0 {
+            // A root where P barely moves with u (a double root: P = (u - 1)^2) would need
+            // gains without bound: it counts as no effect.
+            if dp.abs() * u.abs().max(1.0) <= 1e-6 * sz {
                 zero_slope_root = true;
             } else if best.is_none_or(|b| u.abs() < b.abs()) {
                 best = Some(u);
@@ -184,7 +186,11 @@ pub fn eigenvalues(m: &DMatrix<f64>) -> Result<Vec<(f64, f64)>> {
             "a linearisation is not finite (the model or plant overflows there)".into(),
         ));
     }
-    let schur = nalgebra::Schur::try_new(m.clone(), f64::EPSILON, 10_000).ok_or_else(|| {
+    // Balanced first: companion matrices of fast plants hold entries 1e6 apart, and the Schur
+    // iteration's error scales with the matrix norm.
+    let mut bal = m.clone();
+    nalgebra::linalg::balancing::balance_parlett_reinsch(&mut bal);
+    let schur = nalgebra::Schur::try_new(bal, f64::EPSILON, 10_000).ok_or_else(|| {
         Error::InvalidData("the eigenvalues of a linearisation did not converge".into())
     })?;
     let mut e: Vec<(f64, f64)> = schur
@@ -196,31 +202,68 @@ pub fn eigenvalues(m: &DMatrix<f64>) -> Result<Vec<(f64, f64)>> {
     Ok(e)
 }
 
-/// `prod (M + c I)` over the given shifts: the characteristic polynomial with roots at `-c`,
-/// evaluated at M.
-fn poly_at(m: &DMatrix<f64>, shifts: &[f64]) -> DMatrix<f64> {
+/// The polynomial with roots `poles` (conjugate pairs listed once, with im > 0, or twice),
+/// evaluated at M: `prod (M - p I)` over real poles times `M^2 - 2 re M + |p|^2 I` per pair.
+fn poly_at(m: &DMatrix<f64>, poles: &[(f64, f64)]) -> DMatrix<f64> {
     let k = m.nrows();
-    let mut p = DMatrix::<f64>::identity(k, k);
-    for &c in shifts {
-        p = &p * (m + DMatrix::<f64>::identity(k, k) * c);
+    let id = DMatrix::<f64>::identity(k, k);
+    let mut p = id.clone();
+    for &(re, im) in poles {
+        if im == 0.0 {
+            p = &p * (m - &id * re);
+        } else if im > 0.0 {
+            p = &p * (m * m - m * (2.0 * re) + &id * (re * re + im * im));
+        }
     }
     p
 }
 
-/// Where the design puts the poles, as positive rates (poles at minus them): for each open-loop
-/// eigenvalue l, `floor` if |l| <= floor, else |l|. Slow modes are brought to the bandwidth;
-/// fast ones keep their speed (a fast complex pair becomes a real double pole, an unstable one
-/// its mirror). Slowing a fast stable mode down would take gains that cancel the plant's own
-/// damping, which the sampling delay then destabilises.
-pub fn placed_poles(open_loop: &[(f64, f64)], floor: f64) -> Vec<f64> {
+/// Smallest damping ratio of an open-loop pair the design leaves where it is.
+pub const KEEP_DAMPING: f64 = 0.5;
+
+/// Where the design puts the poles, for each open-loop eigenvalue (re, im): modes no faster than
+/// `floor` go to -floor; faster stable modes stay where they are (real ones, and pairs damped at
+/// least [`KEEP_DAMPING`]); faster unstable or lightly damped ones go to minus their magnitude
+/// (a pair becomes a real double pole). Slowing a fast stable mode down would take gains that
+/// cancel the plant's own damping, which the sampling delay then destabilises. The second value
+/// says whether the pole was moved (moved poles must be slow against the sampling).
+pub fn placed_poles(open_loop: &[(f64, f64)], floor: f64) -> Vec<((f64, f64), bool)> {
     open_loop
         .iter()
-        .map(|(r, i)| r.hypot(*i).max(floor))
+        .map(|&(re, im)| {
+            let mag = re.hypot(im);
+            if mag <= floor {
+                ((-floor, 0.0), true)
+            } else if re < 0.0 && (im == 0.0 || -re >= KEEP_DAMPING * mag) {
+                ((re, im), false)
+            } else {
+                ((-mag, 0.0), true)
+            }
+        })
         .collect()
 }
 
-/// Ackermann: the gain row `k` with eig(A - B k) at `-shifts`.
-fn ackermann(a: &DMatrix<f64>, b: &DVector<f64>, shifts: &[f64]) -> Result<DVector<f64>> {
+/// How far `poly_at(m, poles)` is from zero, relative to the size of its factors: by
+/// Cayley-Hamilton 0 exactly when the eigenvalues of m are `poles`; checks that a placement was
+/// achieved, whatever the rounding of the eigenvalues themselves (repeated poles split).
+fn placement_residual(m: &DMatrix<f64>, poles: &[(f64, f64)]) -> f64 {
+    let norm = m.norm();
+    let size: f64 = poles
+        .iter()
+        .filter(|p| p.1 >= 0.0)
+        .map(|&(re, im)| {
+            if im == 0.0 {
+                norm + re.abs()
+            } else {
+                (norm + re.hypot(im)).powi(2)
+            }
+        })
+        .product();
+    poly_at(m, poles).norm() / size.max(1e-300)
+}
+
+/// Ackermann: the gain row `k` with eig(A - B k) at `poles`.
+fn ackermann(a: &DMatrix<f64>, b: &DVector<f64>, poles: &[(f64, f64)]) -> Result<DVector<f64>> {
     let k = a.nrows();
     let mut ctrb = DMatrix::<f64>::zeros(k, k);
     let mut col = b.clone();
@@ -234,7 +277,7 @@ fn ackermann(a: &DMatrix<f64>, b: &DVector<f64>, shifts: &[f64]) -> Result<DVect
     let w = ctrb.transpose().lu().solve(&last).ok_or_else(|| {
         Error::InvalidData("the linearised model is not controllable at this setpoint".into())
     })?;
-    Ok(poly_at(a, shifts).transpose() * w)
+    Ok(poly_at(a, poles).transpose() * w)
 }
 
 /// The design: linearisation at the setpoint, state feedback with integral action, observer.
@@ -272,29 +315,49 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
             (mags.iter().map(|m| m.ln()).sum::<f64>() / mags.len() as f64).exp()
         }
     };
-    if w * o.tau < 1e-9 {
+    // The loop runs at most MAX_SAMPLES samples, and its default length is
+    // (3 (n + 1) + 6) / w: a slower bandwidth could never be shown settling.
+    let slowest = (3.0 * (n as f64 + 1.0) + 6.0) / (super::MAX_SAMPLES as f64 * o.tau);
+    if w < slowest {
         return Err(Error::param(
             "bandwidth",
             format!(
-                "{w:e} rad/s is too slow for a controller sampled every {} s (the loop would need over 1e9 samples to settle); give a bandwidth above {:.3e} rad/s",
+                "{w:e} rad/s is too slow for a controller sampled every {} s (settling would take over {} samples); give a bandwidth above {slowest:.3e} rad/s",
                 o.tau,
-                1e-9 / o.tau
+                super::MAX_SAMPLES
             ),
         ));
     }
-    // The poles the observer places must be slow against the sampling: the controller updates
-    // once per tau, and a pole at -p holds its value over a sample only while p tau is small.
-    // (Faster open-loop poles it keeps are the model's own, integrated as such.)
-    let fastest = o.observer_speed * w;
-    if fastest * o.tau > 0.5 {
-        return Err(Error::param(
-            "bandwidth",
+    let ctrl = placed_poles(&open_loop, w);
+    let obs = placed_poles(&open_loop, o.observer_speed * w);
+    // The poles the design moves must be slow against the sampling: the controller updates once
+    // per tau, and a pole at -p holds its value over a sample only while p tau is small. (Fast
+    // stable poles it keeps are the model's own, integrated as such.)
+    let fastest_moved = ctrl
+        .iter()
+        .chain(&obs)
+        .filter(|(_, moved)| *moved)
+        .map(|((re, im), _)| re.hypot(*im))
+        .fold(0.0, f64::max);
+    if fastest_moved * o.tau > 0.5 {
+        let own = ctrl
+            .iter()
+            .chain(&obs)
+            .any(|((re, im), moved)| *moved && re.hypot(*im) > o.observer_speed * w);
+        let fix = if own {
             format!(
-                "{w:.4} rad/s puts the observer poles at {fastest:.4} rad/s, too fast for a controller sampled every {} s; give a bandwidth below {:.4} rad/s",
+                "the model has a fast unstable or lightly damped mode at {fastest_moved:.4} rad/s that feedback must move; sample faster: give a tau below {:.3e} s",
+                0.5 / fastest_moved
+            )
+        } else {
+            format!(
+                "{w:.4} rad/s puts the observer poles at {:.4} rad/s, too fast for a controller sampled every {} s; give a bandwidth below {:.4} rad/s",
+                o.observer_speed * w,
                 o.tau,
                 0.5 / (o.tau * o.observer_speed)
-            ),
-        ));
+            )
+        };
+        return Err(Error::param(if own { "tau" } else { "bandwidth" }, fix));
     }
 
     // Scaled time t' = w t and states y^(k) / w^k keep the matrices of order one (a throttle's
@@ -313,17 +376,40 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
     a_aug[(n, 0)] = 1.0;
     let mut b_aug = DVector::<f64>::zeros(n + 1);
     b_aug.rows_mut(0, n).copy_from(&b_s);
-    let mut shifts: Vec<f64> = placed_poles(&open_loop, w).iter().map(|p| p / w).collect();
-    shifts.push(1.0);
-    let k_aug = ackermann(&a_aug, &b_aug, &shifts)?;
+    let scaled = |p: &[((f64, f64), bool)]| -> Vec<(f64, f64)> {
+        p.iter().map(|((re, im), _)| (re / w, im / w)).collect()
+    };
+    let mut ctrl_s = scaled(&ctrl);
+    ctrl_s.push((-1.0, 0.0));
+    let k_aug = ackermann(&a_aug, &b_aug, &ctrl_s)?;
     // Observer of the state from y = x_0 (dual: gains for A^T, C^T).
     let mut c_t = DVector::<f64>::zeros(n);
     c_t[0] = 1.0;
-    let obs_shifts: Vec<f64> = placed_poles(&open_loop, o.observer_speed * w)
-        .iter()
-        .map(|p| p / w)
-        .collect();
-    let l_s = ackermann(&a_s.transpose(), &c_t, &obs_shifts)?;
+    let obs_s = scaled(&obs);
+    let l_s = ackermann(&a_s.transpose(), &c_t, &obs_s)?;
+    // Check the placement in the scaled units it was made in: poles spread over many decades
+    // (order 8, 1 to 1e4 rad/s) leave Ackermann's formula with too few digits.
+    let mut acl_s = a_aug.clone();
+    for i in 0..=n {
+        for j in 0..=n {
+            acl_s[(i, j)] -= b_aug[i] * k_aug[j];
+        }
+    }
+    let mut aobs_s = a_s.clone();
+    for i in 0..n {
+        aobs_s[(i, 0)] -= l_s[i];
+    }
+    let worst = placement_residual(&acl_s, &ctrl_s).max(placement_residual(&aobs_s, &obs_s));
+    if worst.is_nan() || worst > 1e-6 {
+        return Err(Error::InvalidData(format!(
+            "pole placement is numerically unreliable for this model (relative residual {worst:.1e}; its modes spread over {:.1} decades): identify a lower order or give a bandwidth nearer the plant's poles",
+            {
+                let m: Vec<f64> = open_loop.iter().map(|(r, i)| r.hypot(*i)).filter(|v| *v > 0.0).collect();
+                let (lo, hi) = m.iter().fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(*v), b.max(*v)));
+                if m.is_empty() { 0.0 } else { (hi / lo).log10() }
+            }
+        )));
+    }
 
     let k: Vec<f64> = (0..n).map(|j| k_aug[j] / d[j]).collect();
     let k_i = k_aug[n] * w;
@@ -334,19 +420,6 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
         ));
     }
 
-    // What the gains achieve, in original time: checks the placement and is reported.
-    let mut acl = DMatrix::<f64>::zeros(n + 1, n + 1);
-    for i in 0..n {
-        for j in 0..n {
-            acl[(i, j)] = a[(i, j)] - b[i] * k[j];
-        }
-        acl[(i, n)] = -b[i] * k_i;
-    }
-    acl[(n, 0)] = 1.0;
-    let mut aobs = a.clone();
-    for i in 0..n {
-        aobs[(i, 0)] -= l[i];
-    }
     Ok(Design {
         output: model.outputs[0].name.clone(),
         input: model.inputs[0].clone(),
@@ -362,8 +435,14 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
         k,
         k_i,
         l,
-        closed_loop: eigenvalues(&acl)?,
-        observer: eigenvalues(&aobs)?,
+        closed_loop: eigenvalues(&acl_s)?
+            .into_iter()
+            .map(|(r, i)| (r * w, i * w))
+            .collect(),
+        observer: eigenvalues(&aobs_s)?
+            .into_iter()
+            .map(|(r, i)| (r * w, i * w))
+            .collect(),
         model: model.clone(),
     })
 }

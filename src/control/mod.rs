@@ -3,29 +3,33 @@
 //!
 //! # Method
 //! 1. *Operating point* ([`design::steady_input`]): the input `u*` that holds the model at rest
-//!    at the setpoint r, the root of `P(r, 0, ..., 0, u) = 0`.
+//!    at the setpoint r, the root of `P(r, 0, ..., 0, u) = 0` (damped Newton from several
+//!    starts; a root where P hardly moves with u is refused).
 //! 2. *Linearisation* there, from the model's exact Jacobians: the companion pair (A, B).
 //! 3. *Pole placement* (Ackermann) in time scaled by the bandwidth w, with states
 //!    `y^(k) / w^k`: a throttle's companion row holds 1e6 beside 1, and the scaled matrices are
 //!    of order one. The n state gains and one integral gain put the integrator's pole and every
-//!    open-loop pole slower than w at -w and keep the faster ones at their speed
-//!    ([`design::placed_poles`]); the setpoint enters through the integrator only (the loop
-//!    starts bumpless), so the designed step response has no zeros and, with real poles, no
-//!    overshoot ([`designed_response`]). The observer's n gains put its poles at -f w (f = 3 by
-//!    default), or at the open-loop pole's speed where that is faster. Pole placement rather than LQR: the bandwidth is the one
-//!    number an engineer specifies first, and it fixes every pole.
+//!    open-loop pole no faster than w at -w, keep faster stable ones, and move faster unstable
+//!    or lightly damped ones to minus their magnitude ([`design::placed_poles`]); the setpoint
+//!    enters through the integrator only (the loop starts bumpless), so the designed step
+//!    response has no zeros and, with real poles, no overshoot ([`designed_response`]). The
+//!    observer's n gains put its poles at -f w (f = 3 by default), or keep an open-loop pole
+//!    that is faster. The placement is checked by Cayley-Hamilton in the scaled units. Pole
+//!    placement rather than LQR: the bandwidth is the one number an engineer specifies first,
+//!    and it fixes every pole.
 //! 4. *The loop* ([`closed_loop::run`]): a digital controller sampled at tau, as it would run on
 //!    the machine. Each sample it reads the output, updates the integral of the error, and holds
 //!    `u = u* - K (x_hat - x*) - k_i q` until the next sample; the observer integrates the
-//!    *nonlinear* model corrected by its gain towards the held measurement. Any
-//!    [`crate::simulate::System`] can be the plant: the model itself (the design check), another
-//!    model, or a built-in plant with known truth (whether a design on the identified model
-//!    works on the real thing). Input limits clip u and stop the integrator (no wind-up).
+//!    *nonlinear* model corrected by its gain towards the held measurement, together with the
+//!    plant, by the crate's stiff integrator. Any [`crate::simulate::System`] can be the plant:
+//!    the model itself (the design check), another model, or a built-in plant with known truth
+//!    (whether a design on the identified model works on the real thing). Input limits clip u;
+//!    while clipped, the integrator takes only what pulls u back inside (no wind-up, no stall).
 //!
 //! # Assumptions
 //! One output and one input; the input enters the model's highest derivative (relative degree n,
-//! as every ctsid model is written); the observer's poles are slow against the sampling
-//! (`f w tau <= 0.5`, checked). A model identified at a few operating points is trusted near
+//! as every ctsid model is written); the poles the design moves are slow against the sampling
+//! (`p tau <= 0.5`, checked). A model identified at a few operating points is trusted near
 //! them: the integral action removes a steady error the model does not predict, not a wrong
 //! sign of the gain.
 
