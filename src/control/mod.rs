@@ -81,8 +81,9 @@ pub struct Design {
 pub fn format_poles(p: &[(f64, f64)]) -> String {
     p.iter()
         .map(|(r, i)| {
-            // A double pole comes out of the eigensolver split by ~1e-8 of its size.
-            if i.abs() <= 1e-6 * r.abs().max(1e-300) {
+            // A multiple pole comes out of the eigensolver split into a faint pair (by about
+            // eps^(1/k) of its size: 1e-8 for a double pole, 1e-5 for a triple one).
+            if i.abs() <= 1e-4 * r.abs().max(1e-300) {
                 format!("{r:.4}")
             } else {
                 format!("{r:.4}{:+.4}i", i)
