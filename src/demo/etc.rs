@@ -393,6 +393,7 @@ pub fn run(o: &EtcOptions) -> Result<String> {
     // the data's relative level applied to the step (the data's own level, relative to swings of
     // tens of radians at Patm = 0, would bury a 0.5 rad step).
     // A model the design cannot use is a finding of the report, not a failure of the demo.
+    let mut feedback_plot = None;
     match feedback(
         &plant,
         &id.model,
@@ -401,9 +402,10 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         o.noise * STEP,
         o.seed,
     ) {
-        Ok((text, table)) => {
+        Ok((text, table, plot)) => {
             let _ = writeln!(out, "{text}");
             tables.push(("feedback".into(), table));
+            feedback_plot = Some(plot);
         }
         Err(e) => {
             let _ = writeln!(
@@ -426,6 +428,9 @@ pub fn run(o: &EtcOptions) -> Result<String> {
             write_file(dir, &format!("{name}.csv"), &t.csv())?;
         }
         plots(dir, &id, &runs, split.test[0], o.tau)?;
+        if let Some(p) = &feedback_plot {
+            write_file(dir, "feedback_step.svg", p)?;
+        }
     }
     Ok(out)
 }
@@ -582,7 +587,7 @@ fn feedback(
     tau: f64,
     noise_sd: f64,
     seed: u64,
-) -> Result<(String, Table)> {
+) -> Result<(String, Table, String)> {
     use crate::control::{self, format_poles, DesignOptions, Scenario};
     let x_rest = plant.rest_state();
     let from = x_rest[0];
@@ -606,7 +611,7 @@ fn feedback(
                name: &str,
                p: &control::Plant,
                noise: f64|
-     -> Result<()> {
+     -> Result<control::Trace> {
         let scenario = Scenario {
             duration: control::default_duration(&ours),
             noise_sd: noise,
@@ -626,7 +631,7 @@ fn feedback(
             format!("{:.2}", m.design_deviation),
             format!("{:.4e} .. {:.4e}", m.u_min, m.u_max),
         ]);
-        Ok(())
+        Ok(tr)
     };
     let own = model.compile()?;
     let u_guess = control::steady_input(model, from).unwrap_or(ours.u_star);
@@ -656,6 +661,9 @@ fn feedback(
     } else {
         vec![0.0]
     };
+    // The plot shows the loop that matters: designed on the identified model, around the true
+    // plant, with the sensor noise when there is any.
+    let mut shown = None;
     for noise in noises {
         row(
             &mut t,
@@ -665,18 +673,40 @@ fn feedback(
             &own_plant,
             noise,
         )?;
-        row(
+        shown = Some(row(
             &mut t,
             &ours,
             "identified model",
             "true plant",
             &true_plant,
             noise,
-        )?;
+        )?);
         if let Some(r) = &reference {
             row(&mut t, r, "true model", "true plant", &true_plant, noise)?;
         }
     }
+    let tr = shown.expect("at least the noise-free rows run");
+    let designed = control::designed_response(&ours, from, tr.t.len())?;
+    let target = vec![setpoint; tr.t.len()];
+    let line = |label, y, color, dashed| svg::Series {
+        label,
+        x: &tr.t,
+        y,
+        color,
+        band: None,
+        dashed,
+    };
+    let plot = svg::line_plot(
+        "throttle under feedback designed on the identified model: true plant",
+        "t (s)",
+        "y (rad)",
+        &[
+            line("measured", &tr.y_measured, "lightgray", false),
+            line("true plant", &tr.y, "black", false),
+            line("designed response", &designed, "blue", true),
+            line("setpoint", &target, "green", true),
+        ],
+    );
     let mut text = format!(
         "## Feedback designed on the identified model\n\nSetpoint {setpoint:.4} rad from rest at {from:.4} rad (u = 0); controller sampled every {tau} s; state feedback with integral action; bandwidth {w:.3} rad/s (the default: the geometric mean of the identified model's open-loop pole magnitudes {ol}), controller poles {cl}, observer poles {ob}; the observer runs the identified (nonlinear) model. The designed response is the linearised model's under the continuous-time law (real poles, setpoint through the integrator: no overshoot). Without noise and with sensor noise of {noise_sd:.3} rad ({pct} % of the step, the data's relative level).\n",
         w = ours.bandwidth,
@@ -693,5 +723,5 @@ fn feedback(
         );
     }
     let _ = writeln!(text, "{}", t.markdown());
-    Ok((text, t))
+    Ok((text, t, plot))
 }
