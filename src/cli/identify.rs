@@ -156,7 +156,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             .iter()
             .any(|c| !c.validation.p50().is_finite())
         {
-            text += "No derivative validation profile: without --validation runs it is 5-fold over the training runs, and one training run gives no folds (the free-run refinement gate then uses the training runs themselves).\n\n";
+            text += "No derivative validation profile: without --validation runs it is 5-fold over the training runs, and one training run gives no folds (the free-run refinement gate then uses the training runs themselves); a long record cut into runs with --segment SECONDS gives folds and held-out runs.\n\n";
         }
         if let Some(p) = &rep.test {
             text += &format!(
