@@ -5,7 +5,7 @@ use crate::error::{Error, Result};
 use crate::model::CompiledModel;
 use crate::plants::rng::Rng;
 use crate::simulate::{simulate, ConstantInput, SimOptions, System};
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DVector;
 
 /// A setpoint step and how the loop is run.
 #[derive(Debug, Clone)]
@@ -15,7 +15,8 @@ pub struct Scenario {
     /// Standard deviation of white noise added to each measured sample.
     pub noise_sd: f64,
     pub seed: u64,
-    /// Input limits (the integrator holds while the input is clipped: no wind-up).
+    /// Input limits: the input is clipped, and while it is, the integrator takes only what pulls
+    /// it back inside (no wind-up, no stall at a limit).
     pub u_limits: Option<(f64, f64)>,
 }
 
@@ -115,24 +116,8 @@ pub fn designed_response(d: &Design, from: f64, samples: usize) -> Result<Vec<f6
     let n = d.order;
     let w = d.bandwidth;
     let delta = from - d.setpoint;
-    // z = [x - x*, q] with x_k scaled by w^k and q by w (the design's scaling).
-    let sc: Vec<f64> = (0..=n)
-        .map(|k| if k < n { w.powi(k as i32) } else { 1.0 / w })
-        .collect();
-    let mut acl = DMatrix::<f64>::zeros(n + 1, n + 1);
-    for i in 0..n {
-        for j in 0..n {
-            acl[(i, j)] = d.a[(i, j)] - d.b[i] * d.k[j];
-        }
-        acl[(i, n)] = -d.b[i] * d.k_i;
-    }
-    acl[(n, 0)] = 1.0;
-    let mut scaled = DMatrix::<f64>::zeros(n + 1, n + 1);
-    for i in 0..=n {
-        for j in 0..=n {
-            scaled[(i, j)] = acl[(i, j)] * sc[j] / sc[i] / w;
-        }
-    }
+    // z = [x - x*, q], scaled as the design scales it.
+    let (scaled, sc) = super::design::scaled_closed_loop(&d.a, &d.b, &d.k, d.k_i, w);
     let phi = (scaled * (w * d.tau)).exp();
     // At rest at `from` the linearised model needs du = -A[n-1][0] delta / b.
     let du_from = -d.a[(n - 1, 0)] * delta / d.b[n - 1];

@@ -5,8 +5,7 @@ use crate::error::{Error, Result};
 use crate::model::{CompiledModel, Model};
 use nalgebra::{DMatrix, DVector};
 
-/// Largest model order the design handles (the model file's own limit).
-const MAX_ORDER: usize = 8;
+use crate::model::MAX_ORDER;
 
 /// What the design needs besides the model.
 #[derive(Debug, Clone)]
@@ -262,6 +261,32 @@ fn placement_residual(m: &DMatrix<f64>, poles: &[(f64, f64)]) -> f64 {
     poly_at(m, poles).norm() / size.max(1e-300)
 }
 
+/// The closed loop of the linearisation under the gains, state `[x - x*, q]` (q the integral of
+/// y - r), in the design's scaled time `w t` and states `y^(k) / w^k`, `q w`: the matrix whose
+/// eigenvalues over w are the placed poles, of order one however fast the plant. Also the scales
+/// (state = scale * scaled state).
+pub fn scaled_closed_loop(
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    k: &[f64],
+    k_i: f64,
+    w: f64,
+) -> (DMatrix<f64>, Vec<f64>) {
+    let n = k.len();
+    let sc: Vec<f64> = (0..=n)
+        .map(|j| if j < n { w.powi(j as i32) } else { 1.0 / w })
+        .collect();
+    let mut m = DMatrix::<f64>::zeros(n + 1, n + 1);
+    for i in 0..n {
+        for j in 0..n {
+            m[(i, j)] = (a[(i, j)] - b[i] * k[j]) * sc[j] / sc[i] / w;
+        }
+        m[(i, n)] = -b[i] * k_i * sc[n] / sc[i] / w;
+    }
+    m[(n, 0)] = sc[0] / sc[n] / w;
+    (m, sc)
+}
+
 /// Ackermann: the gain row `k` with eig(A - B k) at `poles`.
 fn ackermann(a: &DMatrix<f64>, b: &DVector<f64>, poles: &[(f64, f64)]) -> Result<DVector<f64>> {
     let k = a.nrows();
@@ -387,33 +412,28 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
     c_t[0] = 1.0;
     let obs_s = scaled(&obs);
     let l_s = ackermann(&a_s.transpose(), &c_t, &obs_s)?;
+    let k: Vec<f64> = (0..n).map(|j| k_aug[j] / d[j]).collect();
+    let k_i = k_aug[n] * w;
+    let l: Vec<f64> = (0..n).map(|i| w * d[i] * l_s[i]).collect();
     // Check the placement in the scaled units it was made in: poles spread over many decades
     // (order 8, 1 to 1e4 rad/s) leave Ackermann's formula with too few digits.
-    let mut acl_s = a_aug.clone();
-    for i in 0..=n {
-        for j in 0..=n {
-            acl_s[(i, j)] -= b_aug[i] * k_aug[j];
-        }
-    }
+    let (acl_s, _) = scaled_closed_loop(&a, &b, &k, k_i, w);
     let mut aobs_s = a_s.clone();
     for i in 0..n {
         aobs_s[(i, 0)] -= l_s[i];
     }
     let worst = placement_residual(&acl_s, &ctrl_s).max(placement_residual(&aobs_s, &obs_s));
     if worst.is_nan() || worst > 1e-6 {
+        let mags = open_loop
+            .iter()
+            .map(|(r, i)| r.hypot(*i))
+            .filter(|v| *v > 0.0);
+        let (lo, hi) = mags.fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
+        let decades = if hi > 0.0 { (hi / lo).log10() } else { 0.0 };
         return Err(Error::InvalidData(format!(
-            "pole placement is numerically unreliable for this model (relative residual {worst:.1e}; its modes spread over {:.1} decades): identify a lower order or give a bandwidth nearer the plant's poles",
-            {
-                let m: Vec<f64> = open_loop.iter().map(|(r, i)| r.hypot(*i)).filter(|v| *v > 0.0).collect();
-                let (lo, hi) = m.iter().fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(*v), b.max(*v)));
-                if m.is_empty() { 0.0 } else { (hi / lo).log10() }
-            }
+            "pole placement is numerically unreliable for this model (relative residual {worst:.1e}; its modes spread over {decades:.1} decades): identify a lower order or give a bandwidth nearer the plant's poles"
         )));
     }
-
-    let k: Vec<f64> = (0..n).map(|j| k_aug[j] / d[j]).collect();
-    let k_i = k_aug[n] * w;
-    let l: Vec<f64> = (0..n).map(|i| w * d[i] * l_s[i]).collect();
     if k.iter().chain(&l).chain([&k_i]).any(|v| !v.is_finite()) {
         return Err(Error::InvalidData(
             "pole placement failed (gains not finite): the linearised model is too ill-conditioned at this setpoint".into(),
