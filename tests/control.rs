@@ -26,12 +26,6 @@ fn oscillator() -> Model {
     )
 }
 
-fn rest(model: &Model, y: f64) -> (Vec<f64>, f64) {
-    let c = model.compile().unwrap();
-    let u = control::steady_input(model, y).unwrap();
-    control::rest_state(&c, 0, y, u).unwrap()
-}
-
 #[test]
 fn gains_match_the_hand_derived_placement() {
     let mut o = DesignOptions::new(1.0, 0.01);
@@ -62,8 +56,7 @@ fn the_loop_around_its_own_model_follows_the_designed_response() {
     let mut o = DesignOptions::new(1.0, 0.01);
     o.bandwidth = Some(3.0);
     let d = control::design(&model, &o).unwrap();
-    let c = model.compile().unwrap();
-    let (x0, u0) = rest(&model, 0.0);
+    let (c, x0, u0) = control::model_at_rest(&model, 0.0, 0.0).unwrap();
     let plant = Plant {
         system: &c,
         output: 0,

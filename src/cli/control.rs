@@ -124,9 +124,7 @@ pub fn run(a: ControlArgs) -> Result<()> {
         }
         None => model.clone(),
     };
-    let compiled = plant_model.compile()?;
-    let u_guess = control::steady_input(&plant_model, a.from).unwrap_or(d.u_star);
-    let (x0, u0) = control::rest_state(&compiled, 0, a.from, u_guess)?;
+    let (compiled, x0, u0) = control::model_at_rest(&plant_model, a.from, d.u_star)?;
     let scenario = Scenario {
         duration: a.duration.unwrap_or(control::default_duration(&d)),
         noise_sd: a.noise,

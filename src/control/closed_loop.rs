@@ -2,7 +2,7 @@
 
 use super::Design;
 use crate::error::{Error, Result};
-use crate::model::CompiledModel;
+use crate::model::{CompiledModel, Model};
 use crate::plants::rng::Rng;
 use crate::simulate::{simulate, ConstantInput, SimOptions, System};
 use nalgebra::DVector;
@@ -440,6 +440,20 @@ pub fn metrics(tr: &Trace, d: &Design, from: f64) -> Result<StepMetrics> {
         u_max: tr.u.iter().copied().fold(f64::NEG_INFINITY, nan_max),
         observer_rms,
     })
+}
+
+/// A model as the plant, at rest at output `y`: compiled, with its rest state and input
+/// ([`rest_state`], started from the model's own steady input, or from `u_guess` where that
+/// search finds none).
+pub fn model_at_rest(
+    model: &Model,
+    y: f64,
+    u_guess: f64,
+) -> Result<(CompiledModel, Vec<f64>, f64)> {
+    let c = model.compile()?;
+    let guess = super::steady_input(model, y).unwrap_or(u_guess);
+    let (x, u) = rest_state(&c, 0, y, guess)?;
+    Ok((c, x, u))
 }
 
 /// The state at rest at output `y` of a system whose state `output` is the measured output:

@@ -633,9 +633,7 @@ fn feedback(
         ]);
         Ok(tr)
     };
-    let own = model.compile()?;
-    let u_guess = control::steady_input(model, from).unwrap_or(ours.u_star);
-    let (x_own, u_own) = control::rest_state(&own, 0, from, u_guess)?;
+    let (own, x_own, u_own) = control::model_at_rest(model, from, ours.u_star)?;
     let own_plant = control::Plant {
         system: &own,
         output: 0,
