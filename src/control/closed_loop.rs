@@ -480,6 +480,13 @@ pub fn rest_state(
     let mut jac = vec![0.0; n * n];
     let mut f1 = vec![0.0; n];
     let norm = |v: &[f64]| v.iter().map(|a| a * a).sum::<f64>().sqrt();
+    // The Jacobian in x and, by a forward difference, the rhs at u + du; du.
+    let linearise = |x: &[f64], u: f64, jac: &mut [f64], f1: &mut [f64]| -> f64 {
+        sys.jacobian(x, &[u], jac);
+        let du = 1e-7 * u.abs().max(1e-3);
+        sys.rhs(x, &[u + du], f1);
+        du
+    };
     sys.rhs(&x, &[u], &mut f);
     let f_start = norm(&f).max(1e-300);
     if !(f_start.is_finite() && y.is_finite() && u.is_finite()) {
@@ -492,9 +499,7 @@ pub fn rest_state(
         if norm(&f) <= 1e-12 * f_start {
             break;
         }
-        sys.jacobian(&x, &[u], &mut jac);
-        let du = 1e-7 * u.abs().max(1e-3);
-        sys.rhs(&x, &[u + du], &mut f1);
+        let du = linearise(&x, u, &mut jac, &mut f1);
         if jac.iter().chain(&f1).any(|v| !v.is_finite()) {
             break;
         }
@@ -521,9 +526,7 @@ pub fn rest_state(
     sys.rhs(&x, &[u], &mut f);
     // At rest each equation balances its terms: judged against their size (|J||x| + |B||u|),
     // not against how far the first guess was.
-    sys.jacobian(&x, &[u], &mut jac);
-    let du = 1e-7 * u.abs().max(1e-3);
-    sys.rhs(&x, &[u + du], &mut f1);
+    let du = linearise(&x, u, &mut jac, &mut f1);
     let sizes: Vec<f64> = (0..n)
         .map(|r| {
             (0..n).map(|j| (jac[r * n + j] * x[j]).abs()).sum::<f64>()
