@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::cli::ctsid;
+use common::cli::{ctsid, fails};
 use ctsid::discover::{cases, discover, Options};
 
 #[test]
@@ -32,15 +32,14 @@ fn discover_cli_uses_the_given_split() {
     };
     let (d, n) = (data.to_str().unwrap(), nominal.to_str().unwrap());
     let (tl, vl, sl) = (list(&train), list(&val), list(&test));
+    // The options that every call shares (words() splits them).
+    let base = "--run-column run --time-column t";
     let (ok, out, err) = ctsid(&[
         "discover",
         d,
         "--nominal",
         n,
-        "--run-column",
-        "run",
-        "--time-column",
-        "t",
+        base,
         "--train",
         &tl,
         "--validation",
@@ -72,39 +71,26 @@ fn discover_cli_uses_the_given_split() {
         lib.verdict
     );
 
-    let (ok, _, err) = ctsid(&[
-        "discover",
-        d,
-        "--nominal",
-        n,
-        "--run-column",
-        "run",
-        "--time-column",
-        "t",
-        "--train",
-        &tl,
-        "--validation",
-        &tl,
-        "--test",
-        &sl,
-    ]);
-    assert!(
-        !ok && err.contains("in both train and validation") && err.trim().lines().count() == 1,
-        "{err}"
+    fails(
+        &[
+            "discover",
+            d,
+            "--nominal",
+            n,
+            base,
+            "--train",
+            &tl,
+            "--validation",
+            &tl,
+            "--test",
+            &sl,
+        ],
+        &["in both train and validation"],
     );
-    let (ok, _, err) = ctsid(&[
-        "discover",
-        d,
-        "--nominal",
-        n,
-        "--run-column",
-        "run",
-        "--time-column",
-        "t",
-        "--test",
-        "99",
-    ]);
-    assert!(!ok && err.contains("run '99' does not exist"), "{err}");
+    fails(
+        &["discover", d, "--nominal", n, base, "--test 99"],
+        &["run '99' does not exist"],
+    );
     // One list given: the omitted ones share the other runs (they used to default to fixed
     // positions and clash with it).
     let (ok, out, err) = ctsid(&[
@@ -112,10 +98,7 @@ fn discover_cli_uses_the_given_split() {
         d,
         "--nominal",
         n,
-        "--run-column",
-        "run",
-        "--time-column",
-        "t",
+        base,
         "--train",
         &list(&[5, 6, 7, 8]),
     ]);
