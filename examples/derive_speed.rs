@@ -1,6 +1,8 @@
 //! Timing of the speed targets (single thread): 100 runs x 1000 samples, orders 0..6,
-//! and one run of 1,000,000 samples, with the default options and without the smoother level of
-//! the local blend (same run). Prints wall time; the criterion bench is benches/derivatives.rs.
+//! and one run of 1,000,000 samples, with the default options, without the smoother level of
+//! the local blend, and without the exponential-sum model (same run; the signal is a sum of five
+//! sines, so the model is fitted and used on every short run, the most it costs). Prints wall
+//! time; the criterion bench is benches/derivatives.rs.
 use ctsid::derivatives::{differentiate_runs, DerivativeOptions};
 fn signal(n: usize, seed: u64, tau: f64) -> Vec<f64> {
     let mut s = seed;
@@ -30,16 +32,22 @@ fn main() {
         smooth_window: 0.0,
         ..Default::default()
     };
+    let chain = DerivativeOptions {
+        exp_sum: false,
+        ..Default::default()
+    };
     for (what, o) in [
         ("default", DerivativeOptions::default()),
         ("no smoother level", plain),
+        ("smoother only (no exponential-sum model)", chain),
     ] {
         let t = std::time::Instant::now();
         let d = differentiate_runs(&refs, 0.01, 6, &o).unwrap();
         println!(
-            "{what}: 100 runs x 1000 samples, orders 0..6: {:.3} s (h = {:.4})",
+            "{what}: 100 runs x 1000 samples, orders 0..6: {:.3} s (h = {:.4}; exponential-sum model on {} runs)",
             t.elapsed().as_secs_f64(),
-            d[0].h
+            d[0].h,
+            d.iter().filter(|r| r.exp_terms.is_some()).count()
         );
         let t = std::time::Instant::now();
         let d = differentiate_runs(&[&long], 0.001, 6, &o).unwrap();

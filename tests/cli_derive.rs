@@ -97,3 +97,32 @@ fn derive_bad_input_is_one_line_and_non_zero() {
         assert!(err.contains(want), "case {i}: '{want}' not in {err}");
     }
 }
+
+#[test]
+fn derive_names_the_runs_an_exponential_sum_took_and_can_refuse_it() {
+    // The shared sines at 1 %: four sinusoids, taken by the model; --smoother-only keeps the
+    // smoother and says nothing about a model.
+    let sines = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/signals/sines.csv");
+    let args = [
+        "derive",
+        sines,
+        "--column",
+        "ym_1pct",
+        "--order",
+        "2",
+        "--time-column",
+        "t",
+    ];
+    let (ok, out, err) = ctsid(&args);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("exponential-sum model on 1 of 1 run(s): 0 (8 terms)"),
+        "{err}"
+    );
+    let (ok2, out2, err2) = ctsid(&[&args[..], &["--smoother-only"]].concat());
+    assert!(ok2, "{err2}");
+    assert!(!err2.contains("exponential-sum"), "{err2}");
+    // Same columns, different estimates.
+    assert_eq!(out.lines().next(), out2.lines().next());
+    assert_ne!(out, out2);
+}

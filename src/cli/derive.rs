@@ -27,6 +27,10 @@ pub struct DeriveArgs {
     /// Tune each run on its own instead of jointly over the record set.
     #[arg(long)]
     pub per_run_tuning: bool,
+    /// Always use the smoother: never replace a run's estimate by an exponential-sum model
+    /// (by default one is used where it explains the run to the noise level; see the README).
+    #[arg(long)]
+    pub smoother_only: bool,
 }
 
 pub fn run(a: DeriveArgs) -> Result<()> {
@@ -47,7 +51,10 @@ pub fn run(a: DeriveArgs) -> Result<()> {
     let rs = RecordSet::from_csv(&a.input, &spec)?;
     rs.require_derivable(a.order)?;
     let runs: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[0].as_slice()).collect();
-    let opts = DerivativeOptions::default();
+    let opts = DerivativeOptions {
+        exp_sum: !a.smoother_only,
+        ..Default::default()
+    };
     let ders = if a.per_run_tuning {
         runs.iter()
             .map(|y| differentiate_runs(&[y], rs.tau, a.order, &opts).map(|mut v| v.remove(0)))
@@ -68,8 +75,23 @@ pub fn run(a: DeriveArgs) -> Result<()> {
         }
     })?;
     let d0 = &ders[0];
+    let models: Vec<String> = ders
+        .iter()
+        .zip(&rs.runs)
+        .filter_map(|(d, r)| d.exp_terms.map(|t| format!("{} ({t} terms)", r.id)))
+        .collect();
+    let model_note = if models.is_empty() {
+        String::new()
+    } else {
+        format!(
+            "; exponential-sum model on {} of {} run(s): {}",
+            models.len(),
+            ders.len(),
+            models.join(", ")
+        )
+    };
     eprintln!(
-        "derived '{}' up to order {} on {} run(s), tau = {:?} s: noise sd {:.4e}, smoothing bandwidth {:.3} rad/s",
+        "derived '{}' up to order {} on {} run(s), tau = {:?} s: noise sd {:.4e}, smoothing bandwidth {:.3} rad/s{model_note}",
         a.column,
         a.order,
         ders.len(),

@@ -19,6 +19,12 @@
 //! 5. *Ends.* Near the first and last samples the integrator chain extrapolates high derivatives
 //!    with a large variance; there the estimate is blended into that of a stationary
 //!    (Matern-type) prior with the same h, which shrinks towards zero instead.
+//! 6. *Exponential sums.* A run that is, to the noise level, a short sum of (damped)
+//!    exponentials and sinusoids (a linear plant under a multisine, a free oscillation) gets a
+//!    parametric model instead ([`expsum`]): poles by ESPRIT, amplitudes and poles by least
+//!    squares, used only when its order is unambiguous, its residual white and its derivatives
+//!    inside the smoother's band. It removes the smoother's bandwidth trade-off and end effects
+//!    on such runs; everything else keeps the smoother.
 //!
 //! # Assumptions
 //! Uniform sampling, white measurement noise, and a signal that is smooth at the scale of a few
@@ -26,6 +32,7 @@
 //! tuning numbers are shared). Time and memory are O(N) per run.
 
 pub mod benchmark;
+pub mod expsum;
 mod kernel;
 pub mod score;
 pub mod smoother;
@@ -73,6 +80,9 @@ pub struct DerivativeOptions {
     /// Window of the smoother level's local likelihood, in units of `window`; 0 leaves the
     /// smoother level out.
     pub smooth_window: f64,
+    /// Replace the smoother's estimate of a run by an exponential-sum model where one passes
+    /// the checks of [`expsum`].
+    pub exp_sum: bool,
 }
 
 impl Default for DerivativeOptions {
@@ -85,6 +95,7 @@ impl Default for DerivativeOptions {
             window: 2.0,
             end_blend: true,
             smooth_window: SMOOTH_WINDOW,
+            exp_sum: true,
         }
     }
 }
@@ -102,6 +113,9 @@ pub struct Derivatives {
     /// Tuned scaled step (smoothing level) and number of states.
     pub h: f64,
     pub states: usize,
+    /// Number of exponential terms (a sinusoid counts two) when the run's estimate comes from an
+    /// exponential-sum model ([`expsum`]) instead of the smoother.
+    pub exp_terms: Option<usize>,
 }
 
 /// Fewest samples a run needs for derivatives up to `max_order`.
@@ -218,6 +232,7 @@ pub fn differentiate_runs(
                 noise_sd: 0.0,
                 h: 1.0,
                 states: m,
+                exp_terms: None,
             }
         })
         .collect();
@@ -319,12 +334,30 @@ pub fn differentiate_runs(
                 }
             });
         }
+        let sd: Vec<Vec<f64>> = (0..=max_order)
+            .map(|k| {
+                (0..n)
+                    .map(|i| (second[k][i] - mean[k][i] * mean[k][i]).max(0.0).sqrt())
+                    .collect()
+            })
+            .collect();
         let d = &mut out[r];
+        let model = opts
+            .exp_sum
+            .then(|| expsum::fit(y, tau, fit.sigma2, h))
+            .flatten()
+            .map(|es| (es.terms(), es.evaluate(n, max_order)))
+            .filter(|(_, (v, s))| expsum::agrees(v, s, &mean, &sd));
+        if let Some((terms, (v, s))) = model {
+            mean = v;
+            d.sigma = s;
+            d.exp_terms = Some(terms);
+        } else {
+            d.sigma = sd;
+        }
         for k in 0..=max_order {
             for i in 0..n {
-                let mu = mean[k][i];
-                d.values[k][i] = mu + if k == 0 { means[r] } else { 0.0 };
-                d.sigma[k][i] = (second[k][i] - mu * mu).max(0.0).sqrt();
+                d.values[k][i] = mean[k][i] + if k == 0 { means[r] } else { 0.0 };
             }
         }
     }

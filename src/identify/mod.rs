@@ -1030,6 +1030,9 @@ fn equation_data(
         h: Some(d0.h),
         adaptive: false,
         end_blend: false,
+        // One linear smoother for every signal of the equation: a parametric model for some
+        // runs of one channel would break that.
+        exp_sum: false,
         ..Default::default()
     };
     let smooth = |c: usize, order: usize| -> Result<Vec<Derivatives>> {
