@@ -18,7 +18,8 @@
 //!    sigma grows where the levels disagree (transients shorter than tau among them).
 //! 5. *Ends.* Near the first and last samples the integrator chain extrapolates high derivatives
 //!    with a large variance; there the estimate is blended into that of a stationary
-//!    (Matern-type) prior with the same h, which shrinks towards zero instead.
+//!    (Matern-type) prior with the same h, which shrinks towards zero instead, unless the data
+//!    reject that prior outright (a drift over the whole run: see `END_LL_MARGIN`).
 //! 6. *Exponential sums.* A run that is, to the noise level, a short sum of (damped)
 //!    exponentials and sinusoids (a linear plant under a multisine, a free oscillation) gets a
 //!    parametric model instead ([`expsum`]): poles by ESPRIT, amplitudes and poles by least
@@ -54,6 +55,12 @@ const LADDER: [f64; 6] = [0.0, 0.5, 1.0, 2.0, 3.0, -0.5];
 /// 2 and 6 on the shared signals: at 2 sines and sys3 get worse at nearly every order (up to 2x);
 /// at 6 only the chirp's slow start takes it, and the chirp's error drops 7-43 %.
 const SMOOTH_WINDOW: f64 = 6.0;
+
+/// The stationary end prior is left out when its innovation log-likelihood falls below the
+/// chain's by more than this many nats per sample. Measured at the tuned h: the shared signals
+/// lie between -0.55 (the chirp at 1 %) and +0.09 per sample, a quadratic or exponential drift at
+/// 1 % noise near -2 (tests/derivatives.rs, drifts).
+const END_LL_MARGIN: f64 = 1.0;
 
 /// Largest scaled step: beyond a few units the smoother interpolates the samples and the
 /// integrator chain's transition matrix only loses precision.
@@ -277,10 +284,16 @@ pub fn differentiate_runs(
         covs.iter().position(|(l, _)| *l == n).unwrap()
     };
     let level_covs: Vec<Vec<(usize, Cov)>> = levels.iter().map(|&hl| cov_for(hl, 0.0)).collect();
-    let end_covs = opts.end_blend.then(|| cov_for(h, opts.end_lambda));
+    // The stationary prior serves the ends of runs whose middle the chain handles. Where the
+    // data reject it outright (a polynomial or exponential drift over the whole run, which it
+    // would pull towards zero everywhere), the chain's estimate stands.
+    let samples: usize = live_y.iter().map(|y| y.len()).sum();
     let end_sigma2 = opts
         .end_blend
-        .then(|| tune::evaluate(m, h, opts.end_lambda, &live_y).sigma2);
+        .then(|| tune::evaluate(m, h, opts.end_lambda, &live_y))
+        .filter(|e| e.loglik >= fit.loglik - END_LL_MARGIN * samples as f64)
+        .map(|e| e.sigma2);
+    let end_covs = end_sigma2.map(|_| cov_for(h, opts.end_lambda));
 
     for (li, &r) in live.iter().enumerate() {
         let y = live_y[li];
