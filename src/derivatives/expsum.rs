@@ -237,10 +237,8 @@ pub fn fit(y: &[f64], tau: f64, sigma2: f64, h: f64) -> Option<ExpSum> {
     // A very smooth run (tiny h: a drift, a slow exponential) would get a lag longer than the
     // run; the lag is capped so that at least MIN_ROWS rows fit in half of it.
     let d = ((1.0 / h).round() as usize).clamp(1, ((n / 2) / (MIN_ROWS - 1)).max(1));
+    // At least MIN_ROWS rows: n >= 50 and the clamp above leave room for them.
     let l = MAX_ROWS.min((n / 2) / d + 1);
-    if l < 6 {
-        return None;
-    }
     let m = n - (l - 1) * d;
     // G[a][b] = sum_{j < m} y[j + aD] y[j + bD]: the first row directly, the rest from the
     // entry above-left by moving the window D samples (O(L m + L^2 D) instead of O(L^2 m)).
@@ -337,9 +335,9 @@ fn esprit(
         if li.re.abs() * half_span > 40.0 {
             return None;
         }
-        // A conjugate pair has its partner below the axis; a real z (or one whose imaginary part
-        // is rounding, of either sign) gives a real pole.
-        let real = zi.im.abs() <= 1e-12 * zi.norm();
+        // A conjugate pair has its partner below the axis (the eigenvalues come as exact
+        // conjugates); a real z gives a real pole.
+        let real = zi.im == 0.0;
         if !real && li.im < 0.0 {
             continue;
         }
@@ -528,6 +526,9 @@ pub fn agrees(
         for i in 0..n {
             let diff = model[k][i] - mean[k][i];
             let (sc, sm) = (sd[k][i] * sd[k][i], model_sd[k][i] * model_sd[k][i]);
+            if !(diff.is_finite() && sm.is_finite()) {
+                return false;
+            }
             let var = (sc - sm).max(AGREE_FLOOR * sc);
             if var.is_nan() || var <= 0.0 {
                 if diff != 0.0 {

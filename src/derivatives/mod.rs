@@ -18,8 +18,9 @@
 //!    sigma grows where the levels disagree (transients shorter than tau among them).
 //! 5. *Ends.* Near the first and last samples the integrator chain extrapolates high derivatives
 //!    with a large variance; there the estimate is blended into that of a stationary
-//!    (Matern-type) prior with the same h, which shrinks towards zero instead, unless the data
-//!    reject that prior outright (a drift over the whole run: see `END_LL_MARGIN`).
+//!    (Matern-type) prior with the same h, which shrinks towards zero instead, on runs long
+//!    enough to have a middle between the two ends (`END_RUN_WIDTHS`; a drift over the whole
+//!    run tunes so small an h that it has none).
 //! 6. *Exponential sums.* A run that is, to the noise level, a short sum of (damped)
 //!    exponentials and sinusoids (a linear plant under a multisine, a free oscillation) gets a
 //!    parametric model instead ([`expsum`]): poles by ESPRIT, amplitudes and poles by least
@@ -56,11 +57,11 @@ const LADDER: [f64; 6] = [0.0, 0.5, 1.0, 2.0, 3.0, -0.5];
 /// at 6 only the chirp's slow start takes it, and the chirp's error drops 7-43 %.
 const SMOOTH_WINDOW: f64 = 6.0;
 
-/// The stationary end prior is left out when its innovation log-likelihood falls below the
-/// chain's by more than this many nats per sample. Measured at the tuned h: the shared signals
-/// lie between -0.55 (the chirp at 1 %) and +0.09 per sample, a quadratic or exponential drift at
-/// 1 % noise near -2 (tests/derivatives.rs, drifts).
-const END_LL_MARGIN: f64 = 1.0;
+/// The stationary end prior is used only on runs longer than this many end widths (1/h
+/// samples): its blend fades out two widths from each end, so shorter runs have no middle left
+/// to the chain, and on a drift over the whole run (a tiny h) it would pull every derivative
+/// towards zero. The shared signals have runs of 28 to 150 widths.
+const END_RUN_WIDTHS: f64 = 4.0;
 
 /// Largest scaled step: beyond a few units the smoother interpolates the samples and the
 /// integrator chain's transition matrix only loses precision.
@@ -284,16 +285,11 @@ pub fn differentiate_runs(
         covs.iter().position(|(l, _)| *l == n).unwrap()
     };
     let level_covs: Vec<Vec<(usize, Cov)>> = levels.iter().map(|&hl| cov_for(hl, 0.0)).collect();
-    // The stationary prior serves the ends of runs whose middle the chain handles. Where the
-    // data reject it outright (a polynomial or exponential drift over the whole run, which it
-    // would pull towards zero everywhere), the chain's estimate stands.
-    let samples: usize = live_y.iter().map(|y| y.len()).sum();
+    let end_covs = opts.end_blend.then(|| cov_for(h, opts.end_lambda));
     let end_sigma2 = opts
         .end_blend
-        .then(|| tune::evaluate(m, h, opts.end_lambda, &live_y))
-        .filter(|e| e.loglik >= fit.loglik - END_LL_MARGIN * samples as f64)
-        .map(|e| e.sigma2);
-    let end_covs = end_sigma2.map(|_| cov_for(h, opts.end_lambda));
+        .then(|| tune::evaluate(m, h, opts.end_lambda, &live_y).sigma2);
+    let end_width = (1.0 / h).max(2.0);
 
     for (li, &r) in live.iter().enumerate() {
         let y = live_y[li];
@@ -326,10 +322,11 @@ pub fn differentiate_runs(
                 }
             });
         }
-        if let (Some(covs), Some(s2)) = (&end_covs, end_sigma2) {
+        let has_middle = n as f64 > END_RUN_WIDTHS * end_width;
+        if let (Some(covs), Some(s2), true) = (&end_covs, end_sigma2, has_middle) {
             let cov = &covs[pick(covs, n)].1;
             let scale: Vec<f64> = (0..=max_order).map(|k| (h / tau).powi(k as i32)).collect();
-            let width = (1.0 / h).max(2.0);
+            let width = end_width;
             smooth_two_way(cov, y, |i, x, var| {
                 let b = end_weight(i.min(n - 1 - i) as f64, width);
                 if b == 0.0 {
