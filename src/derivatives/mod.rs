@@ -20,7 +20,8 @@
 //!    with a large variance; there the estimate is blended into that of a stationary
 //!    (Matern-type) prior with the same h, which shrinks towards zero instead, on runs long
 //!    enough to have a middle between the two ends (`END_RUN_WIDTHS`; a drift over the whole
-//!    run tunes so small an h that it has none).
+//!    run tunes so small an h that it has none), and at each end only if held-out samples there
+//!    do not reject it (`end_prior_holds`: a step response recorded from the step does).
 //! 6. *Exponential sums.* A run that is, to the noise level, a short sum of (damped)
 //!    exponentials and sinusoids (a linear plant under a multisine, a free oscillation) gets a
 //!    parametric model instead ([`expsum`]): poles by ESPRIT, amplitudes and poles by least
@@ -290,6 +291,24 @@ pub fn differentiate_runs(
         .end_blend
         .then(|| tune::evaluate(m, h, opts.end_lambda, &live_y).sigma2);
     let end_width = (1.0 / h).max(2.0);
+    // Held-out check of the end prior (see `end_prior_holds`): the chain and the stationary
+    // prior on each run length less its held-out end.
+    let held_out = |n: usize| -> usize { ((1.0 / h).round() as usize).min(n / 8).max(1) };
+    let end_check: Vec<(usize, Cov, Cov)> = match end_sigma2 {
+        Some(_) => {
+            let chain = statespace::discretise(m, h, 0.0);
+            let stationary = statespace::discretise(m, h, opts.end_lambda);
+            lengths
+                .iter()
+                .filter(|&&n| n as f64 > END_RUN_WIDTHS * end_width)
+                .map(|&n| {
+                    let k = n - held_out(n);
+                    (n, Cov::new(&chain, k, true), Cov::new(&stationary, k, true))
+                })
+                .collect()
+        }
+        None => Vec::new(),
+    };
 
     for (li, &r) in live.iter().enumerate() {
         let y = live_y[li];
@@ -327,7 +346,16 @@ pub fn differentiate_runs(
             let cov = &covs[pick(covs, n)].1;
             let scale: Vec<f64> = (0..=max_order).map(|k| (h / tau).powi(k as i32)).collect();
             let width = end_width;
+            let (_, chain, stationary) = end_check.iter().find(|(l, _, _)| *l == n).unwrap();
+            let w = held_out(n);
+            let reversed: Vec<f64> = y.iter().rev().copied().collect();
+            let holds = [&reversed[..], y].map(|run| {
+                end_prior_holds(chain, stationary, run, w, fit.sigma2, s2, h / tau, tau)
+            });
             smooth_two_way(cov, y, |i, x, var| {
+                if !holds[(i >= n / 2) as usize] {
+                    return;
+                }
                 let b = end_weight(i.min(n - 1 - i) as f64, width);
                 if b == 0.0 {
                     return;
@@ -372,6 +400,71 @@ pub fn differentiate_runs(
         }
     }
     Ok(out)
+}
+
+/// Whether the stationary end prior predicts the last `w` samples of `y`, held out, at least
+/// half as well as the chain alone. Both estimate every derivative at the last sample kept,
+/// the prior's as the end blend would there; each extrapolates by its Taylor series over the
+/// held-out samples. The prior assumes the end looks like the middle; a step response recorded
+/// from the step is steepest at its start, and there the chain's extrapolation wins by far (1 %
+/// noise: 3.7 against 18 noise standard deviations), while on multisines, chirps and decaying
+/// oscillations the prior's wins or ties (`chain`, `stationary`: covariances for `y.len() - w`
+/// samples; `rate` = h / tau).
+#[allow(clippy::too_many_arguments)]
+fn end_prior_holds(
+    chain: &Cov,
+    stationary: &Cov,
+    y: &[f64],
+    w: usize,
+    sigma2: f64,
+    sigma2_stationary: f64,
+    rate: f64,
+    tau: f64,
+) -> bool {
+    let kept = &y[..y.len() - w];
+    let last = kept.len() - 1;
+    let at_last = |cov: &Cov, s2: f64| -> (Vec<f64>, Vec<f64>) {
+        let mut x = Vec::new();
+        cov.smooth(kept, |i, xi| {
+            if i == last {
+                x = xi.to_vec();
+            }
+        });
+        let scale: Vec<f64> = (0..x.len()).map(|k| rate.powi(k as i32)).collect();
+        let v: Vec<f64> = x.iter().zip(&scale).map(|(a, s)| a * s).collect();
+        let var: Vec<f64> = cov
+            .var(last)
+            .iter()
+            .zip(&scale)
+            .map(|(a, s)| a * s2 * s * s)
+            .collect();
+        (v, var)
+    };
+    let (c, vc) = at_last(chain, sigma2);
+    let (p, vp) = at_last(stationary, sigma2_stationary);
+    let blended: Vec<f64> = (0..c.len())
+        .map(|k| {
+            let b = vc[k] / (vc[k] + vp[k]).max(1e-300);
+            (1.0 - b) * c[k] + b * p[k]
+        })
+        .collect();
+    let error = |d: &[f64]| -> f64 {
+        (1..=w)
+            .map(|s| {
+                let dt = s as f64 * tau;
+                let (mut term, mut pred) = (1.0, 0.0);
+                for (k, dk) in d.iter().enumerate() {
+                    if k > 0 {
+                        term *= dt / k as f64;
+                    }
+                    pred += term * dk;
+                }
+                (pred - y[last + s]).powi(2)
+            })
+            .sum::<f64>()
+    };
+    let (e_chain, e_prior) = (error(&c), error(&blended));
+    !(e_chain.is_finite() && e_prior.is_finite()) || e_chain.sqrt() >= 0.5 * e_prior.sqrt()
 }
 
 /// Weight of the stationary-prior estimate at `dist` samples from the nearest end: 1 within
