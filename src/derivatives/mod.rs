@@ -64,6 +64,14 @@ const SMOOTH_WINDOW: f64 = 6.0;
 /// towards zero. The shared signals have runs of 28 to 150 widths.
 const END_RUN_WIDTHS: f64 = 4.0;
 
+/// The end prior is left out at an end where the chain alone predicts the held-out samples
+/// with less than this share of the prior's error (see `end_prior_holds`), for the derivatives
+/// up to END_CV_ORDER: the held-out values speak mostly for those; higher ones keep the prior,
+/// which bounds their extrapolation (measured on decaying oscillations started at their peak:
+/// orders 1-2 up to 5x better without the prior there, order 4 up to 4x worse).
+const END_CV_RATIO: f64 = 0.33;
+const END_CV_ORDER: usize = 2;
+
 /// Largest scaled step: beyond a few units the smoother interpolates the samples and the
 /// integrator chain's transition matrix only loses precision.
 const H_MAX: f64 = 4.0;
@@ -349,18 +357,21 @@ pub fn differentiate_runs(
             let (_, chain, stationary) = end_check.iter().find(|(l, _, _)| *l == n).unwrap();
             let w = held_out(n);
             let reversed: Vec<f64> = y.iter().rev().copied().collect();
+            // Fewer held-out samples than states say too little to overrule the prior.
             let holds = [&reversed[..], y].map(|run| {
-                end_prior_holds(chain, stationary, run, w, fit.sigma2, s2, h / tau, tau)
+                w < m.max(5)
+                    || end_prior_holds(chain, stationary, run, w, fit.sigma2, s2, h / tau, tau)
             });
             smooth_two_way(cov, y, |i, x, var| {
-                if !holds[(i >= n / 2) as usize] {
-                    return;
-                }
                 let b = end_weight(i.min(n - 1 - i) as f64, width);
                 if b == 0.0 {
                     return;
                 }
+                let rejected = !holds[(i >= n / 2) as usize];
                 for k in 0..=max_order {
+                    if rejected && k <= END_CV_ORDER {
+                        continue;
+                    }
                     let v = x[k] * scale[k];
                     let vm = var[k] * s2 * scale[k] * scale[k];
                     // Trust the stationary prior only as far as the chain is less certain than it
@@ -402,14 +413,14 @@ pub fn differentiate_runs(
     Ok(out)
 }
 
-/// Whether the stationary end prior predicts the last `w` samples of `y`, held out, at least
-/// half as well as the chain alone. Both estimate every derivative at the last sample kept,
-/// the prior's as the end blend would there; each extrapolates by its Taylor series over the
-/// held-out samples. The prior assumes the end looks like the middle; a step response recorded
-/// from the step is steepest at its start, and there the chain's extrapolation wins by far (1 %
-/// noise: 3.7 against 18 noise standard deviations), while on multisines, chirps and decaying
-/// oscillations the prior's wins or ties (`chain`, `stationary`: covariances for `y.len() - w`
-/// samples; `rate` = h / tau).
+/// Whether the stationary end prior predicts the last `w` samples of `y`, held out, well enough:
+/// the chain alone must not beat it by more than `END_CV_RATIO`. Both estimate every derivative
+/// at the last sample kept, the prior's as the end blend would there (one smoothing level); each
+/// extrapolates by its Taylor series over the held-out samples. The prior assumes the end looks
+/// like the middle; a step response recorded from the step is steepest at its start, and there
+/// the chain's extrapolation wins by far (1 % noise: 3.7 against 18 noise standard deviations),
+/// while on multisines and chirps the prior's wins or ties (`chain`, `stationary`: covariances
+/// for `y.len() - w` samples; `rate` = h / tau).
 #[allow(clippy::too_many_arguments)]
 fn end_prior_holds(
     chain: &Cov,
@@ -464,7 +475,7 @@ fn end_prior_holds(
             .sum::<f64>()
     };
     let (e_chain, e_prior) = (error(&c), error(&blended));
-    !(e_chain.is_finite() && e_prior.is_finite()) || e_chain.sqrt() >= 0.5 * e_prior.sqrt()
+    !(e_chain.is_finite() && e_prior.is_finite()) || e_chain.sqrt() >= END_CV_RATIO * e_prior.sqrt()
 }
 
 /// Weight of the stationary-prior estimate at `dist` samples from the nearest end: 1 within
