@@ -34,6 +34,11 @@ macro_rules! cov_enum {
                 match self { $(Cov::$v(c) => c.smooth(y, |k, x| emit(k, &x[..]))),* }
             }
 
+            /// State means at the last sample, by the forward pass alone.
+            pub fn filter_last(&self, y: &[f64]) -> Vec<f64> {
+                match self { $(Cov::$v(c) => c.filter_last(y).to_vec()),* }
+            }
+
             /// Smoothed variances (diagonal) at sample k.
             pub fn var(&self, k: usize) -> &[f64] {
                 match self { $(Cov::$v(c) => &c.var(k)[..]),* }

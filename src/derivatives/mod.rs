@@ -299,19 +299,26 @@ pub fn differentiate_runs(
         .end_blend
         .then(|| tune::evaluate(m, h, opts.end_lambda, &live_y).sigma2);
     let end_width = (1.0 / h).max(2.0);
-    // Held-out check of the end prior (see `end_prior_holds`): the chain and the stationary
-    // prior on each run length less its held-out end.
-    let held_out = |n: usize| -> usize { ((1.0 / h).round() as usize).min(n / 8).max(1) };
+    // Held-out check of the end prior (see `end_prior_holds`): round(1/h) samples at each end,
+    // none when fewer than the states (too few to overrule the prior); the chain and the
+    // stationary prior's filters on each run length less its held-out end.
+    let held_out = |n: usize| -> Option<usize> {
+        let w = ((1.0 / h).round() as usize).min(n / 8).max(1);
+        (w >= m.max(5) && n as f64 > END_RUN_WIDTHS * end_width).then_some(w)
+    };
     let end_check: Vec<(usize, Cov, Cov)> = match end_sigma2 {
         Some(_) => {
             let chain = statespace::discretise(m, h, 0.0);
             let stationary = statespace::discretise(m, h, opts.end_lambda);
             lengths
                 .iter()
-                .filter(|&&n| n as f64 > END_RUN_WIDTHS * end_width)
-                .map(|&n| {
-                    let k = n - held_out(n);
-                    (n, Cov::new(&chain, k, true), Cov::new(&stationary, k, true))
+                .filter_map(|&n| {
+                    let k = n - held_out(n)?;
+                    Some((
+                        n,
+                        Cov::new(&chain, k, false),
+                        Cov::new(&stationary, k, false),
+                    ))
                 })
                 .collect()
         }
@@ -354,14 +361,15 @@ pub fn differentiate_runs(
             let cov = &covs[pick(covs, n)].1;
             let scale: Vec<f64> = (0..=max_order).map(|k| (h / tau).powi(k as i32)).collect();
             let width = end_width;
-            let (_, chain, stationary) = end_check.iter().find(|(l, _, _)| *l == n).unwrap();
-            let w = held_out(n);
-            let reversed: Vec<f64> = y.iter().rev().copied().collect();
-            // Fewer held-out samples than states say too little to overrule the prior.
-            let holds = [&reversed[..], y].map(|run| {
-                w < m.max(5)
-                    || end_prior_holds(chain, stationary, run, w, fit.sigma2, s2, h / tau, tau)
-            });
+            let holds = match (held_out(n), end_check.iter().find(|(l, _, _)| *l == n)) {
+                (Some(w), Some((_, chain, stationary))) => {
+                    let reversed: Vec<f64> = y.iter().rev().copied().collect();
+                    [&reversed[..], y].map(|run| {
+                        end_prior_holds(chain, stationary, run, w, fit.sigma2, s2, h / tau, tau)
+                    })
+                }
+                _ => [true, true],
+            };
             smooth_two_way(cov, y, |i, x, var| {
                 let b = end_weight(i.min(n - 1 - i) as f64, width);
                 if b == 0.0 {
@@ -420,7 +428,7 @@ pub fn differentiate_runs(
 /// like the middle; a step response recorded from the step is steepest at its start, and there
 /// the chain's extrapolation wins by far (1 % noise: 3.7 against 18 noise standard deviations),
 /// while on multisines and chirps the prior's wins or ties (`chain`, `stationary`: covariances
-/// for `y.len() - w` samples; `rate` = h / tau).
+/// for `y.len() - w` samples, the filter part suffices; `rate` = h / tau).
 #[allow(clippy::too_many_arguments)]
 fn end_prior_holds(
     chain: &Cov,
@@ -435,12 +443,7 @@ fn end_prior_holds(
     let kept = &y[..y.len() - w];
     let last = kept.len() - 1;
     let at_last = |cov: &Cov, s2: f64| -> (Vec<f64>, Vec<f64>) {
-        let mut x = Vec::new();
-        cov.smooth(kept, |i, xi| {
-            if i == last {
-                x = xi.to_vec();
-            }
-        });
+        let x = cov.filter_last(kept);
         let scale: Vec<f64> = (0..x.len()).map(|k| rate.powi(k as i32)).collect();
         let v: Vec<f64> = x.iter().zip(&scale).map(|(a, s)| a * s).collect();
         let var: Vec<f64> = cov

@@ -109,7 +109,8 @@ impl<const M: usize> Covariances<M> {
         k.min(self.gain.len() - 1)
     }
 
-    /// Smoothed variance (diagonal) at sample k.
+    /// Smoothed variance (diagonal) at sample k; without the smoother part (`new(.., false)`)
+    /// only at the last sample.
     pub fn var(&self, k: usize) -> &Vct<M> {
         if k < self.head.len() {
             &self.head[k]
@@ -162,6 +163,11 @@ impl<const M: usize> Covariances<M> {
         }
         let last = pps.len() - 1;
         if !with_smoother {
+            // The last sample's smoothed variance is its filtered one: kept for `var(n - 1)`.
+            let mut end = [0.0; M];
+            for i in 0..M {
+                end[i] = pfs[last][i][i].max(0.0);
+            }
             return Covariances {
                 n,
                 a,
@@ -170,7 +176,7 @@ impl<const M: usize> Covariances<M> {
                 s: ss,
                 rts: Vec::new(),
                 head: Vec::new(),
-                tail: Vec::new(),
+                tail: vec![end],
                 steady: [0.0; M],
             };
         }
@@ -293,6 +299,23 @@ impl<const M: usize> Covariances<M> {
             }
             x = matvec(&self.a, &x);
         }
+    }
+
+    /// Mean of every state at the last sample, where filtered and smoothed agree: the forward
+    /// pass alone, nothing stored.
+    pub fn filter_last(&self, y: &[f64]) -> Vct<M> {
+        let mut x = [0.0; M];
+        for (k, &yk) in y.iter().enumerate() {
+            if k > 0 {
+                x = matvec(&self.a, &x);
+            }
+            let e = yk - x[0];
+            let g = &self.gain[self.fidx(k)];
+            for r in 0..M {
+                x[r] += g[r] * e;
+            }
+        }
+        x
     }
 
     /// Smoothed means of states 0..=K at every sample, handed to `emit(k, mean)` in backward order.
