@@ -287,13 +287,14 @@ pub fn fit(y: &[f64], tau: f64, sigma2: f64, h: f64) -> Option<ExpSum> {
             continue;
         }
         refine(&mut es, y, half_span);
-        let fitted = es.values0(&es.exps(n), n);
+        // One Jacobian at the final parameters gives both the residual and the covariance.
+        let (jac, fitted) = jacobian(&es, n);
         let resid: Vec<f64> = y.iter().zip(&fitted).map(|(a, b)| a - b).collect();
         if !white(&resid, sigma2) {
             continue;
         }
         let s2 = resid.iter().map(|v| v * v).sum::<f64>() / (n - es.params()).max(1) as f64;
-        let Some(f) = covariance_factor(&es, n, s2) else {
+        let Some(f) = covariance_factor(&jac, s2) else {
             continue;
         };
         es.cov_factor = f;
@@ -463,11 +464,11 @@ fn refine(es: &mut ExpSum, y: &[f64], half_span: f64) {
     }
 }
 
-/// F with Cov(theta) = s2 (J^T J)^-1 = F F^T, through the scaled Gram matrix's eigenvectors
+/// F with Cov(theta) = s2 (J^T J)^-1 = F F^T for the Jacobian `jac` of the values, through the scaled Gram matrix's eigenvectors
 /// (directions it cannot see get no variance rather than an infinite one: they are the
 /// collinear ones, whose combination in the values the other directions already carry).
-fn covariance_factor(es: &ExpSum, n: usize, s2: f64) -> Option<DMatrix<f64>> {
-    let (m, scale) = scaled_gram(&jacobian(es, n).0)?;
+fn covariance_factor(jac: &DMatrix<f64>, s2: f64) -> Option<DMatrix<f64>> {
+    let (m, scale) = scaled_gram(jac)?;
     if !m.iter().all(|v| v.is_finite()) {
         return None;
     }
