@@ -70,7 +70,12 @@ pub const MAX_SAMPLES: usize = 1_000_000;
 /// A default simulated time: long enough for the designed response of an order-n model (n + 1
 /// poles at -w) to settle well within 1 % (three time constants per pole, plus six).
 pub fn default_duration(d: &Design) -> f64 {
-    (3.0 * (d.order as f64 + 1.0) + 6.0) / d.bandwidth
+    settle_units(d.order) / d.bandwidth
+}
+
+/// [`default_duration`] in units of 1 / bandwidth, for an order-n design.
+pub(crate) fn settle_units(order: usize) -> f64 {
+    3.0 * (order as f64 + 1.0) + 6.0
 }
 
 /// Most integrator steps one loop may take (over all its samples): stiff or nearly unstable

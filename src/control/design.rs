@@ -283,7 +283,8 @@ pub fn scaled_closed_loop(
         }
         m[(i, n)] = -b[i] * k_i * sc[n] / sc[i] / w;
     }
-    m[(n, 0)] = sc[0] / sc[n] / w;
+    // q' = y - r: in scaled units exactly 1 (sc[0] / sc[n] / w, without its rounding).
+    m[(n, 0)] = 1.0;
     (m, sc)
 }
 
@@ -340,9 +341,9 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
             (mags.iter().map(|m| m.ln()).sum::<f64>() / mags.len() as f64).exp()
         }
     };
-    // The loop runs at most MAX_SAMPLES samples, and its default length is
-    // (3 (n + 1) + 6) / w: a slower bandwidth could never be shown settling.
-    let slowest = (3.0 * (n as f64 + 1.0) + 6.0) / (super::MAX_SAMPLES as f64 * o.tau);
+    // The loop runs at most MAX_SAMPLES samples, and its default length is settle_units / w:
+    // a slower bandwidth could never be shown settling.
+    let slowest = super::closed_loop::settle_units(n) / (super::MAX_SAMPLES as f64 * o.tau);
     if w < slowest {
         return Err(Error::param(
             "bandwidth",
@@ -386,21 +387,14 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
     }
 
     // Scaled time t' = w t and states y^(k) / w^k keep the matrices of order one (a throttle's
-    // companion row holds 1e6 next to 1).
-    let d: Vec<f64> = (0..n).map(|k| w.powi(k as i32)).collect();
-    let mut a_s = DMatrix::<f64>::zeros(n, n);
-    for i in 0..n {
-        for j in 0..n {
-            a_s[(i, j)] = a[(i, j)] * d[j] / d[i] / w;
-        }
-    }
-    let b_s = DVector::from_iterator(n, (0..n).map(|i| b[i] / d[i] / w));
-    // Integral action: q_s' = y - r in scaled units (q_s = w q, q = integral of y - r).
-    let mut a_aug = DMatrix::<f64>::zeros(n + 1, n + 1);
-    a_aug.view_mut((0, 0), (n, n)).copy_from(&a_s);
-    a_aug[(n, 0)] = 1.0;
+    // companion row holds 1e6 next to 1). The open loop with integral action (q_s' = y - r in
+    // scaled units, q_s = w q) is the closed loop under zero gains.
+    let (a_aug, sc) = scaled_closed_loop(&a, &b, &vec![0.0; n], 0.0, w);
+    let a_s = a_aug.view((0, 0), (n, n)).into_owned();
     let mut b_aug = DVector::<f64>::zeros(n + 1);
-    b_aug.rows_mut(0, n).copy_from(&b_s);
+    for i in 0..n {
+        b_aug[i] = b[i] / sc[i] / w;
+    }
     let scaled = |p: &[((f64, f64), bool)]| -> Vec<(f64, f64)> {
         p.iter().map(|((re, im), _)| (re / w, im / w)).collect()
     };
@@ -412,9 +406,9 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
     c_t[0] = 1.0;
     let obs_s = scaled(&obs);
     let l_s = ackermann(&a_s.transpose(), &c_t, &obs_s)?;
-    let k: Vec<f64> = (0..n).map(|j| k_aug[j] / d[j]).collect();
+    let k: Vec<f64> = (0..n).map(|j| k_aug[j] / sc[j]).collect();
     let k_i = k_aug[n] * w;
-    let l: Vec<f64> = (0..n).map(|i| w * d[i] * l_s[i]).collect();
+    let l: Vec<f64> = (0..n).map(|i| w * sc[i] * l_s[i]).collect();
     // Check the placement in the scaled units it was made in: poles spread over many decades
     // (order 8, 1 to 1e4 rad/s) leave Ackermann's formula with too few digits.
     let (acl_s, _) = scaled_closed_loop(&a, &b, &k, k_i, w);
