@@ -250,33 +250,27 @@ fn write_plots(
     from: f64,
 ) -> Result<()> {
     use ctsid::report::{svg, write_file};
-    let designed = control::designed_response(d, from, tr.t.len())?;
-    let setpoint = vec![d.setpoint; tr.t.len()];
-    let series = |label, y, color, dashed| svg::Series {
-        label,
-        x: &tr.t,
-        y,
-        color,
-        band: None,
-        dashed,
-    };
-    let step = svg::line_plot(
+    let step = control::step_plot(
+        d,
+        tr,
+        from,
         &format!("{}: step {from} -> {} under feedback", d.output, d.setpoint),
-        "t (s)",
         &d.output,
-        &[
-            series("measured", &tr.y_measured, "lightgray", false),
-            series("output", &tr.y, "black", false),
-            series("designed response", &designed, "blue", true),
-            series("setpoint", &setpoint, "green", true),
-        ],
-    );
+        "output",
+    )?;
     write_file(dir, "step.svg", &step)?;
     let input = svg::line_plot(
         &format!("{}: input under feedback", d.input),
         "t (s)",
         &d.input,
-        &[series("input", &tr.u, "red", false)],
+        &[svg::Series {
+            label: "input",
+            x: &tr.t,
+            y: &tr.u,
+            color: "red",
+            band: None,
+            dashed: false,
+        }],
     );
     write_file(dir, "input.svg", &input)
 }

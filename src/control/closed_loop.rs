@@ -111,6 +111,40 @@ fn check(d: &Design) -> Result<()> {
     crate::records::check_tau(d.tau)
 }
 
+/// SVG of a step under feedback: the measured and true output (`output_label`), the designed
+/// response and the setpoint over the trace's time.
+pub fn step_plot(
+    d: &Design,
+    tr: &Trace,
+    from: f64,
+    title: &str,
+    y_label: &str,
+    output_label: &str,
+) -> Result<String> {
+    use crate::report::svg;
+    let designed = designed_response(d, from, tr.t.len())?;
+    let setpoint = vec![d.setpoint; tr.t.len()];
+    let series = |label, y, color, dashed| svg::Series {
+        label,
+        x: &tr.t,
+        y,
+        color,
+        band: None,
+        dashed,
+    };
+    Ok(svg::line_plot(
+        title,
+        "t (s)",
+        y_label,
+        &[
+            series("measured", &tr.y_measured, "lightgray", false),
+            series(output_label, &tr.y, "black", false),
+            series("designed response", &designed, "blue", true),
+            series("setpoint", &setpoint, "green", true),
+        ],
+    ))
+}
+
 /// The designed step response at the loop's sample times `k tau`, k < `samples`: the model
 /// linearised at the setpoint under the continuous-time control law, at rest at `from` with the
 /// bumpless integrator (so the setpoint enters through the integrator only), the setpoint

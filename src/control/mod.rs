@@ -37,8 +37,8 @@ pub mod closed_loop;
 pub mod design;
 
 pub use closed_loop::{
-    default_duration, designed_response, metrics, model_at_rest, rest_state, run, Plant, Scenario,
-    StepMetrics, Trace, MAX_SAMPLES,
+    default_duration, designed_response, metrics, model_at_rest, rest_state, run, step_plot, Plant,
+    Scenario, StepMetrics, Trace, MAX_SAMPLES,
 };
 pub use design::{design, steady_input, DesignOptions};
 

@@ -684,27 +684,14 @@ fn feedback(
         }
     }
     let tr = shown.expect("at least the noise-free rows run");
-    let designed = control::designed_response(&ours, from, tr.t.len())?;
-    let target = vec![setpoint; tr.t.len()];
-    let line = |label, y, color, dashed| svg::Series {
-        label,
-        x: &tr.t,
-        y,
-        color,
-        band: None,
-        dashed,
-    };
-    let plot = svg::line_plot(
+    let plot = control::step_plot(
+        &ours,
+        &tr,
+        from,
         "throttle under feedback designed on the identified model: true plant",
-        "t (s)",
         "y (rad)",
-        &[
-            line("measured", &tr.y_measured, "lightgray", false),
-            line("true plant", &tr.y, "black", false),
-            line("designed response", &designed, "blue", true),
-            line("setpoint", &target, "green", true),
-        ],
-    );
+        "true plant",
+    )?;
     let mut text = format!(
         "## Feedback designed on the identified model\n\nSetpoint {setpoint:.4} rad from rest at {from:.4} rad (u = 0); controller sampled every {tau} s; state feedback with integral action; bandwidth {w:.3} rad/s (the default: the geometric mean of the identified model's open-loop pole magnitudes {ol}), controller poles {cl}, observer poles {ob}; the observer runs the identified (nonlinear) model. The designed response is the linearised model's under the continuous-time law (real poles, setpoint through the integrator: no overshoot). Without noise and with sensor noise of {noise_sd:.3} rad ({pct} % of the step, the data's relative level).\n",
         w = ours.bandwidth,
