@@ -197,9 +197,8 @@ struct Prepared {
     effects: Vec<Effect>,
     /// Per run: label residual r and columns [free nominal..., effects...].
     rows: Vec<(Vec<f64>, Vec<Vec<f64>>)>,
+    /// Per run of the record set, in its order (simulation runs on time since the start).
     simruns: Vec<SimRun>,
-    /// Per run: the time of its first sample (simulation runs on time since the start).
-    t0: Vec<f64>,
     zhat: Vec<Vec<Vec<f64>>>,
     top: Vec<Vec<f64>>,
     noise_sd: Vec<f64>,
@@ -416,7 +415,6 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         effects,
         rows,
         simruns,
-        t0: rs.runs.iter().map(|r| r.t0).collect(),
         zhat,
         top,
         noise_sd: der.iter().map(|d| d.noise_sd).collect(),
@@ -699,7 +697,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             // Moving RMS of the error over a window, against three noise levels; reported in the
             // record's own time.
             let m = p.half_width;
-            let t0 = p.t0[ri];
+            let t0 = rs.runs[ri].t0;
             let e2: Vec<f64> = s.iter().zip(&sr.y).map(|(a, b)| (a - b).powi(2)).collect();
             let mut inside = None;
             for i in 0..e2.len() {
