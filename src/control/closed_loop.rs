@@ -244,12 +244,7 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
             format!("{} s; give a value > 0", s.duration),
         ));
     }
-    if !(s.noise_sd.is_finite() && s.noise_sd >= 0.0) {
-        return Err(Error::param(
-            "noise",
-            format!("{}; give a standard deviation >= 0", s.noise_sd),
-        ));
-    }
+    crate::util::finite_nonneg("noise", s.noise_sd)?;
     if let Some((lo, hi)) = s.u_limits {
         if !(lo.is_finite() && hi.is_finite() && lo < hi) {
             return Err(Error::param(
@@ -469,14 +464,20 @@ pub fn metrics(tr: &Trace, d: &Design, from: f64) -> Result<StepMetrics> {
         .fold(0.0, nan_max)
         / step.abs()
         * 100.0;
+    // Both input extremes in one sweep (the minimum as the negated maximum of -u, NaN kept).
+    let (neg_min, u_max) =
+        tr.u.iter()
+            .fold((f64::NEG_INFINITY, f64::NEG_INFINITY), |(lo, hi), &u| {
+                (nan_max(lo, -u), nan_max(hi, u))
+            });
     Ok(StepMetrics {
         design_deviation,
         rise_time,
         overshoot,
         settling_time,
         final_error,
-        u_min: -tr.u.iter().map(|u| -u).fold(f64::NEG_INFINITY, nan_max),
-        u_max: tr.u.iter().copied().fold(f64::NEG_INFINITY, nan_max),
+        u_min: -neg_min,
+        u_max,
         observer_rms,
     })
 }
