@@ -18,15 +18,7 @@ fn file(name: &str, text: &str) -> String {
 
 /// A first-order model file `y' = -y + gain u` (no input term without a gain).
 fn lag_model(name: &str, gain: Option<f64>) -> String {
-    let u = gain.map_or(String::new(), |g| {
-        format!(r#",{{"exponents":{{"u":1}},"coefficient":{g}}}"#)
-    });
-    file(
-        name,
-        &format!(
-            r#"{{"format":"ctsid-model/1","inputs":["u"],"outputs":[{{"name":"y","order":1,"terms":[{{"exponents":{{"y":1}},"coefficient":-1}}{u}]}}]}}"#
-        ),
-    )
+    file(name, &common::cli::lag_model_text(-1.0, gain))
 }
 
 /// `ctsid simulate ARGS`, which must succeed: its pooled NRMSE in percent of output y.

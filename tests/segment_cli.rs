@@ -30,21 +30,14 @@ fn long_record() -> String {
     s
 }
 
-/// Coefficient of the monomial with exponents `exps` in the model file's first output.
-fn coefficient(model: &str, exps: &[(&str, u64)]) -> f64 {
-    let v: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(model).unwrap()).unwrap();
-    let terms = v["outputs"][0]["terms"].as_array().unwrap();
-    terms
+/// Coefficient of the monomial `name` ("y", "u", "y*u", ...) in the model file's first output.
+fn coefficient(model: &str, name: &str) -> f64 {
+    let m = ctsid::model::Model::read(model).unwrap();
+    m.outputs[0]
+        .terms
         .iter()
-        .find(|t| {
-            let e = t["exponents"].as_object().unwrap();
-            e.len() == exps.len()
-                && exps
-                    .iter()
-                    .all(|(k, p)| e.get(*k).and_then(|x| x.as_u64()) == Some(*p))
-        })
-        .map_or(0.0, |t| t["coefficient"].as_f64().unwrap())
+        .find(|t| t.monomial() == name)
+        .map_or(0.0, |t| t.coefficient)
 }
 
 #[test]
@@ -71,10 +64,7 @@ fn one_record_cut_into_pieces_is_identified_tested_and_simulated() {
     assert!(ok, "{err}");
     // Five pieces of 600 samples; the test table names piece 4.
     assert!(out.contains("| 4 | y |"), "{out}");
-    let (a, b) = (
-        coefficient(&model, &[("y", 1)]),
-        coefficient(&model, &[("u", 1)]),
-    );
+    let (a, b) = (coefficient(&model, "y"), coefficient(&model, "u"));
     assert!(
         (a + 2.0).abs() < 0.05 && (b - 3.0).abs() < 0.075,
         "y' = {a} y + {b} u\n{out}"
@@ -135,7 +125,7 @@ fn bad_pieces_are_one_line_errors() {
     let model = temp_file(
         "segment",
         "lag.json",
-        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-2},{"exponents":{"u":1},"coefficient":3}]}]}"#,
+        &common::cli::lag_model_text(-2.0, Some(3.0)),
     );
     // Without a run column the file is one run: too few for discover, which says how to cut it;
     // simulate runs it whole.

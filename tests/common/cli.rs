@@ -70,3 +70,13 @@ pub fn overall_nrmse(stdout: &str, output: &str) -> f64 {
         .unwrap_or_else(|| panic!("no 'all {output}' row in:\n{stdout}"));
     line.split_whitespace().last().unwrap().parse().unwrap()
 }
+
+/// Model-file text of the first-order lag `y' = pole y [+ gain u]`.
+pub fn lag_model_text(pole: f64, gain: Option<f64>) -> String {
+    let u = gain.map_or(String::new(), |g| {
+        format!(r#",{{"exponents":{{"u":1}},"coefficient":{g}}}"#)
+    });
+    format!(
+        r#"{{"format":"ctsid-model/1","inputs":["u"],"outputs":[{{"name":"y","order":1,"terms":[{{"exponents":{{"y":1}},"coefficient":{pole}}}{u}]}}]}}"#
+    )
+}
