@@ -94,6 +94,9 @@ pub struct DerivativeOptions {
     pub window: f64,
     /// Blend into the stationary-prior estimate near the ends.
     pub end_blend: bool,
+    /// With `end_blend`: check the prior at each end on held-out samples (`end_prior_holds`);
+    /// off, it is used at both ends of every run long enough to have a middle.
+    pub end_check: bool,
     /// Window of the smoother level's local likelihood, in units of `window`; 0 leaves the
     /// smoother level out.
     pub smooth_window: f64,
@@ -111,6 +114,7 @@ impl Default for DerivativeOptions {
             adaptive: true,
             window: 2.0,
             end_blend: true,
+            end_check: true,
             smooth_window: SMOOTH_WINDOW,
             exp_sum: true,
         }
@@ -304,7 +308,7 @@ pub fn differentiate_runs(
     // stationary prior's filters on each run length less its held-out end.
     let held_out = |n: usize| -> Option<usize> {
         let w = ((1.0 / h).round() as usize).min(n / 8).max(1);
-        (w >= m.max(5) && n as f64 > END_RUN_WIDTHS * end_width).then_some(w)
+        (opts.end_check && w >= m.max(5) && n as f64 > END_RUN_WIDTHS * end_width).then_some(w)
     };
     let end_check: Vec<(usize, Cov, Cov)> = match end_sigma2 {
         Some(_) => {
