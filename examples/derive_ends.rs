@@ -96,12 +96,12 @@ fn main() {
                 let y = add_noise(&truth[0], eta, &mut Rng::new(100 + seed));
                 let off = differentiate_with(&y, tau, 4, &opts(false)).unwrap();
                 let on = differentiate_with(&y, tau, 4, &opts(true)).unwrap();
-                for end in 0..2 {
+                for (end, count) in dropped.iter_mut().enumerate() {
                     let (a, b) = (worst(&off, end), worst(&on, end));
                     if a == b {
                         continue;
                     }
-                    dropped[end] += 1;
+                    *count += 1;
                     for k in 0..4 {
                         spans[0][k] = (spans[0][k].0.min(a[k]), spans[0][k].1.max(a[k]));
                         spans[1][k] = (spans[1][k].0.min(b[k]), spans[1][k].1.max(b[k]));
