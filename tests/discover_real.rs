@@ -3,23 +3,9 @@
 mod common;
 
 use common::cli::ctsid;
+use common::shared_data as shared;
 use ctsid::discover::benchmarks::{emps, rms_after, silverbox};
 use ctsid::discover::discover;
-
-fn shared(rel: &str) -> Option<String> {
-    let p = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
-        .join(rel);
-    if p.exists() {
-        Some(p.to_string_lossy().into_owned())
-    } else {
-        eprintln!(
-            "skipped: {} not found (the shared benchmark data is absent)",
-            p.display()
-        );
-        None
-    }
-}
 
 #[test]
 fn silverbox_names_cubic_stiffness_and_the_arrow_error_drops_toward_1_mv() {
