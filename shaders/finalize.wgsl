@@ -10,7 +10,7 @@ struct Params {
     block_samples: u32,
     n_blocks: u32,
     stride: u32,
-    _pad0: u32,
+    zero: u32,
     _pad1: u32,
 }
 
@@ -18,6 +18,11 @@ struct Params {
 @group(0) @binding(1) var<storage, read> partial: array<vec2<f32>>;
 // Bound at this window's offset: out[local] belongs to candidate window_start + local.
 @group(0) @binding(2) var<storage, read_write> out: array<vec2<f32>>;
+
+// See sweep.wgsl: keeps the compensation from being simplified away.
+fn opaque(x: f32) -> f32 {
+    return bitcast<f32>(bitcast<u32>(x) ^ P.zero);
+}
 
 @compute @workgroup_size(WG)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -31,7 +36,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         let p = partial[b * P.stride + local];
         for (var h = 0u; h < 2u; h++) {
             let y = p[h] - c;
-            let t = s + y;
+            let t = opaque(s + y);
             c = (t - s) - y;
             s = t;
         }

@@ -31,7 +31,7 @@ struct Params {
     block_samples: u32,  // samples per workgroup row (a multiple of CHUNK)
     n_blocks: u32,
     stride: u32,         // row stride of `partial` (candidates per block row)
-    _pad0: u32,
+    zero: u32,           // 0; see `opaque`
     _pad1: u32,
 }
 
@@ -51,6 +51,13 @@ struct Params {
 
 var<workgroup> tab: array<f32, CHUNK * TS>;
 var<workgroup> vv: array<f32, CHUNK>;
+
+// x, through an integer XOR with P.zero (0 at run time, unknown to the compiler). Kahan's
+// compensation (t - s) - y is zero in exact arithmetic, and compilers that reassociate floating
+// point (Mesa's NIR does) delete it; no float rewrite sees through the XOR.
+fn opaque(x: f32) -> f32 {
+    return bitcast<f32>(bitcast<u32>(x) ^ P.zero);
+}
 
 fn level_end(l: u32) -> u32 {
     switch l {
@@ -155,7 +162,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid
         // Kahan: comp carries the low-order part lost by sum.
         for (var r = 0u; r < R; r++) {
             let y = acc[r] - comp[r];
-            let tt = sum[r] + y;
+            let tt = opaque(sum[r] + y);
             comp[r] = (tt - sum[r]) - y;
             sum[r] = tt;
         }

@@ -6,8 +6,8 @@
 //! uses those correlations to pick the entering candidate and the step lengths; the active-set
 //! algebra is f64 on exact columns on both engines. Checked here, at every breakpoint:
 //! the same active candidates in the same order, the same added/dropped events, alpha and every
-//! coefficient within 1e-6 of the breakpoint's largest |coefficient| (the issue's 1e-6 relative),
-//! and the same stop reason.
+//! coefficient within 1e-10 of the breakpoint's largest |coefficient| (1e-6, the issue's bound,
+//! on the fixtures with a near-duplicate column), and the same stop reason.
 //!
 //! Cases: (a) random polynomial problems, 3,000 samples x 924 candidates (n_z = 6, d = 6), drawn
 //! fresh per case from their own seed, sparse truth plus noise, LAR and lasso; (b) every
@@ -23,7 +23,9 @@
 //! columns on either engine. So both engines produce the same breakpoints to rounding as long as
 //! the f32 sweeps make the same choices, which fails only when two candidates tie within the
 //! f32 error (~1e-7 relative): then no f32 engine can promise the f64 order, and the test would
-//! report the breakpoint where the choice differed. Without that recomputation the f32 sweeps
+//! report the breakpoint where the choice differed.
+//! Measured on lavapipe: no difference at all on every case but lar_collinear (1.2e-7), whose
+//! near-duplicate column lets the f32 correlations move a step length. Without that recomputation the f32 sweeps
 //! put 2e-6 .. 1e-5 relative errors into alphas and coefficients (seen on these cases), above the
 //! issue's 1e-6.
 //!
@@ -41,8 +43,14 @@ mod common;
 use common::lars_fixtures::{load, problem};
 use common::rng::SplitMix as Rng;
 
-/// Relative tolerance of alphas and coefficients (issue 4: "coefficients to 1e-6 relative").
+/// Relative tolerance of alphas and coefficients where a column nearly duplicates another (the
+/// `*_collinear` fixtures): there the f32 correlations can move a step length (lar_collinear:
+/// 1.2e-7 on lavapipe); issue 4's "coefficients to 1e-6 relative".
 const TOL: f64 = 1e-6;
+
+/// Everywhere else the parity is exact (measured 0 on lavapipe, see the module docs); this bound
+/// leaves room for the f64 rounding of a different summation order only.
+const TOL_EXACT: f64 = 1e-10;
 
 fn require_gpu() -> bool {
     std::env::var("CTSID_REQUIRE_GPU").as_deref() == Ok("1")
@@ -90,7 +98,7 @@ fn moves(p: &Path) -> Vec<(bool, usize, usize)> {
 
 /// Every breakpoint of `gpu` against `cpu` (see the module docs); returns the worst relative
 /// coefficient difference.
-fn compare_paths(cpu: &Path, gpu: &Path, label: &str) -> f64 {
+fn compare_paths(cpu: &Path, gpu: &Path, label: &str, tol: f64) -> f64 {
     assert_eq!(
         moves(gpu),
         moves(cpu),
@@ -109,7 +117,7 @@ fn compare_paths(cpu: &Path, gpu: &Path, label: &str) -> f64 {
     for (k, (c, g)) in cpu.breakpoints.iter().zip(&gpu.breakpoints).enumerate() {
         assert_eq!(g.active, c.active, "{label}: breakpoint {k}: active set");
         assert!(
-            (g.alpha - c.alpha).abs() <= TOL * c.alpha.abs() + 1e-12 * a0,
+            (g.alpha - c.alpha).abs() <= tol * c.alpha.abs() + 1e-12 * a0,
             "{label}: breakpoint {k}: alpha gpu {} vs cpu {}",
             g.alpha,
             c.alpha
@@ -118,7 +126,7 @@ fn compare_paths(cpu: &Path, gpu: &Path, label: &str) -> f64 {
         for (q, (gc, cc)) in g.coefs.iter().zip(&c.coefs).enumerate() {
             let rel = (gc - cc).abs() / scale.max(f64::MIN_POSITIVE);
             assert!(
-                rel <= TOL,
+                rel <= tol,
                 "{label}: breakpoint {k}: coefficient of candidate {}: gpu {gc} vs cpu {cc} (rel {rel:.2e})",
                 c.active[q]
             );
@@ -190,7 +198,7 @@ fn random_polynomial_paths_match_the_cpu_engine() {
         let gpu_path = lars_path(&mut gpu, &y, None, &opts).unwrap();
         let t_gpu = t.elapsed();
         let label = format!("seed {seed:#x} {method:?} ({} candidates)", basis.len());
-        let worst = compare_paths(&cpu_path, &gpu_path, &label);
+        let worst = compare_paths(&cpu_path, &gpu_path, &label, TOL_EXACT);
         assert!(
             cpu_path.breakpoints.len() > 20,
             "{label}: the path is too short to test anything ({} breakpoints)",
@@ -220,7 +228,7 @@ fn weighted_path_matches_the_cpu_engine() {
     };
     let cpu_path = lars_path(&mut cpu64(&basis, &f), &y, Some(&w), &opts).unwrap();
     let gpu_path = lars_path(&mut gpu, &y, Some(&w), &opts).unwrap();
-    let worst = compare_paths(&cpu_path, &gpu_path, "weighted lasso");
+    let worst = compare_paths(&cpu_path, &gpu_path, "weighted lasso", TOL_EXACT);
     println!(
         "weighted lasso: {} breakpoints, worst coef diff {worst:.1e}",
         gpu_path.breakpoints.len()
@@ -249,7 +257,12 @@ fn sklearn_fixture_paths_match_the_cpu_engine() {
             fx.name
         );
         let gpu_path = lars_path(&mut gpu, &fx.y, None, &opts).unwrap();
-        let worst = compare_paths(&cpu_path, &gpu_path, &fx.name);
+        let tol = if fx.name.contains("collinear") {
+            TOL
+        } else {
+            TOL_EXACT
+        };
+        let worst = compare_paths(&cpu_path, &gpu_path, &fx.name, tol);
         println!(
             "{}: {} breakpoints, {} candidates, worst coef diff {worst:.1e}, {} refreshes",
             fx.name,
@@ -301,7 +314,7 @@ fn whole_regression_fit_matches_the_cpu_engine() {
             let scale = c.coefficients.iter().fold(0.0f64, |m, x| m.max(x.abs()));
             for (gc, cc) in g.coefficients.iter().zip(&c.coefficients) {
                 assert!(
-                    (gc - cc).abs() <= TOL * scale,
+                    (gc - cc).abs() <= TOL_EXACT * scale,
                     "{label}: breakpoint {k}: {gc} vs {cc}"
                 );
             }

@@ -56,8 +56,15 @@ fn reference_sweep(f: &Features, b: &Basis, v: &[f64]) -> (Vec<f64>, Vec<f64>) {
     (out, mag)
 }
 
-/// Every element: finite (the output was poisoned with NaN) and within 1e-5 of sum |terms|.
-fn check_sweep(eng: &mut GpuEngine, f: &Features, b: &Basis, v: &[f64], label: &str) -> f64 {
+/// Every element: finite (the output was poisoned with NaN) and within `bound` of sum |terms|.
+fn check_sweep_to(
+    eng: &mut GpuEngine,
+    f: &Features,
+    b: &Basis,
+    v: &[f64],
+    label: &str,
+    bound: f64,
+) -> f64 {
     let mut out = vec![f64::NAN; b.len()];
     eng.sweep(v, &mut out).unwrap();
     let (want, mag) = reference_sweep(f, b, v);
@@ -70,7 +77,7 @@ fn check_sweep(eng: &mut GpuEngine, f: &Features, b: &Basis, v: &[f64], label: &
         );
         let rel = (out[j] - want[j]).abs() / mag[j].max(f64::MIN_POSITIVE);
         assert!(
-            rel < 1e-5,
+            rel < bound,
             "{label}: candidate {j} ({}): gpu {} vs f64 {} (rel {rel:e})",
             b.name(j),
             out[j],
@@ -79,6 +86,12 @@ fn check_sweep(eng: &mut GpuEngine, f: &Features, b: &Basis, v: &[f64], label: &
         worst = worst.max(rel);
     }
     worst
+}
+
+/// [`check_sweep_to`] within 2e-7: measured on lavapipe up to 6.7e-8 (degree 12, where the f32
+/// rounding of the factors dominates).
+fn check_sweep(eng: &mut GpuEngine, f: &Features, b: &Basis, v: &[f64], label: &str) -> f64 {
+    check_sweep_to(eng, f, b, v, label, 2e-7)
 }
 
 fn run_case(
@@ -160,6 +173,29 @@ fn sweep_is_tiled_into_windows_and_blocks() {
 }
 
 #[test]
+fn long_blocks_keep_their_precision() {
+    // Blocks of 4,000 samples (a software adapter gets at least 16 blocks) of positive products:
+    // partial sums grow with every sample, the case where an uncompensated f32 sum loses most.
+    // Measured on lavapipe: 1.7e-8 with the Kahan compensation, 2.1e-7 when the shader compiler
+    // had deleted it (before `opaque` in sweep.wgsl); bound 6e-8.
+    let mut rng = Rng(0x5EED_0007);
+    let n_s = 64_000;
+    let f = features(&mut rng, n_s, 3, 0.5, 1.5);
+    let b = Basis::new(&names(3), 4, BasisLimits::default()).unwrap();
+    let opts = GpuOptions {
+        max_block_samples: 8192,
+        ..GpuOptions::default()
+    };
+    let Some(mut eng) = engine_or_skip(&f, &b, opts) else {
+        return;
+    };
+    assert!(eng.layout().block_samples >= 4000, "{:?}", eng.layout());
+    let v: Vec<f64> = (0..n_s).map(|_| rng.uniform(0.5, 2.0)).collect();
+    let worst = check_sweep_to(&mut eng, &f, &b, &v, "long blocks", 6e-8);
+    println!("long blocks: worst rel err {worst:.2e}");
+}
+
+#[test]
 fn column_stats_match_f64_reference_with_large_means() {
     let mut rng = Rng(0x5EED_0010);
     let (n_s, n_z, degree) = (3000, 7, 4);
@@ -198,11 +234,13 @@ fn column_stats_match_f64_reference_with_large_means() {
             let mag = x.iter().zip(&w).map(|(x, w)| (x * w).abs()).sum::<f64>() / wsum;
             let em = (st.mean[j] - m).abs() / mag;
             // f32 values of x carry ~6e-8 |x| each, so the centred sum can only be as good as
-            // that relative to sum w x^2; the 1e-5 bound applies to the spread itself.
+            // that relative to sum w x^2; the bound applies to the spread itself. Measured on
+            // lavapipe: up to 5.3e-8 (1.8e-7 to 2.1e-7 when the compiler deleted the Kahan
+            // compensation).
             let en = (st.norm[j] * st.norm[j] - ss).abs() / (ss + 1e-6 * sq);
-            assert!(em < 1e-5, "mean of {}: {} vs {m}", b.name(j), st.mean[j]);
+            assert!(em < 1e-7, "mean of {}: {} vs {m}", b.name(j), st.mean[j]);
             assert!(
-                en < 1e-5,
+                en < 1e-7,
                 "norm of {}: {} vs {} (weighted {weighted})",
                 b.name(j),
                 st.norm[j],

@@ -10,6 +10,17 @@ use common::lars_fixtures::{load, problem, Fixture};
 
 /// Runs the path on `engine` and compares with the fixture; `map` turns an engine candidate into a fixture column.
 fn check(f: &Fixture, engine: &mut dyn SweepEngine, map: impl Fn(usize) -> usize, what: &str) {
+    check_to(f, engine, map, what, 1e-8)
+}
+
+/// [`check`] to the relative tolerance `tol`.
+fn check_to(
+    f: &Fixture,
+    engine: &mut dyn SweepEngine,
+    map: impl Fn(usize) -> usize,
+    what: &str,
+    tol: f64,
+) {
     let steps = f.alphas.len() - 1;
     let opts = PathOptions {
         method: f.method,
@@ -29,7 +40,7 @@ fn check(f: &Fixture, engine: &mut dyn SweepEngine, map: impl Fn(usize) -> usize
     for (k, bp) in path.breakpoints.iter().enumerate() {
         let want = f.alphas[k];
         assert!(
-            (bp.alpha - want).abs() <= 1e-8 * want.abs() + 1e-14 * a0,
+            (bp.alpha - want).abs() <= tol * want.abs() + 1e-14 * a0,
             "{} ({what}): alpha {k}: {} vs {want}",
             f.name,
             bp.alpha
@@ -41,7 +52,7 @@ fn check(f: &Fixture, engine: &mut dyn SweepEngine, map: impl Fn(usize) -> usize
         let scale = f.coefs[k].iter().fold(0.0f64, |m, x| m.max(x.abs()));
         for (j, (got, want)) in dense.iter().zip(&f.coefs[k]).enumerate() {
             assert!(
-                (got - want).abs() <= 1e-8 * scale,
+                (got - want).abs() <= tol * scale,
                 "{} ({what}): breakpoint {k} coef {j}: {got} vs {want}",
                 f.name
             );
@@ -168,10 +179,13 @@ fn alpha_min_interpolates_like_scikit_learn() {
 }
 
 #[test]
-fn f32_sweeps_keep_the_entering_order_of_well_separated_paths() {
-    // The f32 engine only steers the path; on these small problems it must pick the same terms.
-    for f in load().iter().filter(|f| f.name.contains("small")) {
-        let (basis, feats) = problem(f);
+fn f32_sweeps_give_the_scikit_learn_paths() {
+    // The f32 engine only steers the path (which candidate enters, which limits the step); the
+    // breakpoints' numbers come from exact f64 columns, so every path, order of entry included,
+    // matches scikit-learn's; on lar_collinear (a near-duplicate column) the f32 correlations
+    // move a step length by 4.5e-8 relative, the others agree to 3e-8.
+    for f in load() {
+        let (basis, feats) = problem(&f);
         let mut e = CpuEngine::new(
             &basis,
             &feats,
@@ -181,36 +195,6 @@ fn f32_sweeps_keep_the_entering_order_of_well_separated_paths() {
             },
         )
         .unwrap();
-        let opts = PathOptions {
-            method: f.method,
-            max_terms: 10_000,
-            max_steps: 8,
-            ..PathOptions::default()
-        };
-        let path = lars_path(&mut e, &f.y, None, &opts).unwrap();
-        let got: Vec<usize> = path
-            .breakpoints
-            .last()
-            .unwrap()
-            .active
-            .iter()
-            .map(|j| j - 1)
-            .collect();
-        let want: Vec<usize> = f.coefs[8]
-            .iter()
-            .enumerate()
-            .filter(|(_, c)| **c != 0.0)
-            .map(|(j, _)| j)
-            .collect();
-        let mut g = got.clone();
-        g.sort_unstable();
-        assert_eq!(g, want, "{}", f.name);
-        for (k, bp) in path.breakpoints.iter().enumerate() {
-            assert!(
-                (bp.alpha - f.alphas[k]).abs() <= 1e-4 * f.alphas[k],
-                "{}: alpha {k}",
-                f.name
-            );
-        }
+        check_to(&f, &mut e, |j| j - 1, "basis, f32 sweeps", 1e-7);
     }
 }

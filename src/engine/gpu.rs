@@ -27,7 +27,8 @@
 //! windows so that every binding stays within `max_storage_buffer_binding_size`, every dispatch
 //! within `max_compute_workgroups_per_dimension`, and no dispatch exceeds a bounded number of
 //! sample-candidate pairs (GPU watchdogs kill long dispatches). Each window is its own command
-//! buffer. Sums over a block are Kahan-compensated f32; blocks are reduced by the finalize shader.
+//! buffer. Sums over a block are Kahan-compensated f32 (the compensation is kept from the
+//! compiler's float algebra by `opaque` in the shaders); blocks are reduced by the finalize shader.
 //!
 //! # Errors
 //! wgpu's default error handler panics; this engine installs one that records, wraps device work
@@ -576,6 +577,7 @@ impl GpuEngine {
                     block_samples as u32,
                     n_blocks as u32,
                     window as u32,
+                    // `zero`: the shaders' opaque 0 that keeps Kahan's compensation alive.
                     0,
                     0,
                 ];
