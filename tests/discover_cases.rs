@@ -55,10 +55,26 @@ fn cubic_stiffness_and_quadratic_drag_are_named_with_their_coefficients() {
     }
 }
 
+/// Asserts that `family` alone was added, its coefficient within 10 % of `coef`, and the
+/// held-out error shrank at least 3x (the acceptance rule for one seed).
+fn assert_added(d: &Discovery, family: &str, coef: f64) {
+    assert_eq!(d.verdict, "added", "{}", d.text());
+    let named: Vec<&str> = d.effects.iter().map(|e| e.family.as_str()).collect();
+    assert_eq!(named, [family], "{}", d.text());
+    let c = d.effects[0].coefficient;
+    assert!(
+        (c / coef - 1.0).abs() <= 0.1,
+        "{family}: {c} vs {coef}\n{}",
+        d.text()
+    );
+    assert!(d.nrmse_before / d.nrmse_after > 3.0, "{}", d.text());
+}
+
 #[test]
 fn friction_is_not_confused_with_an_input_relay() {
     let (ok, why, d) = run("distractor_relay", 2);
     assert!(ok, "{why}\n{}", d.text());
+    assert_added(&d, "coulomb_friction", -0.5);
 }
 
 #[test]
@@ -82,9 +98,9 @@ fn mistuned_damping_is_retuned_not_disguised() {
 
 #[test]
 fn quadratic_drag_is_never_named_as_cubic_damping_alone() {
-    let (_, _, d) = run("distractor_v3", 0);
-    let named: Vec<&str> = d.effects.iter().map(|e| e.family.as_str()).collect();
-    assert_ne!(named, vec!["cubic_damping"], "{}", d.text());
+    let (ok, why, d) = run("distractor_v3", 0);
+    assert!(ok, "{why}\n{}", d.text());
+    assert_added(&d, "quadratic_drag", -0.8);
 }
 
 #[test]

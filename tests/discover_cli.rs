@@ -8,7 +8,9 @@ use ctsid::discover::{cases, discover, Options};
 
 #[test]
 fn discover_cli_uses_the_given_split() {
-    let case = cases::generate("negative_none", 0, 0.03).unwrap();
+    // A case where an effect is added, so that a split the CLI ignored would show in the
+    // coefficient (the negative control refuses whatever the split).
+    let case = cases::generate("duffing", 0, 0.03).unwrap();
     let dir = std::env::temp_dir().join(format!("ctsid-discover-cli-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let data = dir.join("d.csv");
@@ -65,11 +67,31 @@ fn discover_cli_uses_the_given_split() {
     }
     assert!(rep.join("residual_along_y.svg").is_file());
     let lib = discover(rs, &case.nominal, &Options::new(train, val, test)).unwrap();
+    assert_eq!(lib.verdict, "added", "{}", lib.text());
     assert!(
-        out.contains(&lib.verdict),
+        out.lines()
+            .any(|l| l == format!("verdict: {}", lib.verdict)),
         "library verdict '{}' not in CLI output:\n{out}",
         lib.verdict
     );
+    // The same effects and coefficients as the library (the CSV round trip of the samples and
+    // times moves them by rounding only).
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(rep.join("discovery.json")).unwrap())
+            .unwrap();
+    assert_eq!(json["verdict"], lib.verdict.as_str());
+    let effects = json["effects"].as_array().unwrap();
+    assert_eq!(effects.len(), lib.effects.len(), "{json}");
+    for (e, l) in effects.iter().zip(&lib.effects) {
+        assert_eq!(e["family"], l.family.as_str());
+        let c = e["coefficient"].as_f64().unwrap();
+        assert!(
+            (c - l.coefficient).abs() <= 1e-6 * l.coefficient.abs(),
+            "{}: CLI {c} vs library {}",
+            l.family,
+            l.coefficient
+        );
+    }
 
     fails(
         &[

@@ -28,11 +28,13 @@ fn truth() -> Model {
     Model::new(&["u"], vec![eq], Some(TAU))
 }
 
-fn data(runs: usize, eta: f64, seed: u64) -> RecordSet {
+/// The record set and each run's noise-free output.
+fn data(runs: usize, eta: f64, seed: u64) -> (RecordSet, Vec<Vec<f64>>) {
     let c = truth().compile().unwrap();
     let mut rng = Rng::new(seed);
     let t: Vec<f64> = (0..N).map(|k| k as f64 * TAU).collect();
     let mut out = Vec::new();
+    let mut clean = Vec::new();
     for r in 0..runs {
         let comps: Vec<(f64, f64, f64)> = (0..6)
             .map(|_| {
@@ -63,6 +65,7 @@ fn data(runs: usize, eta: f64, seed: u64) -> RecordSet {
         )
         .unwrap();
         let y = traj.series(0);
+        clean.push(y.clone());
         let y = if eta > 0.0 {
             add_noise(&y, eta, &mut rng)
         } else {
@@ -75,7 +78,10 @@ fn data(runs: usize, eta: f64, seed: u64) -> RecordSet {
             rows: (0..N).map(|i| i + 2).collect(),
         });
     }
-    RecordSet::new(TAU, vec!["y".into(), "u".into()], out).unwrap()
+    (
+        RecordSet::new(TAU, vec!["y".into(), "u".into()], out).unwrap(),
+        clean,
+    )
 }
 
 fn terms(m: &Model) -> BTreeMap<String, f64> {
@@ -87,7 +93,7 @@ fn terms(m: &Model) -> BTreeMap<String, f64> {
 }
 
 fn run_case(eta: f64, coef_tol: f64, nrmse_tol: f64) {
-    let rs = data(12, eta, 7);
+    let (rs, clean) = data(12, eta, 7);
     let ids: Vec<String> = (0..12).map(|i| i.to_string()).collect();
     let split = Split::new((0..8).collect(), Some(vec![8, 9]), vec![10, 11], &ids).unwrap();
     let mut s = Settings::new(vec!["y".into()], vec!["u".into()], 3);
@@ -108,30 +114,67 @@ fn run_case(eta: f64, coef_tol: f64, nrmse_tol: f64) {
     let want = terms(&truth());
     for (m, c) in &want {
         let g = got.get(m).copied().unwrap_or(0.0);
+        println!(
+            "eta {eta}: term {m}: {g} vs {c} (rel {:.1e})",
+            ((g - c) / c).abs()
+        );
         assert!(
             ((g - c) / c).abs() < coef_tol,
             "eta {eta}: term {m}: {g} vs {c} (model {:?})",
             got
         );
     }
-    for (m, g) in &got {
-        // A term outside the truth may survive only with a negligible coefficient.
-        if !want.contains_key(m) {
-            assert!(g.abs() < 0.02, "eta {eta}: spurious term {m} = {g}");
-        }
+    let spurious: Vec<(&String, &f64)> =
+        got.iter().filter(|(m, _)| !want.contains_key(*m)).collect();
+    assert!(
+        spurious.is_empty(),
+        "eta {eta}: terms outside the truth {spurious:?}"
+    );
+    // Free run on both test runs, scored against the noise-free output (the truth).
+    assert_eq!(id.simulations.len(), 2, "eta {eta}: test runs simulated");
+    for sim in &id.simulations {
+        assert!(
+            sim.error.is_none(),
+            "eta {eta}: run {}: {:?}",
+            sim.run,
+            sim.error
+        );
+        let truth = &clean[sim.run.parse::<usize>().unwrap()];
+        let sim_y = &sim.simulated[0];
+        assert_eq!(sim_y.len(), truth.len());
+        let mean = truth.iter().sum::<f64>() / truth.len() as f64;
+        let sd =
+            (truth.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / truth.len() as f64).sqrt();
+        let rms = (sim_y
+            .iter()
+            .zip(truth)
+            .map(|(a, b)| (a - b).powi(2))
+            .sum::<f64>()
+            / truth.len() as f64)
+            .sqrt();
+        let nrmse = rms / sd;
+        println!(
+            "eta {eta}: run {}: free-run NRMSE vs truth {nrmse:.2e}",
+            sim.run
+        );
+        assert!(
+            nrmse < nrmse_tol,
+            "eta {eta}: run {}: free-run NRMSE vs truth {nrmse}",
+            sim.run
+        );
     }
-    let nrmse = id.test_nrmse()[0];
-    assert!(nrmse < nrmse_tol, "eta {eta}: free-run test NRMSE {nrmse}");
 }
 
+// Bounds about 5x what was measured: noise-free coefficients within 4.6e-5, free-run NRMSE
+// against the truth 3.5e-5 / 1.6e-4; at 1 % noise 3.1e-3 and 1.8e-3 / 8.6e-4.
 #[test]
 fn noise_free_duffing_is_identified_exactly() {
-    run_case(0.0, 0.01, 0.02);
+    run_case(0.0, 3e-4, 1e-3);
 }
 
 #[test]
 fn duffing_at_one_percent_noise_keeps_order_and_terms() {
-    run_case(0.01, 0.05, 0.05);
+    run_case(0.01, 0.015, 0.01);
 }
 
 fn ctsid(args: &[&str]) -> (bool, String) {
@@ -148,7 +191,7 @@ fn ctsid(args: &[&str]) -> (bool, String) {
 
 #[test]
 fn identify_cli_errors_are_one_line() {
-    let rs = data(4, 0.0, 3);
+    let (rs, _) = data(4, 0.0, 3);
     let dir = std::env::temp_dir().join(format!("ctsid-identify-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("d.csv");
