@@ -42,6 +42,6 @@ pub mod records;
 pub mod regression;
 pub mod report;
 pub mod simulate;
-mod util;
+pub mod util;
 
 pub use error::{Error, Result};

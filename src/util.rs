@@ -1,4 +1,5 @@
-//! Small checks shared by the modules that validate their input.
+//! Small checks shared by the modules that validate their input, and number formatting for
+//! messages.
 
 use crate::error::{Error, Result};
 
@@ -18,5 +19,15 @@ pub(crate) fn finite_nonneg(name: &str, v: f64) -> Result<()> {
             name,
             format!("{v:?}; give a finite number >= 0"),
         ))
+    }
+}
+
+/// `x` with four decimals where that reads well (1e-3 <= |x| < 1e6, or 0), else in scientific
+/// notation with four: a rate of 1e160 rad/s is not 161 digits.
+pub fn num4(x: f64) -> String {
+    if x == 0.0 || (1e-3..1e6).contains(&x.abs()) {
+        format!("{x:.4}")
+    } else {
+        format!("{x:.4e}")
     }
 }

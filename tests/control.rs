@@ -180,6 +180,87 @@ fn bad_designs_are_errors_that_say_why() {
     assert!(e(&two, &DesignOptions::new(1.0, 0.01)).contains("one output and one input"));
 }
 
+/// `y^(n) = -3.965 y - 0.9185 y' + 3.941 u` (an identified second-order model given order n).
+fn high_order(n: usize) -> Model {
+    Model::new(
+        &["u"],
+        vec![OutputEquation::new(
+            "y",
+            n,
+            vec![
+                Term::new(&[("y", 1)], -3.965),
+                Term::new(&[("y_d1", 1)], -0.9185),
+                Term::new(&[("u", 1)], 3.941),
+            ],
+        )],
+        Some(0.02),
+    )
+}
+
+#[test]
+fn a_sampled_loop_that_is_unstable_is_refused_with_a_tau_that_works() {
+    // Order 7 at tau = 0.02 s: every placed pole is slow against tau (below 4 rad/s), yet the
+    // held input and measurement make the loop unstable (it used to be reported with an
+    // overshoot of 2936 % and exit 0).
+    let e = control::design(&high_order(7), &DesignOptions::new(1.0, 0.02)).unwrap_err();
+    let msg = e.to_string();
+    assert!(msg.contains("'tau'") && msg.contains("unstable"), "{msg}");
+    let tau: f64 = msg
+        .split("give a tau of ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("no tau suggested: {msg}"));
+    assert!(tau < 0.02, "{msg}");
+    // At the suggested tau the loop around the model follows its design.
+    let model = high_order(7);
+    let d = control::design(&model, &DesignOptions::new(1.0, tau)).unwrap();
+    let (c, x0, u0) = control::model_at_rest(&model, 0.0, 0.0).unwrap();
+    let plant = Plant {
+        system: &c,
+        output: 0,
+        x0,
+        u0,
+    };
+    let s = Scenario {
+        duration: control::default_duration(&d),
+        noise_sd: 0.0,
+        seed: 1,
+        u_limits: None,
+    };
+    let m = control::metrics(&control::run(&d, &plant, &s).unwrap(), &d, 0.0).unwrap();
+    assert!(
+        m.settling_time.is_finite() && m.design_deviation < 2.0,
+        "{m:?}"
+    );
+    // Orders 2 and 3 of the same model are fine at 0.02 s.
+    for n in [2, 3] {
+        assert!(control::design(&high_order(n), &DesignOptions::new(1.0, 0.02)).is_ok());
+    }
+}
+
+#[test]
+fn eigenvalues_of_huge_matrices_end() {
+    // nalgebra's balancing never ended on entries beyond 1e154 (`ctsid control` hung on a model
+    // coefficient of 1e160).
+    let m = nalgebra::DMatrix::from_row_slice(2, 2, &[0.0, 1.0, 1e200, -0.9]);
+    let e = control::design::eigenvalues(&m).unwrap();
+    assert!(
+        (e[1].0 - 1e100).abs() < 1e88 && (e[0].0 + 1e100).abs() < 1e88,
+        "{e:?}"
+    );
+    // Badly scaled companion matrix of (s + 1)(s + 1e3)(s + 1e6): balancing keeps the slow root.
+    let m = nalgebra::DMatrix::from_row_slice(
+        3,
+        3,
+        &[0.0, 1.0, 0.0, 0.0, 0.0, 1.0, -1e9, -1.001001e9, -1.001001e6],
+    );
+    let e = control::design::eigenvalues(&m).unwrap();
+    for (got, want) in e.iter().zip([-1e6, -1e3, -1.0]) {
+        assert!((got.0 / want - 1.0).abs() < 1e-8 && got.1 == 0.0, "{e:?}");
+    }
+}
+
 /// `y'' = -y - y' + c2 u^2 + c3 u^3 + c1 u`: steady inputs where Newton from u = 0 alone fails.
 fn input_poly(c1: f64, c2: f64, c3: f64) -> Model {
     let mut terms = vec![
@@ -292,6 +373,34 @@ fn the_command_prints_the_design_and_writes_the_trace() {
     fails(
         &["control", &model, "--setpoint 1 --from 0 --duration 1e5"],
         &["'duration'", "at most 1000000"],
+    );
+    let mut huge = oscillator();
+    huge.outputs[0].terms[0] = Term::new(&[("y", 1)], 1e160);
+    let huge = temp_file("control", "huge.json", &huge.to_json_string().unwrap());
+    fails(
+        &["control", &huge, "--setpoint 1 --from 0"],
+        &[
+            "the default bandwidth 1.0000e80 rad/s",
+            "give a bandwidth below",
+        ],
+    );
+    let h7 = temp_file(
+        "control",
+        "h7.json",
+        &high_order(7).to_json_string().unwrap(),
+    );
+    fails(
+        &["control", &h7, "--setpoint 1 --from 0"],
+        &["'tau'", "unstable", "give a tau of"],
+    );
+    let h6 = temp_file(
+        "control",
+        "h6.json",
+        &high_order(6).to_json_string().unwrap(),
+    );
+    fails(
+        &["control", &h6, "--setpoint 1 --from 0"],
+        &["'tau'", "does not settle", "--tau"],
     );
     let mut other = oscillator();
     other.outputs[0].name = "z".into();

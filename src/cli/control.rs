@@ -12,6 +12,7 @@
 use clap::Args;
 use ctsid::control::{self, DesignOptions, Scenario};
 use ctsid::model::Model;
+use ctsid::util::num4;
 use ctsid::{Error, Result};
 use std::io::Write;
 use std::path::PathBuf;
@@ -193,14 +194,22 @@ pub fn run(a: ControlArgs) -> Result<()> {
         a.from,
         a.setpoint,
         u0,
-        scenario.duration,
+        num4(scenario.duration),
         a.noise
     )?;
+    let settling = if m.settling_time.is_nan() {
+        format!("none within the {} s run", num4(scenario.duration))
+    } else {
+        format!("{:.4} s", m.settling_time)
+    };
+    let rise = if m.rise_time.is_nan() {
+        "never".to_string()
+    } else {
+        format!("{:.4} s", m.rise_time)
+    };
     outln!(
-        "rise time (10-90 %) {:.4} s, overshoot {:.2} %, settling (2 %) {:.4} s, final error {:.3} % of the step, input {:.4e}..{:.4e}, observer RMS error {:.3e}; largest difference from the designed response {:.2} % of the step",
-        m.rise_time,
+        "rise time (10-90 %) {rise}, overshoot {:.2} %, settling (2 %) {settling}, final error {:.3} % of the step, input {:.4e}..{:.4e}, observer RMS error {:.3e}; largest difference from the designed response {:.2} % of the step",
         m.overshoot,
-        m.settling_time,
         m.final_error,
         m.u_min,
         m.u_max,
@@ -214,6 +223,21 @@ pub fn run(a: ControlArgs) -> Result<()> {
     if let Some(dir) = &a.report {
         write_plots(dir, &d, &tr, a.from)?;
         eprintln!("plots written to {}", dir.display());
+    }
+    // Around its own model and without noise the loop must do what it was designed for; where
+    // it does not settle, the sampling (or the model's order) breaks the design, and the
+    // figures above are not a controller to use.
+    if a.plant.is_none() && a.noise == 0.0 && m.settling_time.is_nan() {
+        return Err(Error::param(
+            "tau",
+            format!(
+                "around its own model the loop sampled every {} s does not settle within {} s ({:.1} % off the designed response): sample faster (e.g. --tau {:.3e}) or give a lower --bandwidth",
+                d.tau,
+                num4(scenario.duration),
+                m.design_deviation,
+                d.tau / 4.0
+            ),
+        ));
     }
     Ok(())
 }
