@@ -540,7 +540,7 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
         l: l_s.as_slice(),
     };
     let radius = sampled_radius(&a_s, &b_aug.rows(0, n).into_owned(), &gains, w * o.tau)?;
-    if !(radius < 1.0) {
+    if radius.is_nan() || radius >= 1.0 {
         // Suggested: a quarter of the longest tau / 2^h at which the sampled loop is stable (at
         // the limit itself it barely decays: an order-7 loop at its limit was 21 % off its
         // design, at a quarter of it 0.7 %).
