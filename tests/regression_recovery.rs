@@ -537,3 +537,53 @@ fn forward_ols_breakpoints_are_least_squares_fits_and_recover_the_truth() {
         );
     }
 }
+
+#[test]
+fn the_model_does_not_depend_on_the_units_of_the_label_or_the_weights() {
+    // A label of 1e-15 once gave `y = 0` (the path's equality tolerance was absolute) and
+    // uniform weights of 1e-30 lost a term; every method must give the same support, with the
+    // coefficients in the label's units.
+    let p = problem(5, 3, 2, 400, 3, 0.01);
+    for method in [Method::LassoLars, Method::Lars, Method::ForwardOls] {
+        let reg = Regression::builder()
+            .degree(2)
+            .method(method)
+            .build()
+            .unwrap();
+        let base = reg.fit(&p.features, &p.label, "y", None).unwrap();
+        assert_eq!(
+            support(&base)
+                .into_iter()
+                .filter(|j| *j != 0)
+                .collect::<Vec<_>>(),
+            p.truth.iter().map(|t| t.0).collect::<Vec<_>>(),
+            "{method:?}: {}",
+            base.equation()
+        );
+        for (scale, w) in [
+            (1e-15, 1.0),
+            (1e15, 1.0),
+            (1.0, 1e-30),
+            (1.0, 1e-200),
+            (1e-15, 1e30),
+        ] {
+            let y: Vec<f64> = p.label.iter().map(|v| v * scale).collect();
+            let weights = vec![w; y.len()];
+            let m = reg.fit(&p.features, &y, "y", Some(&weights)).unwrap();
+            assert_eq!(
+                support(&m),
+                support(&base),
+                "{method:?} x{scale:e} w {w:e}: {}",
+                m.equation()
+            );
+            for (a, b) in m.terms.iter().zip(&base.terms) {
+                assert!(
+                    (a.coefficient / scale - b.coefficient).abs() <= 1e-9 * b.coefficient.abs(),
+                    "{method:?} x{scale:e} w {w:e}: {} vs {}",
+                    a.coefficient / scale,
+                    b.coefficient
+                );
+            }
+        }
+    }
+}

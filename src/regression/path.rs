@@ -308,8 +308,21 @@ fn begin<'a>(
             "the label is not finite at sample {i}"
         )));
     }
-    let stats = engine.column_stats(weights)?;
-    let w: Vec<f64> = weights.map(<[f64]>::to_vec).unwrap_or_else(|| vec![1.0; n]);
+    // Weights matter only relative to each other: scaled to mean 1, so that neither the path's
+    // tolerances nor an f32 engine see their units (uniform weights of 1e-30 once lost a term,
+    // 1e-200 every term).
+    let w: Vec<f64> = match weights {
+        Some(w) => {
+            let mean = w.iter().sum::<f64>() / n.max(1) as f64;
+            if mean.is_finite() && mean > 0.0 {
+                w.iter().map(|x| x / mean).collect()
+            } else {
+                w.to_vec()
+            }
+        }
+        None => vec![1.0; n],
+    };
+    let stats = engine.column_stats(weights.map(|_| w.as_slice()))?;
     let sw: f64 = w.iter().sum();
     let sqrt_w: Vec<f64> = w.iter().map(|x| x.sqrt()).collect();
     let y_mean = w.iter().zip(y).map(|(a, b)| a * b).sum::<f64>() / sw;
@@ -416,6 +429,9 @@ fn lars_steps(
     } = begun;
     let (n, nc) = (y_tilde.len(), sd.usable.len());
     let y_norm = path.y_norm;
+    // scikit-learn's equality tolerance is the absolute f64 epsilon, which ends the path of a
+    // label of 1e-15 before it starts; here it is relative to alpha's scale (alpha <= ||y~|| / n).
+    let eq_tol = EQ_TOL * y_norm / n as f64;
 
     let lasso = opts.method == Method::LassoLars;
     let mut cov = vec![0.0; nc];
@@ -473,8 +489,8 @@ fn lars_steps(
             path.stop = StopReason::NoImprovement;
             break;
         }
-        if alpha <= opts.alpha_min + EQ_TOL {
-            if (alpha - opts.alpha_min).abs() > EQ_TOL && n_iter > 0 {
+        if alpha <= opts.alpha_min + eq_tol {
+            if (alpha - opts.alpha_min).abs() > eq_tol && n_iter > 0 {
                 // Interpolate back to alpha_min between the last two breakpoints.
                 let prev = path.breakpoints[n_iter - 1].clone();
                 let ss = (prev.alpha - opts.alpha_min) / (prev.alpha - alpha);
