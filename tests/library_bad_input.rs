@@ -136,6 +136,19 @@ fn record_sets_refuse_names_twice_and_huge_values() {
     let mut v = sine(50, 0.0);
     v[7] = 1e160;
     assert!(RecordSet::new(0.01, vec!["y".into()], vec![run("0", vec![v])]).is_err());
+    // Tiny channels: squares and products underflow (identification went wrong at 1e-150).
+    let tiny = |scale: f64| {
+        let v: Vec<f64> = sine(50, 0.0).iter().map(|x| x * scale).collect();
+        RecordSet::new(0.01, vec!["y".into()], vec![run("0", vec![v])])
+    };
+    let e = tiny(1e-150).unwrap_err().to_string();
+    assert!(
+        e.contains("channel 'y'") && e.contains("too small") && e.contains("rescale"),
+        "{e}"
+    );
+    assert!(tiny(1e-90).is_ok());
+    // All zeros is a constant channel, not a tiny one.
+    assert!(RecordSet::new(0.01, vec!["y".into()], vec![run("0", vec![vec![0.0; 50]])]).is_ok());
 }
 
 #[test]

@@ -36,6 +36,12 @@ pub fn unusable_reason(v: f64) -> String {
 /// of its sweeps (f64 on the CPU when f32 monomials would overflow).
 pub const MAX_MAGNITUDE: f64 = 1e150;
 
+/// Smallest largest-magnitude a channel may have (all zeros aside): below it squares fall under
+/// 1e-200 and products of a few of them into subnormal numbers, where derivatives, regression
+/// and simulation silently lose every digit (identification went wrong at 1e-150 and a
+/// simulation scored RMS 0 at 1e-300).
+pub const MIN_MAGNITUDE: f64 = 1e-100;
+
 /// One run: samples of every channel, all of the same length.
 #[derive(Debug, Clone)]
 pub struct Run {
@@ -115,6 +121,17 @@ impl RecordSet {
                         unusable_reason(ch[i])
                     )));
                 }
+            }
+        }
+        for (c, name) in channel_names.iter().enumerate() {
+            let largest = runs
+                .iter()
+                .flat_map(|r| r.channels[c].iter())
+                .fold(0.0f64, |m, x| m.max(x.abs()));
+            if largest > 0.0 && largest < MIN_MAGNITUDE {
+                return Err(Error::InvalidData(format!(
+                    "channel '{name}': its largest magnitude is {largest:e}, too small to compute with (limit {MIN_MAGNITUDE:e}: its squares and products underflow); rescale it"
+                )));
             }
         }
         Ok(RecordSet {
