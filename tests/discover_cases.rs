@@ -247,3 +247,16 @@ fn a_user_effect_the_data_cannot_carry_is_an_error_not_a_silent_omission() {
         discover(&case.records, &case.nominal, &o).unwrap();
     }
 }
+
+#[test]
+fn a_nominal_that_diverges_on_every_run_is_refused() {
+    // It used to give verdict "retune" with NRMSE inf and 200-digit percentages.
+    let mut case = generate("duffing", 0, 0.03).unwrap();
+    for t in case.nominal.outputs[0].terms.iter_mut() {
+        t.coefficient = t.coefficient.abs() * 1e3;
+    }
+    let e = discover(&case.records, &case.nominal, &options(&case, 0))
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("diverges in free run on every run"), "{e}");
+}

@@ -670,6 +670,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let nominal_model = p.model(&[], &[]);
     let mut runs = Vec::new();
     let mut windows = Vec::new();
+    let mut diverged = 0usize;
     for (ri, sr) in p.simruns.iter().enumerate() {
         let role = if o.train.contains(&ri) {
             "train"
@@ -685,6 +686,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             ..sr.clone()
         };
         let sim = sim::free_run(&nominal_model, sr);
+        diverged += sim.is_none() as usize;
         let (nr, above) = match &sim {
             Some(s) => {
                 let (_, nr) = crate::simulate::rms_nrmse(s, &sr.y);
@@ -729,6 +731,14 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             above_noise: above,
             nrmse_final: None,
         });
+    }
+    // With no run the nominal can simulate there is no error to explain and nothing to
+    // compare an augmented model with.
+    if !runs.is_empty() && diverged == runs.len() {
+        return Err(Error::InvalidData(format!(
+            "the nominal model diverges in free run on every run ({} of them): discover needs a nominal that simulates the record; check its coefficients with `ctsid simulate`",
+            runs.len()
+        )));
     }
     let shares = coordinate_shares(&p, &o.train);
 
@@ -1436,11 +1446,15 @@ impl Discovery {
         }
         for r in &self.retuned {
             s += &format!(
-                "  retuned {}: {} -> {} ({:+.1} %){}\n",
+                "  retuned {}: {} -> {} ({} %){}\n",
                 r.term,
                 num(r.nominal),
                 num(r.value),
-                r.change_percent,
+                if r.change_percent.abs() < 1e6 {
+                    format!("{:+.1}", r.change_percent)
+                } else {
+                    format!("{:+.2e}", r.change_percent)
+                },
                 if r.outside_confidence {
                     format!(
                         "; more than 3x its +-{:.0} % confidence: not a small correction (a missing effect the dictionary cannot name, or parameters these runs cannot tell apart)",
