@@ -113,6 +113,30 @@ fn discover_cli_uses_the_given_split() {
         &["discover", d, "--nominal", n, base, "--test 99"],
         &["run '99' does not exist"],
     );
+    // An overlap between two given lists is named as such (it used to read as an empty
+    // validation list), and so is an omitted list that no run is left for.
+    let all: Vec<usize> = (0..rs.runs.len()).collect();
+    fails(
+        &[
+            "discover",
+            d,
+            "--nominal",
+            n,
+            base,
+            "--train",
+            &list(&all[..5]),
+            "--test",
+            &list(&all[4..]),
+        ],
+        &[&format!(
+            "run '{}' is in both train and test",
+            rs.runs[4].id
+        )],
+    );
+    fails(
+        &["discover", d, "--nominal", n, base, "--train", &list(&all)],
+        &["'validation'", "no run is left"],
+    );
     // One list given: the omitted ones share the other runs (they used to default to fixed
     // positions and clash with it).
     let (ok, out, err) = ctsid(&[

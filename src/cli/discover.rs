@@ -103,6 +103,23 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     // validation a quarter, test the rest (by these weights among the omitted lists only).
     let mut rest = given.unnamed(n);
     let mut lists = [given.train, given.validation, given.test];
+    let list_names = ["train", "validation", "test"];
+    // Overlaps first: otherwise they show as an omitted list left empty, which misleads.
+    for a_i in 0..3 {
+        for b_i in a_i + 1..3 {
+            if let (Some(la), Some(lb)) = (&lists[a_i], &lists[b_i]) {
+                if let Some(r) = la.iter().find(|r| lb.contains(r)) {
+                    return Err(Error::param(
+                        "split",
+                        format!(
+                            "run '{}' is in both {} and {}; splits must not overlap",
+                            names[*r], list_names[a_i], list_names[b_i]
+                        ),
+                    ));
+                }
+            }
+        }
+    }
     let weights = [2usize, 1, 1];
     let omitted: Vec<usize> = (0..3).filter(|&i| lists[i].is_none()).collect();
     let mut weight_left: usize = omitted.iter().map(|&i| weights[i]).sum();
@@ -114,6 +131,15 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
                 .max(1)
                 .min(rest.len())
         };
+        if take == 0 {
+            return Err(Error::param(
+                list_names[i],
+                format!(
+                    "no run is left for it (the given lists name all {n}); give --{} explicitly or name fewer runs in the others",
+                    list_names[i]
+                ),
+            ));
+        }
         lists[i] = Some(rest.drain(..take).collect());
         weight_left -= weights[i];
     }
