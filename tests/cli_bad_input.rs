@@ -136,6 +136,18 @@ fn columns_named_twice_and_values_too_large_are_refused() {
         &["derive", &single, derive, "--run-column run"],
         &["no run has two samples"],
     );
+    // The run and time columns are not channels (identify once fitted `y'' = -9 y` with the
+    // run id as its unused input).
+    let good = file("runs_time.csv", &good_csv());
+    let id = "--run-column run --time-column t --degree 1";
+    fails(
+        &["identify", &good, id, "--output y --input run"],
+        &["column 'run' is the run column"],
+    );
+    fails(
+        &["identify", &good, id, "--output t --input u"],
+        &["column 't' is the time column"],
+    );
 }
 
 #[test]

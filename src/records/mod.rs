@@ -280,6 +280,14 @@ impl RecordSet {
         if spec.tau.is_none() && spec.time_column.is_none() {
             return Err(Error::MissingTau);
         }
+        // A run id or a time stamp is no signal: as a channel it would be fitted as one.
+        for (role, col) in [("run", &spec.run_column), ("time", &spec.time_column)] {
+            if let Some(c) = col.as_ref().filter(|c| spec.columns.contains(c)) {
+                return Err(Error::InvalidData(format!(
+                    "{label}: column '{c}' is the {role} column; it cannot also be an input or output channel"
+                )));
+            }
+        }
         let mut rdr = csv::ReaderBuilder::new()
             .trim(csv::Trim::All)
             .flexible(false)
