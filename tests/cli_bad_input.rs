@@ -148,6 +148,15 @@ fn columns_named_twice_and_values_too_large_are_refused() {
         &["identify", &good, id, "--output t --input u"],
         &["column 't' is the time column"],
     );
+    // A lost run id is named where it is (it used to surface as non-uniform time a row later).
+    let mut text = good_csv();
+    let at = text.match_indices('\n').nth(100).unwrap().0 + 1;
+    text.replace_range(at..at + 1, "");
+    let lost = file("lost_run.csv", &text);
+    fails(
+        &["identify", &lost, id, "--output y --input u"],
+        &["row 102, column 'run': empty run id"],
+    );
 }
 
 #[test]

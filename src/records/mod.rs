@@ -364,6 +364,13 @@ impl RecordSet {
             let id = run_col
                 .map(|c| rec[c].to_string())
                 .unwrap_or_else(|| "0".into());
+            // An empty id is a lost cell, not a run: as one it would pull the row out of its
+            // run and blame the time column for the gap.
+            if let (Some(c), true) = (&spec.run_column, id.is_empty()) {
+                return Err(Error::InvalidData(format!(
+                    "{label}: row {row}, column '{c}': empty run id; give every row its run"
+                )));
+            }
             let k = *index.entry(id.clone()).or_insert_with(|| {
                 runs.push(Acc {
                     id: id.clone(),
