@@ -225,3 +225,44 @@ fn errors_are_one_line() {
     );
     std::fs::remove_dir_all(&d).ok();
 }
+
+#[test]
+fn a_time_column_in_milliseconds_is_pointed_out() {
+    let d = tmpdir("ms");
+    let model = d.join("m.json");
+    std::fs::write(
+        &model,
+        r#"{"format":"ctsid-model/1","tau":0.01,"inputs":["u"],"outputs":[{"name":"y","order":2,
+        "terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":1}]}]}"#,
+    )
+    .unwrap();
+    let m = model.to_str().unwrap();
+    for (scale, note) in [
+        (1.0, false),
+        (1000.0, true),
+        (1.0 / 60.0, true),
+        (2.0, false),
+    ] {
+        let data = d.join(format!("d{scale}.csv"));
+        let mut s = String::from("t,u,y\n");
+        for k in 0..200 {
+            let t = k as f64 * 0.01;
+            s += &format!("{},{},{}\n", t * scale, (3.0 * t).sin(), 0.0);
+        }
+        std::fs::write(&data, &s).unwrap();
+        let (ok, _, err) = ctsid(&["simulate", m, data.to_str().unwrap(), "--time-column", "t"]);
+        assert!(ok, "{err}");
+        assert_eq!(
+            err.contains("convert it to seconds"),
+            note,
+            "x{scale}: {err}"
+        );
+        if scale == 1000.0 {
+            assert!(
+                err.contains("(ms?)") && err.contains("about 1000 times"),
+                "{err}"
+            );
+        }
+    }
+    std::fs::remove_dir_all(&d).ok();
+}

@@ -19,6 +19,7 @@ use ctsid::simulate::{
     estimate_initial_derivatives, fit_initial_state, initial_window, rms_nrmse, simulate_model,
     SimOptions,
 };
+use ctsid::util::num4;
 use ctsid::Result;
 use rayon::prelude::*;
 
@@ -67,6 +68,25 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     let rs = args
         .segment
         .apply(RecordSet::from_csv(&args.data, &spec)?)?;
+    // A continuous-time model simulates at any sampling, but a ratio of 1e3, 1e6, 1/60 or
+    // 1/3600 to the identification's is mostly a time column in ms, us, min or h.
+    if let Some(mt) = model.tau {
+        let ratio = rs.tau / mt;
+        for (k, label, unit) in [
+            (1e3, "1000", "ms"),
+            (1e6, "1e6", "us"),
+            (1.0 / 60.0, "1/60", "min"),
+            (1.0 / 3600.0, "1/3600", "h"),
+        ] {
+            if (ratio / k - 1.0).abs() < 0.01 {
+                eprintln!(
+                    "note: the data are sampled every {} s, the model was identified at {} s (about {label} times): if the time column is in another unit ({unit}?), convert it to seconds",
+                    num4(rs.tau),
+                    num4(mt),
+                );
+            }
+        }
+    }
     let n_out = model.outputs.len();
     let sim_names: Vec<String> = model
         .outputs
