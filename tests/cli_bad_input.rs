@@ -174,6 +174,17 @@ fn time_stamps_far_from_zero_and_an_odd_first_step() {
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    // ... and the derivative is taken at tau = 1 ms: y' = 10 cos(10 (t - t0)).
+    let text = String::from_utf8(out.stdout).unwrap();
+    let mut rows = 0;
+    for (i, line) in text.lines().skip(1).enumerate() {
+        let d1: f64 = line.split(',').nth(3).unwrap().parse().unwrap();
+        let want = 10.0 * (i as f64 * 1e-2).cos();
+        assert!((d1 - want).abs() < 1e-3, "row {i}: {d1} vs {want}");
+        rows += 1;
+    }
+    assert_eq!(rows, 400);
+    assert!(text.starts_with("t,y,y_d0,y_d1,"), "{text:.40}");
     // The first step is twice the rest: blamed on its own row (3), not on the second.
     let mut s = String::from("t,y\n0,0\n");
     for i in 2..40 {

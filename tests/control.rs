@@ -41,6 +41,8 @@ fn gains_match_the_hand_derived_placement() {
     );
     // Observer at -9 twice: s^2 + (l1 + 0.4) s + (4 + 0.4 l1 + l2) = (s + 9)^2.
     assert!(close(d.l[0], 17.6) && close(d.l[1], 69.96), "{:?}", d.l);
+    // A triple pole: the eigenvalue solver resolves it to about eps^(1/3).
+    assert_eq!(d.closed_loop.len(), 3, "{:?}", d.closed_loop);
     for (r, i) in &d.closed_loop {
         assert!(
             (r + 3.0).abs() < 1e-3 && i.abs() < 1e-3,

@@ -125,6 +125,23 @@ fn shared_signals_meet_the_regression_gates() {
                 r.trimmed_p95,
                 r.full_p100
             );
+        } else {
+            // The two sys3 rows that miss some gate must not get worse than today (5 % slack).
+            let today: [f64; 4] = match r.noise {
+                1 => [0.033, 0.074, 0.210, 0.607],
+                _ => [0.084, 0.189, 0.501, 1.403],
+            };
+            for k in 0..4 {
+                assert!(
+                    r.trimmed_p95[k] <= 1.05 * today[k],
+                    "{} {}% order {}: {} (was {})",
+                    r.signal,
+                    r.noise,
+                    k + 1,
+                    r.trimmed_p95[k],
+                    today[k]
+                );
+            }
         }
     }
 }
@@ -148,7 +165,7 @@ fn sigma_is_calibrated_and_informative_on_smooth_signals() {
                 corr += spearman(&d.sigma[k], &err) / 4.0;
             }
             assert!(
-                corr > 0.0,
+                corr > 0.1,
                 "{name} {noise}%: sigma not informative (mean rank correlation {corr:.3})"
             );
         }

@@ -50,5 +50,6 @@ fn silverbox_identifies_the_duffing_form_and_simulates_the_arrow_near_1_mv() {
         "Silverbox arrow free-run RMS after 50 samples: {:.3} mV\n    {text}",
         1e3 * rms
     );
-    assert!(rms < 2e-3, "arrow free-run RMS {rms} V\n{text}");
+    // Measured 0.96 mV.
+    assert!(rms < 1.2e-3, "arrow free-run RMS {rms} V\n{text}");
 }

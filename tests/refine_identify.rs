@@ -1,8 +1,8 @@
 //! The refinement inside `identify`: the throttle at Patm = 0 with 3 % noise, order 3 and degree
 //! 1, whose five candidates are exactly the true terms, so the derivative fit gives the true
 //! structure with the errors-in-variables bias in its coefficients. With refinement on (the
-//! default) the report must say what was kept, and a kept refinement must not simulate worse than
-//! the derivative fit against the true output of the test runs; with it off, no report.
+//! default) the refinement is kept and simulates far closer to the true output of the test runs
+//! than the derivative fit; with it off, no report.
 
 use ctsid::demo::records;
 use ctsid::identify::{identify, Orders, Settings, Split};
@@ -49,17 +49,12 @@ fn identify_refines_the_throttle_and_reports_it() {
     assert_eq!(rep.gate, "validation runs");
     assert_eq!(rep.gate_runs, vec!["8".to_string(), "9".to_string()]);
     assert_eq!(rep.derivative_fit[0], off.model.outputs[0].to_text());
-    if rep.kept {
-        assert!(rep.validation_after[0] < rep.validation_before[0]);
-        assert_eq!(rep.refined[0], on.model.outputs[0].to_text());
-        assert!(
-            b <= a * 1.05,
-            "kept a refinement that simulates worse: {a} -> {b}"
-        );
-    } else {
-        assert!(rep.validation_after[0] >= rep.validation_before[0]);
-        assert_eq!(on.model, off.model);
-    }
+    // Here the refinement must be kept: the derivative fit has the true structure with biased
+    // coefficients (measured vs truth 0.30 -> 0.0072, validation 0.24 -> 0.11).
+    assert!(rep.kept, "{}", rep.message);
+    assert!(rep.validation_after[0] < rep.validation_before[0]);
+    assert_eq!(rep.refined[0], on.model.outputs[0].to_text());
+    assert!(b < a / 5.0, "refinement barely helped: {a} -> {b}");
     // The refinement's own targets: under 2 % against the truth on the test runs.
     assert!(b < 0.02, "test NRMSE against the true output {b}");
 }

@@ -399,7 +399,11 @@ fn bad_settings_are_refused_before_fitting() {
         let m = gpu.unwrap();
         assert_eq!(support(&m), p.truth.iter().map(|t| t.0).collect::<Vec<_>>());
         for (t, (_, c)) in m.terms.iter().zip(&p.truth) {
-            assert!((t.coefficient - c).abs() <= 1e-9 * c.abs(), "{}", m.equation());
+            assert!(
+                (t.coefficient - c).abs() <= 1e-9 * c.abs(),
+                "{}",
+                m.equation()
+            );
         }
     }
 }

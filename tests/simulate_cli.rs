@@ -39,7 +39,8 @@ fn true_throttle_model_reproduces_its_data() {
         sim.to_str().unwrap(),
     ]);
     assert!(ok, "{err}");
-    assert!(overall_nrmse(&out, "y") < 0.1, "{out}");
+    // Noise-free data: measured 0.0017.
+    assert!(overall_nrmse(&out, "y") < 0.005, "{out}");
     // y_sim beside the data, close to the truth on every row.
     let mut rdr = csv::Reader::from_path(&sim).unwrap();
     let h = rdr.headers().unwrap().clone();
@@ -49,7 +50,8 @@ fn true_throttle_model_reproduces_its_data() {
     for r in rdr.records() {
         let r = r.unwrap();
         let (a, b): (f64, f64) = (r[iy].parse().unwrap(), r[is].parse().unwrap());
-        assert!((a - b).abs() < 1e-2 * (1.0 + a.abs()), "{a} vs {b}");
+        // Measured at most 2.3e-3 rad (the input is interpolated between samples).
+        assert!((a - b).abs() < 5e-3, "{a} vs {b}");
         n += 1;
     }
     assert_eq!(n, 1200);

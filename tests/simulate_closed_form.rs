@@ -393,7 +393,9 @@ fn initial_state_fit_recovers_the_state_from_noisy_samples() {
             .map(|k| (x[k] - x_true[k]).abs() / [1.0, 5.0, 20.0][k])
             .fold(0.0, f64::max)
     };
-    assert!(err(&fit) < 0.05, "fit {fit:?}");
+    // The Cramer-Rao bound for 200 samples at this noise: standard deviations 0.0028 / 0.025 /
+    // 0.14, 0.007 at most in these units; measured 0.014 (y'').
+    assert!(err(&fit) < 0.03, "fit {fit:?}");
     assert!(
         err(&fit) < err(&guess),
         "fit {fit:?} not better than guess {guess:?}"
