@@ -140,9 +140,13 @@ fn errors_are_one_line() {
     }
     std::fs::write(&data, &s).unwrap();
     let (m, dp) = (model.to_str().unwrap(), data.to_str().unwrap());
-    // Works as a baseline.
-    let (ok, _, err) = ctsid(&["simulate", m, dp, "--run-column", "run"]);
+    // Works as a baseline. The measured y is constant (0), so NRMSE has nothing to normalise
+    // by: '-' and a note, not 'inf'.
+    let (ok, out, err) = ctsid(&["simulate", m, dp, "--run-column", "run"]);
     assert!(ok, "{err}");
+    let all = out.lines().find(|l| l.starts_with("all")).unwrap();
+    assert!(all.trim_end().ends_with(" -") && !out.contains("inf"), "{out}");
+    assert!(err.contains("NRMSE '-': the measured output is constant"), "{err}");
     fails(
         &["simulate", m, dp, "--run-column", "batch"],
         &["no column named 'batch'"],

@@ -127,6 +127,7 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             .map(|i| traj.series(compiled.offset(i)))
             .collect())
     };
+    let mut constant = false;
     // In chunks, so that rows appear while a long record is still being simulated.
     let chunk = 2 * rayon::current_num_threads().max(1);
     for runs in rs.runs.chunks(chunk) {
@@ -149,12 +150,13 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         for (run, per_run) in runs.iter().zip(results) {
             for (i, o) in model.outputs.iter().enumerate() {
                 let (rms, nrmse) = rms_nrmse(&per_run[i], &run.channels[i]);
+                constant |= nrmse.is_infinite();
                 outln!(
-                    "{:<12} {:<12} {:>14.6e} {:>10.4}",
+                    "{:<12} {:<12} {:>14.6e} {:>10}",
                     run.id,
                     o.name,
                     rms,
-                    100.0 * nrmse
+                    percent(nrmse)
                 )?;
                 pooled_sim[i].extend_from_slice(&per_run[i]);
                 pooled_meas[i].extend_from_slice(&run.channels[i]);
@@ -164,13 +166,19 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     }
     for (i, o) in model.outputs.iter().enumerate() {
         let (rms, nrmse) = rms_nrmse(&pooled_sim[i], &pooled_meas[i]);
+        constant |= nrmse.is_infinite();
         outln!(
-            "{:<12} {:<12} {:>14.6e} {:>10.4}",
+            "{:<12} {:<12} {:>14.6e} {:>10}",
             "all",
             o.name,
             rms,
-            100.0 * nrmse
+            percent(nrmse)
         )?;
+    }
+    if constant {
+        eprintln!(
+            "note: NRMSE '-': the measured output is constant there, so there is no spread to normalise by; judge by RMS (in the output's units)"
+        );
     }
     if let Some(path) = &args.output {
         let out = std::path::Path::new(path);
@@ -184,4 +192,14 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         eprintln!("wrote {path}");
     }
     Ok(())
+}
+
+/// NRMSE in percent for the table: '-' where it is undefined (a constant measurement that the
+/// simulation misses), scientific notation where four decimals would be a wall of digits.
+fn percent(nrmse: f64) -> String {
+    if nrmse.is_infinite() {
+        "-".into()
+    } else {
+        num4(100.0 * nrmse)
+    }
 }
