@@ -31,3 +31,14 @@ pub fn num4(x: f64) -> String {
         format!("{x:.4e}")
     }
 }
+
+/// A number as the user typed it where that is short (0.02, 1.5, 100), in scientific notation
+/// where the plain form would run to hundreds of digits (1e300).
+pub fn short(x: f64) -> String {
+    let s = format!("{x}");
+    if s.len() <= 16 {
+        s
+    } else {
+        format!("{x:e}")
+    }
+}

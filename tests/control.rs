@@ -338,6 +338,13 @@ fn the_command_prints_the_design_and_writes_the_trace() {
         out.contains("largest difference from the designed response"),
         "{out}"
     );
+    // A linear model takes any setpoint; 1e300 is echoed as 1e300, not in 301 digits.
+    let (ok, out, err) = ctsid(&["control", &model, "--setpoint 1e300 --from 0 --bandwidth 3"]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("operating point: y = 1e300,") && out.contains("step 0 -> 1e300 around"),
+        "{out}"
+    );
     let text = std::fs::read_to_string(&trace).unwrap();
     assert!(
         text.starts_with("t,setpoint,y,y_measured,y_hat,y_d1_hat,u\n"),

@@ -145,8 +145,14 @@ fn errors_are_one_line() {
     let (ok, out, err) = ctsid(&["simulate", m, dp, "--run-column", "run"]);
     assert!(ok, "{err}");
     let all = out.lines().find(|l| l.starts_with("all")).unwrap();
-    assert!(all.trim_end().ends_with(" -") && !out.contains("inf"), "{out}");
-    assert!(err.contains("NRMSE '-': the measured output is constant"), "{err}");
+    assert!(
+        all.trim_end().ends_with(" -") && !out.contains("inf"),
+        "{out}"
+    );
+    assert!(
+        err.contains("NRMSE '-': the measured output is constant"),
+        "{err}"
+    );
     fails(
         &["simulate", m, dp, "--run-column", "batch"],
         &["no column named 'batch'"],

@@ -12,7 +12,7 @@
 use clap::Args;
 use ctsid::control::{self, DesignOptions, Scenario};
 use ctsid::model::Model;
-use ctsid::util::num4;
+use ctsid::util::{num4, short};
 use ctsid::{Error, Result};
 use std::io::Write;
 use std::path::PathBuf;
@@ -149,7 +149,7 @@ pub fn run(a: ControlArgs) -> Result<()> {
     outln!("")?;
     outln!(
         "operating point: {y} = {}, steady {} = {:.6e}",
-        d.setpoint,
+        short(d.setpoint),
         d.input,
         d.u_star
     )?;
@@ -160,7 +160,7 @@ pub fn run(a: ControlArgs) -> Result<()> {
     outln!(
         "design: bandwidth {:.4} rad/s, tau {} s; controller poles (with integral action): {}",
         d.bandwidth,
-        d.tau,
+        short(d.tau),
         control::format_poles(&d.closed_loop)
     )?;
     outln!("observer poles: {}", control::format_poles(&d.observer))?;
@@ -191,11 +191,11 @@ pub fn run(a: ControlArgs) -> Result<()> {
         .map_or("the model itself".to_string(), |p| p.display().to_string());
     outln!(
         "step {} -> {} around {plant_name} (rest input {:.6e}), {} s, noise sd {}:",
-        a.from,
-        a.setpoint,
+        short(a.from),
+        short(a.setpoint),
         u0,
         num4(scenario.duration),
-        a.noise
+        short(a.noise)
     )?;
     let settling = if m.settling_time.is_nan() {
         format!("none within the {} s run", num4(scenario.duration))

@@ -129,7 +129,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         ]);
         let cell = |v: f64| {
             if v.is_finite() {
-                format!("{v:.4}")
+                ctsid::util::num4(v)
             } else {
                 "-".into()
             }

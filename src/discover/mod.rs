@@ -41,6 +41,7 @@ use crate::model::{derivative_name, Model, Term};
 use crate::plants::noise::percentile;
 use crate::plants::rng::Rng;
 use crate::records::RecordSet;
+use crate::util::num4;
 use dictionary::{num, Effect, Scales};
 use expr::Expr;
 use fit::{Gram, Problem};
@@ -1515,17 +1516,18 @@ impl Discovery {
         s += "| run | role | NRMSE nominal | above noise | NRMSE final |\n|---|---|---|---|---|\n";
         for r in &self.runs {
             s += &format!(
-                "| {} | {} | {:.4} | {:.4} | {} |\n",
+                "| {} | {} | {} | {} | {} |\n",
                 r.run,
                 r.role,
-                r.nrmse_nominal,
-                r.above_noise,
-                r.nrmse_final.map(|v| format!("{v:.4}")).unwrap_or_default()
+                num4(r.nrmse_nominal),
+                num4(r.above_noise),
+                r.nrmse_final.map(num4).unwrap_or_default()
             );
         }
         s += &format!(
-            "test runs: mean free-run NRMSE before {:.4}, after {:.4}\n",
-            self.nrmse_before, self.nrmse_after
+            "test runs: mean free-run NRMSE before {}, after {}\n",
+            num4(self.nrmse_before),
+            num4(self.nrmse_after)
         );
         s
     }

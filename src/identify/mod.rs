@@ -43,6 +43,7 @@ use crate::model::{derivative_name, Model as ModelFile, OutputEquation, Term as 
 use crate::records::RecordSet;
 use crate::regression::{EngineChoice, Method, Regression};
 use crate::simulate::{fit_initial_state, rms_nrmse, simulate_model, SimOptions};
+use crate::util::num4;
 
 /// Labels whose sigma exceeds this multiple of the median label sigma are left out.
 pub const EXCLUDE_SIGMA: f64 = 3.0;
@@ -713,9 +714,17 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
                         })
                         .collect::<Result<_>>()?;
                     for c in &list {
-                        say(format!("output '{}' order {}: validation p50/p95/p100 = {:.4}/{:.4}/{:.4}, {} terms", settings.outputs[i], c.order, c.validation.p50(), c.validation.p95(), c.validation.p100(), c.n_terms));
+                        say(format!(
+                            "output '{}' order {}: validation p50/p95/p100 = {}/{}/{}, {} terms",
+                            settings.outputs[i],
+                            c.order,
+                            num4(c.validation.p50()),
+                            num4(c.validation.p95()),
+                            num4(c.validation.p100()),
+                            c.n_terms
+                        ));
                         if let Some(p) = &c.simulation {
-                            say(format!("output '{}' order {}: free-run p50/p95/p100 = {:.4}/{:.4}/{:.4} on the gate runs", settings.outputs[i], c.order, p.p50(), p.p95(), p.p100()));
+                            say(format!("output '{}' order {}: free-run p50/p95/p100 = {}/{}/{} on the gate runs", settings.outputs[i], c.order, num4(p.p50()), num4(p.p95()), num4(p.p100())));
                         }
                     }
                     let profiles: Vec<Profile> = list

@@ -50,6 +50,7 @@ use crate::simulate::{
     fit_initial_state, rms_nrmse, simulate_model, simulate_model_sensitivities, SimOptions,
     Trajectory,
 };
+use crate::util::num4;
 
 /// Settings of [`refine`].
 #[derive(Debug, Clone)]
@@ -792,9 +793,17 @@ pub fn refine_gated(
     let (b, a) = (overall(&gate_before), overall(&gate_after));
     let kept = a < b;
     let message = if kept {
-        format!("refinement kept: free-run NRMSE on the gate runs {b:.4} -> {a:.4}{start_note}")
+        format!(
+            "refinement kept: free-run NRMSE on the gate runs {} -> {}{start_note}",
+            num4(b),
+            num4(a)
+        )
     } else {
-        format!("refinement refused: free-run NRMSE on the gate runs {b:.4} -> {a:.4} is not lower{start_note}")
+        format!(
+            "refinement refused: free-run NRMSE on the gate runs {} -> {} is not lower{start_note}",
+            num4(b),
+            num4(a)
+        )
     };
     Ok(Gated {
         model: if kept {
