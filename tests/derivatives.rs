@@ -131,15 +131,13 @@ fn shared_signals_meet_the_regression_gates() {
                 1 => [0.033, 0.074, 0.210, 0.607],
                 _ => [0.084, 0.189, 0.501, 1.403],
             };
-            for k in 0..4 {
+            for (k, (ours, was)) in r.trimmed_p95.iter().zip(today).enumerate() {
                 assert!(
-                    r.trimmed_p95[k] <= 1.05 * today[k],
-                    "{} {}% order {}: {} (was {})",
+                    *ours <= 1.05 * was,
+                    "{} {}% order {}: {ours} (was {was})",
                     r.signal,
                     r.noise,
-                    k + 1,
-                    r.trimmed_p95[k],
-                    today[k]
+                    k + 1
                 );
             }
         }
