@@ -148,6 +148,21 @@ fn columns_named_twice_and_values_too_large_are_refused() {
         &["identify", &good, id, "--output t --input u"],
         &["column 't' is the time column"],
     );
+    // A corrupted sample (a spike far beyond any physical range) is named where it is.
+    let mut text = good_csv();
+    let line = text.lines().nth(41).unwrap().to_string();
+    let mut cells: Vec<String> = line.split(',').map(String::from).collect();
+    let y = cells.len() - 1;
+    cells[y] = "-9.9e37".into();
+    text = text.replacen(&line, &cells.join(","), 1);
+    let spike = file("spike.csv", &text);
+    fails(
+        &["identify", &spike, id, "--output y --input u"],
+        &[
+            "spike.csv: row 42, column 'y': -9.9e37 is",
+            "remove or repair it",
+        ],
+    );
     // A lost run id is named where it is (it used to surface as non-uniform time a row later).
     let mut text = good_csv();
     let at = text.match_indices('\n').nth(100).unwrap().0 + 1;

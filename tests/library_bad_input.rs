@@ -149,6 +149,27 @@ fn record_sets_refuse_names_twice_and_huge_values() {
     assert!(tiny(1e-90).is_ok());
     // All zeros is a constant channel, not a tiny one.
     assert!(RecordSet::new(0.01, vec!["y".into()], vec![run("0", vec![vec![0.0; 50]])]).is_ok());
+    // A spike far beyond any physical range (below the magnitude limit) is named, in its run;
+    // a large but physical excursion, and an impulse on a zero channel, pass.
+    let spiked = |value: f64| {
+        let mut v = sine(50, 0.0);
+        v[7] = value;
+        RecordSet::new(
+            0.01,
+            vec!["y".into()],
+            vec![run("a", vec![sine(50, 1.0)]), run("b", vec![v])],
+        )
+    };
+    let e = spiked(1e149).unwrap_err().to_string();
+    assert!(
+        e.contains("run 'b': channel 'y' sample 7: 1e149") && e.contains("remove or repair it"),
+        "{e}"
+    );
+    assert!(spiked(-1e13).is_err());
+    assert!(spiked(1e6).is_ok());
+    let mut impulse = vec![0.0; 50];
+    impulse[3] = 1e100;
+    assert!(RecordSet::new(0.01, vec!["u".into()], vec![run("0", vec![impulse])]).is_ok());
 }
 
 #[test]

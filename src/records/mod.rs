@@ -31,6 +31,38 @@ pub fn unusable_reason(v: f64) -> String {
     }
 }
 
+/// The sample of channel `c` furthest from the channel's median, as (run, sample, distance over
+/// the median absolute deviation), when that ratio exceeds [`MAX_OUTLIER`]. A channel whose
+/// deviation is mostly zero (a step, an impulse) has no scale to judge by and passes.
+fn gross_outlier(runs: &[Run], c: usize) -> Option<(usize, usize, f64)> {
+    let mut v: Vec<f64> = runs
+        .iter()
+        .flat_map(|r| r.channels[c].iter().copied())
+        .collect();
+    if v.len() < 3 {
+        return None;
+    }
+    let mid = v.len() / 2;
+    let median = *v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
+    for x in v.iter_mut() {
+        *x = (*x - median).abs();
+    }
+    let mad = *v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
+    if mad <= 0.0 {
+        return None;
+    }
+    let (mut worst, mut at) = (0.0, (0, 0));
+    for (r, run) in runs.iter().enumerate() {
+        for (i, x) in run.channels[c].iter().enumerate() {
+            let d = (x - median).abs();
+            if d > worst {
+                (worst, at) = (d, (r, i));
+            }
+        }
+    }
+    (worst > MAX_OUTLIER * mad).then_some((at.0, at.1, worst / mad))
+}
+
 /// Largest magnitude a sample may have: its square must stay finite in f64 (overflow at 1.8e308).
 /// Higher powers, in polynomial features, are checked where a regression chooses the precision
 /// of its sweeps (f64 on the CPU when f32 monomials would overflow).
@@ -41,6 +73,12 @@ pub const MAX_MAGNITUDE: f64 = 1e150;
 /// and simulation silently lose every digit (identification went wrong at 1e-150 and a
 /// simulation scored RMS 0 at 1e-300).
 pub const MIN_MAGNITUDE: f64 = 1e-100;
+
+/// A sample further than this many times the channel's median absolute deviation from its
+/// median is refused as corrupt (a spike of 1e149 in a signal of size 1 passed every other check
+/// and made junk of the model). Physical records stay far below: the shared benchmark records
+/// reach 11, an exact fourth derivative through a 1 ms transient 7.8e6.
+pub const MAX_OUTLIER: f64 = 1e12;
 
 /// One run: samples of every channel, all of the same length.
 #[derive(Debug, Clone)]
@@ -131,6 +169,16 @@ impl RecordSet {
             if largest > 0.0 && largest < MIN_MAGNITUDE {
                 return Err(Error::InvalidData(format!(
                     "channel '{name}': its largest magnitude is {largest:e}, too small to compute with (limit {MIN_MAGNITUDE:e}: its squares and products underflow); rescale it"
+                )));
+            }
+            if let Some((r, i, ratio)) = gross_outlier(&runs, c) {
+                let at = match runs[r].rows.get(i) {
+                    Some(row) => format!("row {row}, column '{name}'"),
+                    None => format!("run '{}': channel '{name}' sample {i}", runs[r].id),
+                };
+                return Err(Error::InvalidData(format!(
+                    "{at}: {:e} is {ratio:.1e} times the channel's median deviation from its median; a corrupted sample or a missing-value code? remove or repair it",
+                    runs[r].channels[c][i]
                 )));
             }
         }
@@ -428,7 +476,7 @@ impl RecordSet {
                         column: tname.into(),
                     });
                 }
-                return finish(tau, runs, spec);
+                return finish(tau, runs, spec, label);
             };
             let mut steps: Vec<f64> = first.times.windows(2).map(|w| w[1] - w[0]).collect();
             steps.sort_by(f64::total_cmp);
@@ -468,7 +516,7 @@ impl RecordSet {
                 _ => {}
             }
         }
-        finish(tau, runs, spec)
+        finish(tau, runs, spec, label)
     }
 }
 
@@ -481,7 +529,7 @@ struct Acc {
 }
 
 /// The record set from the grouped runs, once tau is settled.
-fn finish(tau: Option<f64>, runs: Vec<Acc>, spec: &CsvSpec) -> Result<RecordSet> {
+fn finish(tau: Option<f64>, runs: Vec<Acc>, spec: &CsvSpec, label: &str) -> Result<RecordSet> {
     let tau = tau.ok_or(Error::MissingTau)?;
     let runs = runs
         .into_iter()
@@ -492,7 +540,13 @@ fn finish(tau: Option<f64>, runs: Vec<Acc>, spec: &CsvSpec) -> Result<RecordSet>
             rows: a.rows,
         })
         .collect();
-    RecordSet::new(tau, spec.columns.clone(), runs)
+    // Errors that name a row name the file too, as those found while reading do.
+    RecordSet::new(tau, spec.columns.clone(), runs).map_err(|e| match e {
+        Error::InvalidData(m) if m.starts_with("row ") => {
+            Error::InvalidData(format!("{label}: {m}"))
+        }
+        e => e,
+    })
 }
 
 /// Sampling periods outside [TAU_MIN, TAU_MAX] seconds are refused: beyond them the powers of
