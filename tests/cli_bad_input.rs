@@ -163,6 +163,34 @@ fn columns_named_twice_and_values_too_large_are_refused() {
             "remove or repair it",
         ],
     );
+    // A missing-value code within the magnitude limits is legal but named in a note; the
+    // command still runs.
+    let mut text = good_csv();
+    for k in [51, 52] {
+        let line = text.lines().nth(k).unwrap().to_string();
+        let mut cells: Vec<String> = line.split(',').map(String::from).collect();
+        *cells.last_mut().unwrap() = "-9999".into();
+        text = text.replacen(&line, &cells.join(","), 1);
+    }
+    let code = file("code.csv", &text);
+    let out = run(&[
+        "derive",
+        &code,
+        "--column y --order 1 --time-column t --run-column run",
+    ]);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("note: row 52, column 'y': -9999 is ")
+            && err.contains("(1 more beyond 1e3): a missing-value code or a glitch?"),
+        "{err}"
+    );
+    let clean = run(&[
+        "derive",
+        &good,
+        "--column y --order 1 --time-column t --run-column run",
+    ]);
+    assert!(!String::from_utf8_lossy(&clean.stderr).contains("note:"));
     // A lost run id is named where it is (it used to surface as non-uniform time a row later).
     let mut text = good_csv();
     let at = text.match_indices('\n').nth(100).unwrap().0 + 1;

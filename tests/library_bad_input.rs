@@ -166,7 +166,13 @@ fn record_sets_refuse_names_twice_and_huge_values() {
         "{e}"
     );
     assert!(spiked(-1e13).is_err());
-    assert!(spiked(1e6).is_ok());
+    // Below the refusal, far samples are listed for the caller to report.
+    let rs = spiked(1e6).unwrap();
+    let s = rs.suspect_samples();
+    assert_eq!(s.len(), 1, "{s:?}");
+    assert_eq!((s[0].run.as_str(), s[0].sample, s[0].count), ("b", 7, 1));
+    assert_eq!(s[0].place(), "run 'b': channel 'y' sample 7");
+    assert!(spiked(0.3).unwrap().suspect_samples().is_empty());
     let mut impulse = vec![0.0; 50];
     impulse[3] = 1e100;
     assert!(RecordSet::new(0.01, vec!["u".into()], vec![run("0", vec![impulse])]).is_ok());

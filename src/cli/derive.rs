@@ -2,7 +2,6 @@
 
 use clap::Args;
 use ctsid::derivatives::{differentiate_runs, DerivativeOptions};
-use ctsid::records::RecordSet;
 use ctsid::{Error, Result};
 use std::path::PathBuf;
 
@@ -48,7 +47,7 @@ pub fn run(a: DeriveArgs) -> Result<()> {
     let spec = a
         .sampling
         .spec(vec![a.column.clone()], a.run_column.clone(), None);
-    let rs = RecordSet::from_csv(&a.input, &spec)?;
+    let rs = super::load_records(&a.input, &spec)?;
     rs.require_derivable(a.order)?;
     let runs: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[0].as_slice()).collect();
     let opts = DerivativeOptions {

@@ -4,7 +4,6 @@ use clap::Args;
 use ctsid::discover::{discover, Options};
 use ctsid::identify::Split;
 use ctsid::model::Model;
-use ctsid::records::RecordSet;
 use ctsid::report::write_file;
 use ctsid::{Error, Result};
 use std::collections::BTreeMap;
@@ -88,7 +87,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     let mut columns: Vec<String> = nominal.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(nominal.inputs.iter().cloned());
     let spec = a.sampling.spec(columns, a.run_column.clone(), None);
-    let rs = a.segment.apply(RecordSet::from_csv(&a.data, &spec)?)?;
+    let rs = a.segment.apply(super::load_records(&a.data, &spec)?)?;
     let names: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
     let n = names.len();
     let given = a.split.resolve(&names)?;

@@ -3,7 +3,6 @@
 use clap::Args;
 use ctsid::identify::split::parse_list;
 use ctsid::identify::{identify, Orders, Settings, Split};
-use ctsid::records::RecordSet;
 use ctsid::regression::EngineChoice;
 use ctsid::report::{svg, write_file, Table};
 use ctsid::{Error, Result};
@@ -96,7 +95,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     let mut columns = a.output.clone();
     columns.extend(a.input.iter().cloned());
     let spec = a.sampling.spec(columns, a.run_column.clone(), None);
-    let rs = a.segment.apply(RecordSet::from_csv(&a.data, &spec)?)?;
+    let rs = a.segment.apply(super::load_records(&a.data, &spec)?)?;
     let ids: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
     let given = a.split.resolve(&ids)?;
     let train = given

@@ -80,6 +80,32 @@ pub fn show_progress(quiet: bool) -> bool {
     !quiet && std::io::stderr().is_terminal()
 }
 
+/// Loads the channels of `spec` from `path` and notes on standard error the samples that look
+/// like glitches or missing-value codes (legal values, kept: the user decides).
+pub fn load_records(
+    path: impl AsRef<Path>,
+    spec: &ctsid::records::CsvSpec,
+) -> Result<ctsid::records::RecordSet> {
+    let rs = ctsid::records::RecordSet::from_csv(path, spec)?;
+    for s in rs.suspect_samples() {
+        let others = match s.count {
+            0 | 1 => String::new(),
+            n => format!(
+                " ({} more beyond {:.0e})",
+                n - 1,
+                ctsid::records::SUSPECT_OUTLIER
+            ),
+        };
+        eprintln!(
+            "note: {}: {} is {:.1e} times the channel's median deviation from its median{others}: a missing-value code or a glitch? if so, remove or repair it",
+            s.place(),
+            ctsid::util::short(s.value),
+            s.ratio
+        );
+    }
+    Ok(rs)
+}
+
 /// Writes `text` to standard output and flushes it.
 pub fn write_stdout(text: &str) -> Result<()> {
     use std::io::Write;

@@ -7,7 +7,7 @@
 
 use clap::{Args, ValueEnum};
 use ctsid::engine::Features;
-use ctsid::records::{CsvSpec, RecordSet};
+use ctsid::records::CsvSpec;
 use ctsid::regression::{EngineChoice, Method, Regression};
 use ctsid::{Error, Result};
 use std::path::PathBuf;
@@ -78,7 +78,7 @@ fn read_columns(path: &std::path::Path, wanted: &[String]) -> Result<Vec<Vec<f64
         time_column: None,
         tau: Some(1.0),
     };
-    let mut rs = RecordSet::from_csv(path, &spec)?;
+    let mut rs = super::load_records(path, &spec)?;
     Ok(rs.runs.remove(0).channels)
 }
 

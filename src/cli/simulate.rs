@@ -14,7 +14,6 @@
 
 use clap::Args;
 use ctsid::model::Model;
-use ctsid::records::RecordSet;
 use ctsid::simulate::{
     estimate_initial_derivatives, fit_initial_state, initial_window, rms_nrmse, simulate_model,
     SimOptions,
@@ -67,7 +66,7 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         .spec(columns, args.run_column.clone(), model.tau);
     let rs = args
         .segment
-        .apply(RecordSet::from_csv(&args.data, &spec)?)?;
+        .apply(super::load_records(&args.data, &spec)?)?;
     // A continuous-time model simulates at any sampling, but a ratio of 1e3, 1e6, 1/60 or
     // 1/3600 to the identification's is mostly a time column in ms, us, min or h.
     if let Some(mt) = model.tau {

@@ -32,9 +32,9 @@ pub fn unusable_reason(v: f64) -> String {
 }
 
 /// The sample of channel `c` furthest from the channel's median, as (run, sample, distance over
-/// the median absolute deviation), when that ratio exceeds [`MAX_OUTLIER`]. A channel whose
-/// deviation is mostly zero (a step, an impulse) has no scale to judge by and passes.
-fn gross_outlier(runs: &[Run], c: usize) -> Option<(usize, usize, f64)> {
+/// the median absolute deviation), and how many samples lie beyond `ratio` deviations. A channel
+/// whose deviation is mostly zero (a step, an impulse) has no scale to judge by: None.
+fn furthest_sample(runs: &[Run], c: usize, ratio: f64) -> Option<(usize, usize, f64, usize)> {
     let mut v: Vec<f64> = runs
         .iter()
         .flat_map(|r| r.channels[c].iter().copied())
@@ -51,17 +51,51 @@ fn gross_outlier(runs: &[Run], c: usize) -> Option<(usize, usize, f64)> {
     if mad <= 0.0 {
         return None;
     }
-    let (mut worst, mut at) = (0.0, (0, 0));
+    let (mut worst, mut at, mut beyond) = (0.0, (0, 0), 0);
     for (r, run) in runs.iter().enumerate() {
         for (i, x) in run.channels[c].iter().enumerate() {
             let d = (x - median).abs();
+            beyond += (d > ratio * mad) as usize;
             if d > worst {
                 (worst, at) = (d, (r, i));
             }
         }
     }
-    (worst > MAX_OUTLIER * mad).then_some((at.0, at.1, worst / mad))
+    Some((at.0, at.1, worst / mad, beyond))
 }
+
+/// A sample far outside the rest of its channel (see [`RecordSet::suspect_samples`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Suspect {
+    pub channel: String,
+    pub run: String,
+    /// Sample index within the run, and the CSV row where the record came from a file.
+    pub sample: usize,
+    pub row: Option<usize>,
+    pub value: f64,
+    /// Distance from the channel's median over its median absolute deviation.
+    pub ratio: f64,
+    /// Samples of the channel beyond [`SUSPECT_OUTLIER`] deviations, this one included.
+    pub count: usize,
+}
+
+impl Suspect {
+    /// Where it is: 'row 42, column 'y'' for a file, else run and sample.
+    pub fn place(&self) -> String {
+        match self.row {
+            Some(row) => format!("row {row}, column '{}'", self.channel),
+            None => format!(
+                "run '{}': channel '{}' sample {}",
+                self.run, self.channel, self.sample
+            ),
+        }
+    }
+}
+
+/// Samples beyond this many median absolute deviations from their channel's median are
+/// reported by [`RecordSet::suspect_samples`] (a missing-value code such as -9999 in a signal of
+/// size 1 lies near 1e4; the shared benchmark records reach 11).
+pub const SUSPECT_OUTLIER: f64 = 1e3;
 
 /// Largest magnitude a sample may have: its square must stay finite in f64 (overflow at 1.8e308).
 /// Higher powers, in polynomial features, are checked where a regression chooses the precision
@@ -171,7 +205,9 @@ impl RecordSet {
                     "channel '{name}': its largest magnitude is {largest:e}, too small to compute with (limit {MIN_MAGNITUDE:e}: its squares and products underflow); rescale it"
                 )));
             }
-            if let Some((r, i, ratio)) = gross_outlier(&runs, c) {
+            if let Some((r, i, ratio, _)) =
+                furthest_sample(&runs, c, MAX_OUTLIER).filter(|f| f.2 > MAX_OUTLIER)
+            {
                 let at = match runs[r].rows.get(i) {
                     Some(row) => format!("row {row}, column '{name}'"),
                     None => format!("run '{}': channel '{name}' sample {i}", runs[r].id),
@@ -187,6 +223,26 @@ impl RecordSet {
             channel_names,
             runs,
         })
+    }
+
+    /// The sample furthest from the rest of each channel where it lies beyond
+    /// [`SUSPECT_OUTLIER`] median absolute deviations: legal values that look like a glitch or
+    /// a missing-value code. Callers decide what to say; the record set keeps them.
+    pub fn suspect_samples(&self) -> Vec<Suspect> {
+        (0..self.channel_names.len())
+            .filter_map(|c| {
+                let (r, i, ratio, count) = furthest_sample(&self.runs, c, SUSPECT_OUTLIER)?;
+                (ratio > SUSPECT_OUTLIER).then(|| Suspect {
+                    channel: self.channel_names[c].clone(),
+                    run: self.runs[r].id.clone(),
+                    sample: i,
+                    row: self.runs[r].rows.get(i).copied(),
+                    value: self.runs[r].channels[c][i],
+                    ratio,
+                    count,
+                })
+            })
+            .collect()
     }
 
     /// Index of a channel by name, with an error that lists the available ones.
