@@ -32,12 +32,11 @@ pub fn num4(x: f64) -> String {
     }
 }
 
-/// A number as the user typed it where that is short (0.02, 1.5, 100), in scientific notation
-/// where the plain form would run to hundreds of digits (1e300).
+/// A number as the user typed it where that is short (0.02, 1.5, -9999), in scientific
+/// notation from 1e7 and below 1e-4 in magnitude (1e300, not 301 digits).
 pub fn short(x: f64) -> String {
-    let s = format!("{x}");
-    if s.len() <= 16 {
-        s
+    if x == 0.0 || (1e-4..1e7).contains(&x.abs()) {
+        format!("{x}")
     } else {
         format!("{x:e}")
     }

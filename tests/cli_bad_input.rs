@@ -182,7 +182,7 @@ fn columns_named_twice_and_values_too_large_are_refused() {
     assert!(out.status.success(), "{err}");
     assert!(
         err.contains("note: row 52, column 'y': -9999 is ")
-            && err.contains("(1 more beyond 1e3): a missing-value code or a glitch?"),
+            && err.contains("(1 more as far out): a missing-value code or a glitch?"),
         "{err}"
     );
     let clean = run(&[

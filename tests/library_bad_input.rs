@@ -165,7 +165,19 @@ fn record_sets_refuse_names_twice_and_huge_values() {
         e.contains("run 'b': channel 'y' sample 7: 1e149") && e.contains("remove or repair it"),
         "{e}"
     );
-    assert!(spiked(-1e13).is_err());
+    let e = spiked(-1e13).unwrap_err().to_string();
+    assert!(e.contains("sample 7: -1e13 is "), "{e}");
+    // A spike on a step channel (median absolute deviation 0) is refused too; a noise-free
+    // step response settled over most of a long record (a gap-free tail) passes.
+    let mut step: Vec<f64> = (0..1000).map(|i| if i < 400 { 0.0 } else { 1.0 }).collect();
+    step[700] = 1e149;
+    let e = RecordSet::new(0.01, vec!["u".into()], vec![run("0", vec![step])]).unwrap_err();
+    assert!(e.to_string().contains("sample 700: 1e149 is"), "{e}");
+    let settled: Vec<f64> = (0..30_000)
+        .map(|i| 1.0 - (-(i as f64) * 0.01).exp())
+        .collect();
+    let rs = RecordSet::new(0.01, vec!["y".into()], vec![run("0", vec![settled])]).unwrap();
+    assert!(rs.suspect_samples().is_empty());
     // Below the refusal, far samples are listed for the caller to report.
     let rs = spiked(1e6).unwrap();
     let s = rs.suspect_samples();

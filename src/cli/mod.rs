@@ -90,14 +90,10 @@ pub fn load_records(
     for s in rs.suspect_samples() {
         let others = match s.count {
             0 | 1 => String::new(),
-            n => format!(
-                " ({} more beyond {:.0e})",
-                n - 1,
-                ctsid::records::SUSPECT_OUTLIER
-            ),
+            n => format!(" ({} more as far out)", n - 1),
         };
         eprintln!(
-            "note: {}: {} is {:.1e} times the channel's median deviation from its median{others}: a missing-value code or a glitch? if so, remove or repair it",
+            "note: {}: {} is {:.1e} times further from the channel's median than nearly all its samples{others}: a missing-value code or a glitch? if so, remove or repair it",
             s.place(),
             ctsid::util::short(s.value),
             s.ratio

@@ -31,10 +31,13 @@ pub fn unusable_reason(v: f64) -> String {
     }
 }
 
-/// The sample of channel `c` furthest from the channel's median, as (run, sample, distance over
-/// the median absolute deviation), and how many samples lie beyond `ratio` deviations. A channel
-/// whose deviation is mostly zero (a step, an impulse) has no scale to judge by: None.
-fn furthest_sample(runs: &[Run], c: usize, ratio: f64) -> Option<(usize, usize, f64, usize)> {
+/// The sample of channel `c` furthest from the channel's median, as (run, sample, ratio,
+/// count): `ratio` is its distance from the median over that of the `REFERENCE_RANK`-th furthest
+/// sample, and `count` the samples beyond `threshold` times that reference. A glitch or a
+/// missing-value code stands alone far outside; a settled step response (most samples at its
+/// final value) or a step input has no such gap, though its median absolute deviation may be
+/// near zero. None where the reference distance is 0 (an impulse on a constant channel).
+fn furthest_sample(runs: &[Run], c: usize, threshold: f64) -> Option<(usize, usize, f64, usize)> {
     let mut v: Vec<f64> = runs
         .iter()
         .flat_map(|r| r.channels[c].iter().copied())
@@ -47,21 +50,23 @@ fn furthest_sample(runs: &[Run], c: usize, ratio: f64) -> Option<(usize, usize, 
     for x in v.iter_mut() {
         *x = (*x - median).abs();
     }
-    let mad = *v.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
-    if mad <= 0.0 {
+    // Up to one sample in 500 may stand out before the reference is one of them.
+    let rank = (v.len() / 500).max(2);
+    let reference = *v.select_nth_unstable_by(rank, |a, b| b.total_cmp(a)).1;
+    if reference <= 0.0 {
         return None;
     }
     let (mut worst, mut at, mut beyond) = (0.0, (0, 0), 0);
     for (r, run) in runs.iter().enumerate() {
         for (i, x) in run.channels[c].iter().enumerate() {
             let d = (x - median).abs();
-            beyond += (d > ratio * mad) as usize;
+            beyond += (d > threshold * reference) as usize;
             if d > worst {
                 (worst, at) = (d, (r, i));
             }
         }
     }
-    Some((at.0, at.1, worst / mad, beyond))
+    Some((at.0, at.1, worst / reference, beyond))
 }
 
 /// A sample far outside the rest of its channel (see [`RecordSet::suspect_samples`]).
@@ -73,9 +78,11 @@ pub struct Suspect {
     pub sample: usize,
     pub row: Option<usize>,
     pub value: f64,
-    /// Distance from the channel's median over its median absolute deviation.
+    /// Distance from the channel's median over that of nearly all its samples (see
+    /// `furthest_sample`).
     pub ratio: f64,
-    /// Samples of the channel beyond [`SUSPECT_OUTLIER`] deviations, this one included.
+    /// Samples of the channel that stand out as far (beyond [`SUSPECT_OUTLIER`]), this one
+    /// included.
     pub count: usize,
 }
 
@@ -92,9 +99,10 @@ impl Suspect {
     }
 }
 
-/// Samples beyond this many median absolute deviations from their channel's median are
-/// reported by [`RecordSet::suspect_samples`] (a missing-value code such as -9999 in a signal of
-/// size 1 lies near 1e4; the shared benchmark records reach 11).
+/// A sample this many times further from its channel's median than nearly all others (see
+/// `furthest_sample`) is reported by [`RecordSet::suspect_samples`]: a missing-value code such
+/// as -9999 in a signal of size 1 stands out by 1e4. The shared benchmark records reach 1.8, an
+/// exact fourth derivative through a 1 ms transient 61.
 pub const SUSPECT_OUTLIER: f64 = 1e3;
 
 /// Largest magnitude a sample may have: its square must stay finite in f64 (overflow at 1.8e308).
@@ -108,10 +116,9 @@ pub const MAX_MAGNITUDE: f64 = 1e150;
 /// simulation scored RMS 0 at 1e-300).
 pub const MIN_MAGNITUDE: f64 = 1e-100;
 
-/// A sample further than this many times the channel's median absolute deviation from its
-/// median is refused as corrupt (a spike of 1e149 in a signal of size 1 passed every other check
-/// and made junk of the model). Physical records stay far below: the shared benchmark records
-/// reach 11, an exact fourth derivative through a 1 ms transient 7.8e6.
+/// A sample this many times further from its channel's median than nearly all others is
+/// refused as corrupt: a spike of 1e149 in a signal of size 1 passed every other check and made
+/// junk of the model.
 pub const MAX_OUTLIER: f64 = 1e12;
 
 /// One run: samples of every channel, all of the same length.
@@ -213,8 +220,8 @@ impl RecordSet {
                     None => format!("run '{}': channel '{name}' sample {i}", runs[r].id),
                 };
                 return Err(Error::InvalidData(format!(
-                    "{at}: {:e} is {ratio:.1e} times the channel's median deviation from its median; a corrupted sample or a missing-value code? remove or repair it",
-                    runs[r].channels[c][i]
+                    "{at}: {} is {ratio:.1e} times further from the channel's median than nearly all its samples; a corrupted sample or a missing-value code? remove or repair it",
+                    crate::util::short(runs[r].channels[c][i])
                 )));
             }
         }
@@ -225,8 +232,8 @@ impl RecordSet {
         })
     }
 
-    /// The sample furthest from the rest of each channel where it lies beyond
-    /// [`SUSPECT_OUTLIER`] median absolute deviations: legal values that look like a glitch or
+    /// The sample furthest from the rest of each channel where it lies [`SUSPECT_OUTLIER`] times
+    /// further from the channel's median than nearly all others: legal values that look like a glitch or
     /// a missing-value code. Callers decide what to say; the record set keeps them.
     pub fn suspect_samples(&self) -> Vec<Suspect> {
         (0..self.channel_names.len())
