@@ -407,9 +407,33 @@ fn the_command_prints_the_design_and_writes_the_trace() {
         "h6.json",
         &high_order(6).to_json_string().unwrap(),
     );
+    let out = fails(
+        &["control", &h6, "--setpoint 1 --from 0 -o", &trace],
+        &["'tau'", "does not settle", "--tau", "works)"],
+    );
+    // The suggested tau is one that was checked: taking it, the loop settles.
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    let at = err.find("--tau ").unwrap() + 6;
+    let tau = err[at..].split_whitespace().next().unwrap();
+    let (ok, _, err2) = ctsid(&["control", &h6, "--setpoint 1 --from 0 --tau", tau]);
+    assert!(ok, "--tau {tau}: {err2}");
+    // A failed loop writes no files (the trace from before is left as it was).
+    assert_eq!(std::fs::read_to_string(&trace).unwrap(), text);
+    // A model whose mode no sampling can follow says so, not 'tau below 5e-81 s'.
     fails(
-        &["control", &h6, "--setpoint 1 --from 0"],
-        &["'tau'", "does not settle", "--tau"],
+        &["control", &huge, "--setpoint 1 --from 0 --bandwidth 10"],
+        &["faster than any sampling", "check the model's coefficients"],
+    );
+    // A run shorter than the designed settling is a note, not an error.
+    let (ok, _, err) = ctsid(&[
+        "control",
+        &model,
+        "--setpoint 1 --from 0 --bandwidth 3 --duration 0.5",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("has not settled within the 0.5000 s run; give a longer --duration"),
+        "{err}"
     );
     let mut other = oscillator();
     other.outputs[0].name = "z".into();

@@ -216,6 +216,56 @@ pub fn run(a: ControlArgs) -> Result<()> {
         m.observer_rms,
         m.design_deviation
     )?;
+    // Around its own model and without noise the loop must do what it was designed for; where
+    // it strays from the designed response and does not settle, the sampling (or the model's
+    // order) breaks the design, and the figures above are not a controller to use: an error,
+    // with no files written. Following the design but unsettled is a short run.
+    let unsettled = m.settling_time.is_nan();
+    if a.plant.is_none() && a.noise == 0.0 && unsettled && m.design_deviation > DESIGN_STRAY {
+        // Suggest only a sampling period that is checked to work.
+        let works = |t: f64| -> bool {
+            let mut o2 = o.clone();
+            o2.tau = t;
+            let Ok(d2) = control::design(&model, &o2) else {
+                return false;
+            };
+            let s2 = Scenario {
+                duration: scenario.duration,
+                noise_sd: 0.0,
+                seed: a.seed,
+                u_limits: scenario.u_limits,
+            };
+            control::run(&d2, &plant, &s2)
+                .and_then(|tr| control::metrics(&tr, &d2, a.from))
+                .is_ok_and(|m2| !m2.settling_time.is_nan() && m2.design_deviation <= DESIGN_STRAY)
+        };
+        let advice = match (1..=6)
+            .map(|h| d.tau / f64::powi(2.0, h))
+            .find(|&t| works(t))
+        {
+            Some(t) => format!("sample faster (--tau {t:.3e} works)"),
+            None => format!(
+                "sampling up to 64 times faster does not help: give another --bandwidth (now {})",
+                num4(d.bandwidth)
+            ),
+        };
+        return Err(Error::param(
+            "tau",
+            format!(
+                "around its own model the loop sampled every {} s does not settle within {} s ({:.1} % off the designed response): {advice}",
+                short(d.tau),
+                num4(scenario.duration),
+                m.design_deviation,
+            ),
+        ));
+    }
+    if a.plant.is_none() && a.noise == 0.0 && unsettled {
+        eprintln!(
+            "note: the loop follows the designed response ({:.2} % off) but has not settled within the {} s run; give a longer --duration to see it settle",
+            m.design_deviation,
+            num4(scenario.duration)
+        );
+    }
     if let Some(path) = &a.output {
         write_trace(path, &tr, d.setpoint, &names)?;
         eprintln!("wrote {}", path.display());
@@ -224,23 +274,13 @@ pub fn run(a: ControlArgs) -> Result<()> {
         write_plots(dir, &d, &tr, a.from)?;
         eprintln!("plots written to {}", dir.display());
     }
-    // Around its own model and without noise the loop must do what it was designed for; where
-    // it does not settle, the sampling (or the model's order) breaks the design, and the
-    // figures above are not a controller to use.
-    if a.plant.is_none() && a.noise == 0.0 && m.settling_time.is_nan() {
-        return Err(Error::param(
-            "tau",
-            format!(
-                "around its own model the loop sampled every {} s does not settle within {} s ({:.1} % off the designed response): sample faster (e.g. --tau {:.3e}) or give a lower --bandwidth",
-                d.tau,
-                num4(scenario.duration),
-                m.design_deviation,
-                d.tau / 4.0
-            ),
-        ));
-    }
     Ok(())
 }
+
+/// Largest difference from the designed response, in % of the step, of a loop around its own
+/// model that still counts as following its design (working loops measure under 1 %; the
+/// sampled sixth-order loops the design cannot hold 11-23 %).
+const DESIGN_STRAY: f64 = 5.0;
 
 fn write_trace(path: &PathBuf, tr: &control::Trace, setpoint: f64, names: &[String]) -> Result<()> {
     let io = |e: std::io::Error| Error::Io {

@@ -460,7 +460,13 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
             .iter()
             .chain(&obs)
             .any(|((re, im), moved)| *moved && re.hypot(*im) > o.observer_speed * w);
-        let fix = if own {
+        let fix = if own && 0.5 / fastest_moved < crate::records::TAU_MIN {
+            format!(
+                "the model has an unstable or lightly damped mode at {} rad/s that feedback must move, faster than any sampling (tau >= {:e} s) can follow; check the model's coefficients",
+                crate::util::num4(fastest_moved),
+                crate::records::TAU_MIN
+            )
+        } else if own {
             format!(
                 "the model has a fast unstable or lightly damped mode at {} rad/s that feedback must move; sample faster: give a tau below {:.3e} s",
                 crate::util::num4(fastest_moved),
@@ -552,8 +558,11 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
             })
             .map(|t| t / 4.0);
         let fix = match stable_tau {
-            Some(t) => format!("give a tau of {t:.3e} s or less (a quarter of the longest that is stable), or a lower bandwidth"),
-            None => "give a lower bandwidth or identify a lower order".into(),
+            Some(t) if t >= crate::records::TAU_MIN => {
+                format!("give a tau of {t:.3e} s or less (a quarter of the longest that is stable)")
+            }
+            _ => "no sampling period holds it: give another bandwidth or identify a lower order"
+                .into(),
         };
         return Err(Error::param(
             "tau",
