@@ -135,7 +135,26 @@ fn discover_cli_uses_the_given_split() {
     );
     fails(
         &["discover", d, "--nominal", n, base, "--train", &list(&all)],
-        &["'validation'", "no run is left"],
+        &[
+            "'validation'",
+            "no run is left",
+            &format!("name all {} runs", all.len()),
+        ],
+    );
+    fails(
+        &[
+            "discover",
+            d,
+            "--nominal",
+            n,
+            base,
+            "--test",
+            &list(&all[1..]),
+        ],
+        &[
+            "'validation'",
+            "the 1 run(s) the lists do not name went to train",
+        ],
     );
     // One list given: the omitted ones share the other runs (they used to default to fixed
     // positions and clash with it).

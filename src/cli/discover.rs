@@ -122,6 +122,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     let weights = [2usize, 1, 1];
     let omitted: Vec<usize> = (0..3).filter(|&i| lists[i].is_none()).collect();
     let mut weight_left: usize = omitted.iter().map(|&i| weights[i]).sum();
+    let unnamed = rest.len();
     for (k, &i) in omitted.iter().enumerate() {
         let take = if k + 1 == omitted.len() {
             rest.len()
@@ -131,10 +132,19 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
                 .min(rest.len())
         };
         if take == 0 {
+            let why = if unnamed == 0 {
+                format!("the given lists name all {n} runs")
+            } else {
+                let to: Vec<&str> = omitted[..k].iter().map(|&j| list_names[j]).collect();
+                format!(
+                    "the {unnamed} run(s) the lists do not name went to {}",
+                    to.join(" and ")
+                )
+            };
             return Err(Error::param(
                 list_names[i],
                 format!(
-                    "no run is left for it (the given lists name all {n}); give --{} explicitly or name fewer runs in the others",
+                    "no run is left for it ({why}); give --{} explicitly or name fewer runs in the others",
                     list_names[i]
                 ),
             ));

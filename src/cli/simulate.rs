@@ -78,8 +78,13 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             (1.0 / 3600.0, "1/3600", "h"),
         ] {
             if (ratio / k - 1.0).abs() < 0.01 {
+                let source = if spec.time_column.is_some() {
+                    "the time column"
+                } else {
+                    "--tau"
+                };
                 eprintln!(
-                    "note: the data are sampled every {} s, the model was identified at {} s (about {label} times): if the time column is in another unit ({unit}?), convert it to seconds",
+                    "note: the data are sampled every {} s, the model was identified at {} s (about {label} times): if {source} is in another unit ({unit}?), convert it to seconds",
                     num4(rs.tau),
                     num4(mt),
                 );
