@@ -106,8 +106,8 @@ fn recovers_the_support_with_one_percent_noise() {
             model.diagnostics
         );
         for (t, (_, c)) in model.terms.iter().zip(&p.truth) {
-            // 1 % noise on 25,000 samples: a standard error near 1e-4 of each coefficient
-            // (measured at most 6.1e-4 of it).
+            // 1 % noise on 25,000 samples: standard errors of a few 1e-4 of each coefficient
+            // (high-degree monomials of uniform features spread little); measured at most 6.1e-4.
             assert!(
                 (t.coefficient - c).abs() <= 0.003 * c.abs(),
                 "{}: {} vs {c}",
@@ -589,6 +589,7 @@ fn the_model_does_not_depend_on_the_units_of_the_label_or_the_weights() {
             (1e15, 1.0),
             (1.0, 1e-30),
             (1.0, 1e-200),
+            (1.0, 1e306),
             (1e-15, 1e30),
         ] {
             let y: Vec<f64> = p.label.iter().map(|v| v * scale).collect();

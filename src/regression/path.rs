@@ -313,11 +313,18 @@ fn begin<'a>(
     // 1e-200 every term).
     let w: Vec<f64> = match weights {
         Some(w) => {
+            // By the largest first: a sum of weights near 1e308 would overflow.
+            let max = w.iter().fold(0.0f64, |m, x| m.max(*x));
+            let w: Vec<f64> = if max.is_finite() && max > 0.0 {
+                w.iter().map(|x| x / max).collect()
+            } else {
+                w.to_vec()
+            };
             let mean = w.iter().sum::<f64>() / n.max(1) as f64;
             if mean.is_finite() && mean > 0.0 {
                 w.iter().map(|x| x / mean).collect()
             } else {
-                w.to_vec()
+                w
             }
         }
         None => vec![1.0; n],
