@@ -37,7 +37,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>) {
         for (var h = 0u; h < 2u; h++) {
             let y = p[h] - c;
             let t = opaque(s + y);
-            c = (t - s) - y;
+            c = opaque(t - s) - y;
             s = t;
         }
     }

@@ -54,7 +54,9 @@ var<workgroup> vv: array<f32, CHUNK>;
 
 // x, through an integer XOR with P.zero (0 at run time, unknown to the compiler). Kahan's
 // compensation (t - s) - y is zero in exact arithmetic, and compilers that reassociate floating
-// point (Mesa's NIR does) delete it; no float rewrite sees through the XOR.
+// point (Mesa's NIR does) delete it. Both t and t - s pass through the XOR: with t alone, a
+// rewrite of (t - s) - y as t - (s + y) would still give 0, since s + y rounds to t; no float
+// rewrite crosses the XOR.
 fn opaque(x: f32) -> f32 {
     return bitcast<f32>(bitcast<u32>(x) ^ P.zero);
 }
@@ -163,7 +165,7 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid
         for (var r = 0u; r < R; r++) {
             let y = acc[r] - comp[r];
             let tt = opaque(sum[r] + y);
-            comp[r] = (tt - sum[r]) - y;
+            comp[r] = opaque(tt - sum[r]) - y;
             sum[r] = tt;
         }
         workgroupBarrier();
