@@ -47,7 +47,7 @@ fn derive_writes_columns_in_file_order() {
         let t: f64 = r[1].parse().unwrap();
         let d1: f64 = r[4].parse().unwrap();
         let expect = if r[0] == "a" { 2.0 * t } else { 3.0 };
-        assert!((d1 - expect).abs() < 1e-9, "row {j}: {d1} vs {expect}");
+        assert!((d1 - expect).abs() < 1e-12, "row {j}: {d1} vs {expect}");
         let (y, d0, d2): (f64, f64, f64) = (
             r[2].parse().unwrap(),
             r[3].parse().unwrap(),
@@ -55,8 +55,9 @@ fn derive_writes_columns_in_file_order() {
         );
         let expect = if r[0] == "a" { 2.0 } else { 0.0 };
         assert!((d0 - y).abs() < 1e-9, "row {j}: {d0} vs {y}");
-        assert!((d2 - expect).abs() < 1e-7, "row {j}: {d2} vs {expect}");
-        // No noise: sigma is at rounding level (0 where the fit is exact).
+        assert!((d2 - expect).abs() < 1e-9, "row {j}: {d2} vs {expect}");
+        // No noise: sigma is tiny (the noise estimate is 1e-11; measured at most 1.5e-5, at
+        // y'' at the ends).
         assert!(
             r[6..9]
                 .iter()

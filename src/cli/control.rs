@@ -158,8 +158,8 @@ pub fn run(a: ControlArgs) -> Result<()> {
         control::format_poles(&d.open_loop)
     )?;
     outln!(
-        "design: bandwidth {:.4} rad/s, tau {} s; controller poles (with integral action): {}",
-        d.bandwidth,
+        "design: bandwidth {} rad/s, tau {} s; controller poles (with integral action): {}",
+        num4(d.bandwidth),
         short(d.tau),
         control::format_poles(&d.closed_loop)
     )?;
@@ -200,12 +200,12 @@ pub fn run(a: ControlArgs) -> Result<()> {
     let settling = if m.settling_time.is_nan() {
         format!("none within the {} s run", num4(scenario.duration))
     } else {
-        format!("{:.4} s", m.settling_time)
+        format!("{} s", num4(m.settling_time))
     };
     let rise = if m.rise_time.is_nan() {
         "never".to_string()
     } else {
-        format!("{:.4} s", m.rise_time)
+        format!("{} s", num4(m.rise_time))
     };
     outln!(
         "rise time (10-90 %) {rise}, overshoot {:.2} %, settling (2 %) {settling}, final error {:.3} % of the step, input {:.4e}..{:.4e}, observer RMS error {:.3e}; largest difference from the designed response {:.2} % of the step",

@@ -84,9 +84,14 @@ pub fn format_poles(p: &[(f64, f64)]) -> String {
             // A multiple pole comes out of the eigensolver split into a faint pair (by about
             // eps^(1/k) of its size: 1e-8 for a double pole, 1e-5 for a triple one).
             if i.abs() <= 1e-4 * r.abs().max(1e-300) {
-                format!("{r:.4}")
+                crate::util::num4(*r)
             } else {
-                format!("{r:.4}{:+.4}i", i)
+                let sign = if *i < 0.0 { '-' } else { '+' };
+                format!(
+                    "{}{sign}{}i",
+                    crate::util::num4(*r),
+                    crate::util::num4(i.abs())
+                )
             }
         })
         .collect::<Vec<_>>()
