@@ -32,8 +32,9 @@ pub fn unusable_reason(v: f64) -> String {
 }
 
 /// The sample of channel `c` furthest from the channel's median, as (run, sample, ratio,
-/// count): `ratio` is its distance from the median over that of the `REFERENCE_RANK`-th furthest
-/// sample, and `count` the samples beyond `threshold` times that reference. A glitch or a
+/// count): `ratio` is its distance from the median over that of the furthest sample but one in
+/// `OUTLIER_SHARE` (at least the third furthest), and `count` the samples beyond `threshold`
+/// times that reference. A glitch or a
 /// missing-value code stands alone far outside; a settled step response (most samples at its
 /// final value) or a step input has no such gap, though its median absolute deviation may be
 /// near zero. None where the reference distance is 0 (an impulse on a constant channel).
@@ -50,8 +51,7 @@ fn furthest_sample(runs: &[Run], c: usize, threshold: f64) -> Option<(usize, usi
     for x in v.iter_mut() {
         *x = (*x - median).abs();
     }
-    // Up to one sample in 500 may stand out before the reference is one of them.
-    let rank = (v.len() / 500).max(2);
+    let rank = (v.len() / OUTLIER_SHARE).max(2);
     let reference = *v.select_nth_unstable_by(rank, |a, b| b.total_cmp(a)).1;
     if reference <= 0.0 {
         return None;
@@ -68,6 +68,10 @@ fn furthest_sample(runs: &[Run], c: usize, threshold: f64) -> Option<(usize, usi
     }
     Some((at.0, at.1, worst / reference, beyond))
 }
+
+/// Up to one sample in this many may stand out before the reference distance of
+/// `furthest_sample` is one of them.
+const OUTLIER_SHARE: usize = 500;
 
 /// A sample far outside the rest of its channel (see [`RecordSet::suspect_samples`]).
 #[derive(Debug, Clone, PartialEq)]
@@ -101,8 +105,9 @@ impl Suspect {
 
 /// A sample this many times further from its channel's median than nearly all others (see
 /// `furthest_sample`) is reported by [`RecordSet::suspect_samples`]: a missing-value code such
-/// as -9999 in a signal of size 1 stands out by 1e4. The shared benchmark records reach 1.8, an
-/// exact fourth derivative through a 1 ms transient 61.
+/// as -9999 in a signal of size 1 stands out by 1e4. No shared record or test signal has one
+/// (`tests/real_records.rs`), the exact fourth derivative of the throttle's 1 ms transient
+/// included.
 pub const SUSPECT_OUTLIER: f64 = 1e3;
 
 /// Largest magnitude a sample may have: its square must stay finite in f64 (overflow at 1.8e308).
