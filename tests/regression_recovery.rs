@@ -53,6 +53,18 @@ fn problem(seed: u64, nz: usize, d: usize, n: usize, n_true: usize, noise: f64) 
     }
 }
 
+/// Each fitted coefficient within `rel` of the true one (the supports already agree).
+fn assert_coefficients(m: &Model, truth: &[(usize, f64)], rel: f64) {
+    for (t, (_, c)) in m.terms.iter().zip(truth) {
+        assert!(
+            (t.coefficient - c).abs() <= rel * c.abs(),
+            "{}: {} vs {c}",
+            t.name,
+            t.coefficient
+        );
+    }
+}
+
 fn support(m: &Model) -> Vec<usize> {
     m.terms.iter().map(|t| t.index.unwrap()).collect()
 }
@@ -75,14 +87,7 @@ fn recovers_ten_terms_among_12376_without_noise() {
         model.equation(),
         model.diagnostics
     );
-    for (t, (_, c)) in model.terms.iter().zip(&p.truth) {
-        assert!(
-            (t.coefficient - c).abs() <= 1e-6 * c.abs(),
-            "{}: {} vs {c}",
-            t.name,
-            t.coefficient
-        );
-    }
+    assert_coefficients(&model, &p.truth, 1e-6);
     assert_eq!(model.diagnostics.n_candidates, 12_376);
 }
 
@@ -105,16 +110,9 @@ fn recovers_the_support_with_one_percent_noise() {
             model.equation(),
             model.diagnostics
         );
-        for (t, (_, c)) in model.terms.iter().zip(&p.truth) {
-            // 1 % noise on 25,000 samples: standard errors of a few 1e-4 of each coefficient
-            // (high-degree monomials of uniform features spread little); measured at most 6.1e-4.
-            assert!(
-                (t.coefficient - c).abs() <= 0.003 * c.abs(),
-                "{}: {} vs {c}",
-                t.name,
-                t.coefficient
-            );
-        }
+        // 1 % noise on 25,000 samples: standard errors of a few 1e-4 of each coefficient
+        // (high-degree monomials of uniform features spread little); measured at most 6.1e-4.
+        assert_coefficients(&model, &p.truth, 0.003);
     }
 }
 
@@ -134,14 +132,7 @@ fn plain_lars_recovers_a_small_problem_too() {
         "{}",
         model.equation()
     );
-    for (t, (_, c)) in model.terms.iter().zip(&p.truth) {
-        assert!(
-            (t.coefficient - c).abs() <= 1e-9 * c.abs(),
-            "{}: {} vs {c}",
-            t.name,
-            t.coefficient
-        );
-    }
+    assert_coefficients(&model, &p.truth, 1e-9);
 }
 
 #[test]
@@ -398,13 +389,7 @@ fn bad_settings_are_refused_before_fitting() {
     } else {
         let m = gpu.unwrap();
         assert_eq!(support(&m), p.truth.iter().map(|t| t.0).collect::<Vec<_>>());
-        for (t, (_, c)) in m.terms.iter().zip(&p.truth) {
-            assert!(
-                (t.coefficient - c).abs() <= 1e-9 * c.abs(),
-                "{}",
-                m.equation()
-            );
-        }
+        assert_coefficients(&m, &p.truth, 1e-9);
     }
 }
 

@@ -13,6 +13,18 @@ fn tmpdir(name: &str) -> PathBuf {
     d
 }
 
+/// `y'' = -y + u` identified at tau = 0.01 s, as a model file in `d`.
+fn oscillator_file(d: &std::path::Path) -> PathBuf {
+    let model = d.join("m.json");
+    std::fs::write(
+        &model,
+        r#"{"format":"ctsid-model/1","tau":0.01,"inputs":["u"],"outputs":[{"name":"y","order":2,
+        "terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":1}]}]}"#,
+    )
+    .unwrap();
+    model
+}
+
 #[test]
 fn true_throttle_model_reproduces_its_data() {
     let d = tmpdir("thr");
@@ -124,13 +136,7 @@ fn true_mimo_model_reproduces_noisy_data() {
 #[test]
 fn errors_are_one_line() {
     let d = tmpdir("err");
-    let model = d.join("m.json");
-    std::fs::write(
-        &model,
-        r#"{"format":"ctsid-model/1","tau":0.01,"inputs":["u"],"outputs":[{"name":"y","order":2,
-        "terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":1}]}]}"#,
-    )
-    .unwrap();
+    let model = oscillator_file(&d);
     let data = d.join("d.csv");
     let mut s = String::from("run,t,u,y\n");
     for r in 0..2 {
@@ -241,13 +247,7 @@ fn errors_are_one_line() {
 #[test]
 fn a_time_column_in_milliseconds_is_pointed_out() {
     let d = tmpdir("ms");
-    let model = d.join("m.json");
-    std::fs::write(
-        &model,
-        r#"{"format":"ctsid-model/1","tau":0.01,"inputs":["u"],"outputs":[{"name":"y","order":2,
-        "terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":1}]}]}"#,
-    )
-    .unwrap();
+    let model = oscillator_file(&d);
     let m = model.to_str().unwrap();
     for (scale, note) in [
         (1.0, false),
