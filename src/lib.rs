@@ -36,6 +36,7 @@ pub mod engine;
 pub mod error;
 pub mod identify;
 pub mod lm;
+pub mod metrics;
 pub mod model;
 pub mod plants;
 pub mod records;

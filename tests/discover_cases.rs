@@ -127,14 +127,29 @@ fn augmented_model_file_is_valid_and_carries_the_discovery() {
         .find(|t| t.monomial() == "y^3")
         .expect("no y^3 term in the file");
     assert!((cubic.coefficient - d.effects[0].coefficient).abs() < 1e-12);
-    // Coulomb friction (sign) has no polynomial form: no file rather than one without it.
+    // Coulomb friction has no polynomial form: it is an expression term with its origin, and
+    // the file simulates the final model exactly (same test-run NRMSE as the discovery's).
     let case = generate("coulomb", 0, 0.03).unwrap();
     let d = discover(&case.records, &case.nominal, &Options::new(tr, va, te)).unwrap();
-    let e = d.augmented_model(&case.nominal).unwrap_err().to_string();
-    assert!(
-        e.contains("not a polynomial") && e.contains("coulomb_friction"),
-        "{e}"
+    assert_eq!(d.verdict, "added");
+    let m = d.augmented_model(&case.nominal).unwrap();
+    let back = ctsid::model::Model::from_json_str(&m.to_json_string().unwrap(), "aug").unwrap();
+    let t = back.outputs[0]
+        .terms
+        .iter()
+        .find(|t| t.expression.as_deref() == Some("sign(y_d1)"))
+        .expect("no sign(y_d1) term in the file");
+    assert_eq!(
+        t.origin,
+        Some(ctsid::model::Origin::Effect("coulomb_friction".into()))
     );
+    assert!(back.sign_smoothing.contains_key("y_d1"));
+    assert_eq!(&back, d.final_model.as_ref().map(|f| {
+        let mut f = f.clone();
+        f.extra = back.extra.clone();
+        f.outputs[0].terms.iter_mut().zip(&back.outputs[0].terms).for_each(|(a, b)| a.interval = b.interval);
+        f
+    }).as_ref().unwrap());
 }
 
 #[test]

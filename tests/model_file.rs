@@ -1,6 +1,6 @@
 //! The model file: round trip, hand-written files, and the one-line errors for bad files.
 
-use ctsid::model::{Model, OutputEquation, Term};
+use ctsid::model::{Model, Origin, OutputEquation, Term};
 use ctsid::Error;
 
 fn siso() -> Model {
@@ -28,31 +28,107 @@ fn err_of(text: &str) -> String {
     }
 }
 
-#[test]
-fn round_trip_is_exact_and_keeps_extra_fields() {
+/// A model with every kind of term and field of `ctsid-model/2`.
+fn mixed() -> Model {
     let mut m = siso();
+    m.outputs[0].terms.push(
+        Term::expression("sign(y_d1)", -0.21).with_origin(Origin::Effect("coulomb_friction".into())),
+    );
+    m.outputs[0].terms.push(Term::expression("abs(y_d1)*y_d1", 0.5));
+    m.outputs[0].terms[1].std_error = Some(1.5);
+    m.outputs[0].terms[1].origin = Some(Origin::Identified);
+    m.outputs[0].terms[4].interval = Some([-0.25, -0.17]);
+    m.sign_smoothing.insert("y_d1".into(), 2.5e-5);
     m.extra.insert(
         "training".into(),
         serde_json::json!({"p50": 0.01, "runs": [0, 1, 2]}),
     );
-    m.outputs[0]
-        .extra
-        .insert("selected_order".into(), serde_json::json!(3));
-    m.outputs[0].terms[1]
-        .extra
-        .insert("stderr".into(), serde_json::json!(1.5));
+    m
+}
+
+#[test]
+fn round_trip_is_byte_identical_and_keeps_sections() {
+    let m = mixed();
     let dir = std::env::temp_dir().join(format!("ctsid-model-rt-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let path = dir.join("m.json");
-    m.write(path.to_str().unwrap()).unwrap();
-    let back = Model::read(path.to_str().unwrap()).unwrap();
+    let (p1, p2) = (dir.join("a.json"), dir.join("b.json"));
+    m.write(p1.to_str().unwrap()).unwrap();
+    let back = Model::read(p1.to_str().unwrap()).unwrap();
     assert_eq!(back, m);
+    back.write(p2.to_str().unwrap()).unwrap();
+    let (a, b) = (std::fs::read(&p1).unwrap(), std::fs::read(&p2).unwrap());
+    assert_eq!(a, b, "write -> read -> write changed the bytes");
+    let text = String::from_utf8(a).unwrap();
+    assert!(text.contains("\"format\": \"ctsid-model/2\""), "{text}");
+    assert!(text.contains("\"expression\": \"sign(y_d1)\""), "{text}");
+    assert!(text.contains("\"effect\": \"coulomb_friction\""), "{text}");
     // Coefficients survive bit for bit.
     assert_eq!(
         back.outputs[0].terms[3].coefficient.to_bits(),
         (-675.7f64).to_bits()
     );
     std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn expression_terms_evaluate_with_their_smoothing_and_exact_gradients() {
+    let m = mixed();
+    let c = m.compile().unwrap();
+    // z = [y, y_d1, y_d2, u]
+    let z = [0.3, 1e-5, -0.7, 2.0];
+    let w = 2.5e-5f64;
+    let smooth_sign = 1e-5 / (1e-10f64 + w * w).sqrt();
+    let expect = 37664.0 - 23978.0 * 0.3 + 0.125 * 1e-10 * 2.0 - 675.7 * -0.7
+        - 0.21 * smooth_sign
+        + 0.5 * 1e-5 * 1e-5;
+    assert!((c.eval_output(0, &z) - expect).abs() < 1e-9 * expect.abs());
+    let mut g = vec![0.0; 4];
+    c.grad_output(0, &z, &mut g);
+    for k in 0..4 {
+        let h = 1e-9 * z[k].abs().max(1e-6);
+        let (mut a, mut b) = (z, z);
+        a[k] += h;
+        b[k] -= h;
+        let fd = (c.eval_output(0, &a) - c.eval_output(0, &b)) / (2.0 * h);
+        assert!((fd - g[k]).abs() < 1e-5 * (1.0 + fd.abs()), "d/dz{k}: {} vs {fd}", g[k]);
+    }
+}
+
+#[test]
+fn unknown_and_misspelt_keys_are_named() {
+    let v2 = |terms: &str| {
+        format!(
+            r#"{{"format":"ctsid-model/2","inputs":["u"],"outputs":[{{"name":"y","order":2,"terms":[{terms}]}}]}}"#
+        )
+    };
+    let e = err_of(&v2(r#"{"exponent":{"y":1},"coefficient":-1}"#));
+    assert!(e.contains("term 1") && e.contains("\"exponent\""), "{e}");
+    assert_eq!(e.lines().count(), 1);
+    let e = err_of(&v2(r#"{"exponents":{"y":1},"expression":"sign(y_d1)","coefficient":-1}"#));
+    assert!(e.contains("both"), "{e}");
+    let e = err_of(&v2(r#"{"expression":"sign(v)","coefficient":-1}"#));
+    assert!(e.contains("unknown variable 'v'"), "{e}");
+    let e = err_of(&v2(r#"{"expression":"sgn(y_d1)","coefficient":-1}"#));
+    assert!(e.contains("unknown function 'sgn'"), "{e}");
+    let e = err_of(&v2(r#"{"exponents":{"y":1},"coefficient":-1,"stderr":0.1}"#));
+    assert!(e.contains("\"stderr\""), "{e}");
+    let e = err_of(
+        r#"{"format":"ctsid-model/2","inputs":["u"],"outputs":[{"name":"y","order":2,"terms":[],"selected_order":2}]}"#,
+    );
+    assert!(e.contains("output 'y'") && e.contains("selected_order"), "{e}");
+    let e = err_of(
+        r#"{"format":"ctsid-model/2","inputs":["u"],"extras":1,"outputs":[{"name":"y","order":2,"terms":[]}]}"#,
+    );
+    assert!(e.contains("\"extras\""), "{e}");
+    let e = err_of(
+        r#"{"format":"ctsid-model/2","inputs":["u"],"sign_smoothing":{"w":1},"outputs":[{"name":"y","order":2,"terms":[]}]}"#,
+    );
+    assert!(e.contains("'w'"), "{e}");
+    // Expressions need the second version.
+    let e = err_of(
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y","order":2,"terms":[{"expression":"sign(y_d1)","coefficient":-1}]}]}"#,
+    );
+    assert!(e.contains("ctsid-model/2"), "{e}");
 }
 
 #[test]

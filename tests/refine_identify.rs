@@ -8,7 +8,7 @@ use ctsid::demo::records;
 use ctsid::identify::{identify, Orders, Settings, Split};
 use ctsid::plants::{dataset, Plant, ThrottlePreset};
 use ctsid::regression::EngineChoice;
-use ctsid::simulate::rms_nrmse;
+use ctsid::metrics::rms_nrmse;
 
 #[test]
 fn identify_refines_the_throttle_and_reports_it() {

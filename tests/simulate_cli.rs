@@ -105,7 +105,7 @@ fn true_mimo_model_reproduces_noisy_data() {
     };
     for y in ["y1", "y2", "y3"] {
         let (rms, nrmse) =
-            ctsid::simulate::rms_nrmse(&col(&format!("{y}_sim")), &col(&format!("{y}_true")));
+            ctsid::metrics::rms_nrmse(&col(&format!("{y}_sim")), &col(&format!("{y}_true")));
         eprintln!("{y}: rms {rms:e} nrmse vs truth {:.3} %", 100.0 * nrmse);
         assert!(nrmse < 0.03, "{y}: NRMSE against the truth {nrmse}\n{out}");
         // The printed NRMSE is against the noisy measurement: near the noise's own share.

@@ -56,6 +56,11 @@ pub struct IdentifyArgs {
     /// No progress lines (they are shown only when standard error is a terminal anyway).
     #[arg(long)]
     pub quiet: bool,
+    /// A named candidate term beside the monomials, for every output (repeatable), e.g.
+    /// `--term 'sign(y_d1)' --term 'abs(y_d1)*y_d1'`; functions: sign abs sqrt tanh sin cos exp
+    /// sat relu.
+    #[arg(long)]
+    pub term: Vec<String>,
 }
 
 fn parse_orders(text: &str) -> Result<Vec<usize>> {
@@ -90,6 +95,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     s.engine = a.engine;
     s.method = a.method.into();
     s.progress = super::show_progress(a.quiet);
+    s.terms = a.term.clone();
     s.validate()?;
     a.segment.check()?;
     let mut columns = a.output.clone();
@@ -146,7 +152,22 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             });
             t.row(row);
         }
-        text += &format!("## Output '{}': order {} ({} samples, {} left out for uncertain labels; engine {})\n\n{}\n    {}\n\n", rep.name, rep.order, rep.samples_used, rep.samples_excluded, rep.engine, t.markdown(), rep.equation);
+        // The equation printed is the model written with -o (after refinement); the derivative
+        // fit it started from is shown beside it when they differ.
+        let written = id
+            .model
+            .outputs
+            .iter()
+            .find(|o| o.name == rep.name)
+            .map(|o| o.to_string())
+            .unwrap_or_default();
+        text += &format!("## Output '{}': order {} ({} samples, {} left out for uncertain labels; engine {})\n\n{}\n    {}\n\n", rep.name, rep.order, rep.samples_used, rep.samples_excluded, rep.engine, t.markdown(), written);
+        if let Some(r) = id.refinement.as_ref().filter(|r| r.kept) {
+            text += &format!(
+                "Refinement on free-run error changed the derivative fit\n    {}\ninto the model above ({}).\n\n",
+                rep.equation, r.message
+            );
+        }
         if rep.candidates.iter().any(|c| c.simulation.is_some()) {
             text += "The eta-rule chose on the free-run profiles (simulation on held-out runs); the derivative-domain validation profiles are shown beside them.\n\n";
         }

@@ -14,17 +14,15 @@
 
 use clap::Args;
 use ctsid::model::Model;
-use ctsid::simulate::{
-    estimate_initial_derivatives, fit_initial_state, initial_window, rms_nrmse, simulate_model,
-    SimOptions,
-};
+use ctsid::metrics::rms_nrmse;
+use ctsid::simulate::{free_run, RunData, SimOptions, INIT_WINDOW};
 use ctsid::util::num4;
 use ctsid::Result;
 use rayon::prelude::*;
 
 #[derive(Args, Debug)]
 pub struct SimulateArgs {
-    /// Model file (ctsid-model/1 JSON).
+    /// Model file (ctsid-model/2 JSON, or /1).
     pub model: String,
     /// Data file (CSV with a header row).
     pub data: String,
@@ -38,7 +36,7 @@ pub struct SimulateArgs {
     pub segment: super::runs::SegmentArgs,
     /// Samples at the start of each run used to estimate its initial state (at least the
     /// local fit's window; the model-based refinement uses all of them).
-    #[arg(long, default_value_t = 200)]
+    #[arg(long, default_value_t = INIT_WINDOW)]
     pub init_window: usize,
     /// Where to write the data with the simulated outputs.
     #[arg(short = 'o', long)]
@@ -100,36 +98,21 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     let mut simulated: Vec<Vec<Vec<f64>>> = Vec::with_capacity(rs.runs.len());
     let mut pooled_sim: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let mut pooled_meas: Vec<Vec<f64>> = vec![Vec::new(); n_out];
-    let window = args.init_window.max(initial_window(
-        compiled.orders().iter().copied().max().unwrap_or(1),
-    ));
-    // One run's simulated outputs (runs are independent: simulated in parallel).
+    let window = args.init_window;
+    // One run's simulated outputs (runs are independent: simulated in parallel), from the
+    // library's one initial-state convention.
     let simulate_run = |run: &ctsid::records::Run| -> Result<Vec<Vec<f64>>> {
-        let id = &run.id;
         // Time since the run's start: the model is time invariant, and stamps far from zero
         // (Unix time) would leave the integrator a few digits of resolution.
-        let t: Vec<f64> = (0..run.len()).map(|k| k as f64 * rs.tau).collect();
-        let ys = &run.channels[..n_out];
-        let us: Vec<Vec<f64>> = run.channels[n_out..].to_vec();
-        let mut x0 = Vec::with_capacity(compiled.n_state());
-        for (i, o) in model.outputs.iter().enumerate() {
-            let what = format!(
-                "estimating the initial state of output '{}' (order {})",
-                o.name, o.order
-            );
-            x0.extend(estimate_initial_derivatives(
-                &t, &ys[i], o.order, id, &what,
-            )?);
-        }
-        let opts = SimOptions {
-            run: id.clone(),
-            ..Default::default()
+        let data = RunData {
+            id: run.id.clone(),
+            t: (0..run.len()).map(|k| k as f64 * rs.tau).collect(),
+            y: run.channels[..n_out].to_vec(),
+            u: run.channels[n_out..].to_vec(),
+            states: None,
+            x0: Vec::new(),
         };
-        let x0 = fit_initial_state(&compiled, &t, ys, &us, &x0, window, &opts);
-        let traj = simulate_model(&compiled, &x0, &t, &us, &opts)?;
-        Ok((0..n_out)
-            .map(|i| traj.series(compiled.offset(i)))
-            .collect())
+        free_run(&compiled, &data, window, &SimOptions::default())
     };
     let mut constant = false;
     // In chunks, so that rows appear while a long record is still being simulated.

@@ -103,6 +103,10 @@ pub struct DerivativeOptions {
     /// Replace the smoother's estimate of a run by an exponential-sum model where one passes
     /// the checks of [`expsum`].
     pub exp_sum: bool,
+    /// Runs (indices into the runs given) whose data tune the smoothing level and the noise
+    /// variance; `None` tunes on all. An identification passes its training runs, so that test
+    /// runs never influence a fit.
+    pub tune_runs: Option<Vec<usize>>,
 }
 
 impl Default for DerivativeOptions {
@@ -117,6 +121,7 @@ impl Default for DerivativeOptions {
             end_check: true,
             smooth_window: SMOOTH_WINDOW,
             exp_sum: true,
+            tune_runs: None,
         }
     }
 }
@@ -238,6 +243,15 @@ pub fn differentiate_runs(
         .filter(|&r| centred[r].iter().any(|v| *v != 0.0))
         .collect();
     let live_y: Vec<&[f64]> = live.iter().map(|&r| centred[r].as_slice()).collect();
+    // The runs that tune: the chosen ones among the live, or all live runs if none is.
+    let tune_y: Vec<&[f64]> = match &opts.tune_runs {
+        Some(t) if live.iter().any(|r| t.contains(r)) => live
+            .iter()
+            .filter(|r| t.contains(r))
+            .map(|&r| centred[r].as_slice())
+            .collect(),
+        _ => live_y.clone(),
+    };
 
     let mut out: Vec<Derivatives> = runs
         .iter()
@@ -262,8 +276,8 @@ pub fn differentiate_runs(
     }
 
     let (h, fit) = match opts.h {
-        Some(h) => (h, tune::evaluate(m, h, 0.0, &live_y)),
-        None => tune::best_h(m, &live_y, (1e-4f64).ln(), H_MAX.ln()),
+        Some(h) => (h, tune::evaluate(m, h, 0.0, &tune_y)),
+        None => tune::best_h(m, &tune_y, (1e-4f64).ln(), H_MAX.ln()),
     };
     // Constant runs share the record set's sensor and smoothing level too (callers take h
     // from any run, the first among them).
@@ -301,7 +315,7 @@ pub fn differentiate_runs(
     let end_covs = opts.end_blend.then(|| cov_for(h, opts.end_lambda));
     let end_sigma2 = opts
         .end_blend
-        .then(|| tune::evaluate(m, h, opts.end_lambda, &live_y).sigma2);
+        .then(|| tune::evaluate(m, h, opts.end_lambda, &tune_y).sigma2);
     let end_width = (1.0 / h).max(2.0);
     // Held-out check of the end prior (see `end_prior_holds`): round(1/h) samples at each end,
     // none when fewer than the states (too few to overrule the prior); the chain and the

@@ -5,7 +5,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::sim::{fit_x0_on, free_run, AugModel, SimRun};
+use crate::simulate::{free_run, RunData, SimOptions};
 use super::Options;
 use crate::derivatives::{differentiate_runs, DerivativeOptions};
 use crate::error::{Error, Result};
@@ -159,20 +159,12 @@ pub fn emps(dir: &str) -> Result<Setup> {
 
 /// Free-run RMS error of `m` on `run` after its first `init` samples, from an initial state
 /// fitted on those samples (infinite when the simulation fails).
-pub fn rms_after(m: &AugModel, run: &SimRun, init: usize) -> f64 {
-    let r = SimRun {
-        x0: fit_x0_on(m, run, init),
-        ..run.clone()
-    };
-    match free_run(m, &r) {
-        Some(s) if s.len() > init => {
-            let e2: f64 = s[init..]
-                .iter()
-                .zip(&r.y[init..])
-                .map(|(a, b)| (a - b).powi(2))
-                .sum();
-            (e2 / (s.len() - init) as f64).sqrt()
-        }
+pub fn rms_after(m: &Model, run: &RunData, init: usize) -> f64 {
+    let sim = m
+        .compile()
+        .and_then(|c| free_run(&c, run, init, &SimOptions::default()));
+    match sim {
+        Ok(s) if s[0].len() > init => crate::metrics::rms(&s[0][init..], &run.y[0][init..]),
         _ => f64::INFINITY,
     }
 }

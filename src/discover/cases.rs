@@ -9,13 +9,13 @@
 //! Coulomb friction in the truth is `Fc tanh(v / 1e-3)` (a relay the integrator can step across;
 //! at velocities of order 1 it is a sign function).
 
-use super::sim;
+
 use crate::error::Result;
 use crate::model::{Model, OutputEquation, Term};
 use crate::plants::noise::add_noise;
 use crate::plants::rng::{stream_seed, Rng};
 use crate::records::{RecordSet, Run};
-use crate::simulate::{simulate, Input, SimOptions, System};
+use crate::simulate::{free_run, simulate, Input, RunData, SimOptions, System, INIT_WINDOW};
 use rayon::prelude::*;
 
 /// Upper end of the random input phases. Not `TAU`: the published acceptance matrix was drawn
@@ -406,14 +406,17 @@ pub fn split() -> (Vec<usize>, Vec<usize>, Vec<usize>) {
 }
 
 /// Mean free-run NRMSE of `m` on `runs` against the plant's noise-free output, each run started
-/// from the initial state the workflow itself estimates from the measurement ([`sim::fit_x0`]).
-pub fn nrmse_vs_truth(case: &Case, m: &sim::AugModel, runs: &[sim::SimRun]) -> f64 {
+/// from the initial state fitted on the measurement ([`crate::simulate::initial_state`]), as
+/// every report does.
+pub fn nrmse_vs_truth(case: &Case, m: &Model, runs: &[RunData]) -> f64 {
+    let Ok(c) = m.compile() else { return f64::NAN };
     let v: Vec<f64> = runs
         .par_iter()
         .map(|r| {
             let k = case.records.runs.iter().position(|x| x.id == r.id);
             match k.and_then(|k| case.truth.get(k)) {
-                Some(clean) => sim::nrmse_against(m, r, clean),
+                Some(clean) => free_run(&c, r, INIT_WINDOW, &SimOptions::default())
+                    .map_or(f64::INFINITY, |s| crate::metrics::nrmse(&s[0], clean)),
                 None => f64::NAN,
             }
         })

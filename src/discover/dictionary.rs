@@ -7,7 +7,7 @@
 //! `v` is the highest derivative of the output below the model's order (`y_d1` for a second-order
 //! mechanical model, `y` itself for a first-order one).
 
-use super::expr::Expr;
+use crate::model::Expr;
 use crate::error::{Error, Result};
 
 /// One named candidate.

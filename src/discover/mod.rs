@@ -16,8 +16,14 @@
 //!   free-run error on validation runs than both the nominal and the re-tuned nominal (for the
 //!   remaining effects together);
 //! - (e) names, formulas and aliases (partial correlation > 0.95 after the nominal columns);
-//! - (f) the accepted structure is refined on simulation error ([`sim::refine`]) and scored on
-//!   the test runs.
+//! - (f) the accepted structure is refined on simulation error (the one refit of
+//!   [`crate::identify::refine`], nominal terms the user fixed held) and scored on the test runs
+//!   from the one initial-state convention of [`crate::simulate::initial_state`], as
+//!   `ctsid simulate` scores the model file.
+//!
+//! Every model here, nominal, re-tuned or augmented, is a [`Model`]: effects are its expression
+//! terms (`origin: effect`), so the augmented model is written, simulated and controlled like
+//! any other.
 //!
 //! Assumptions: one output (the model file may have several; discover refuses them with an error),
 //! uniformly sampled runs, only `y` and the inputs measured; initial states of the free runs come
@@ -26,9 +32,8 @@
 pub mod benchmarks;
 pub mod cases;
 pub mod dictionary;
-pub mod expr;
+
 pub mod fit;
-pub mod sim;
 pub mod weak;
 
 use std::collections::BTreeMap;
@@ -43,9 +48,12 @@ use crate::plants::rng::Rng;
 use crate::records::RecordSet;
 use crate::util::num4;
 use dictionary::{num, Effect, Scales};
-use expr::Expr;
+use crate::model::Expr;
 use fit::{Gram, Problem};
-use sim::{AugModel, SimRun};
+use crate::identify::refine::{refine_holding, RefineOptions};
+use crate::metrics::{nrmse, rms_nrmse};
+use crate::model::Origin;
+use crate::simulate::{free_run, RunData, SimOptions, INIT_WINDOW};
 
 /// Settings of one discovery.
 #[derive(Debug, Clone)]
@@ -111,9 +119,6 @@ pub struct FoundEffect {
     pub interval: [f64; 2],
     pub inclusion: f64,
     pub aliases: Vec<String>,
-    /// Whether the term can be written into the model's polynomial right-hand side (monomials
-    /// only; [`Discovery::augmented_model`] refuses a discovery with any other effect).
-    pub in_model_terms: bool,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reading: Option<String>,
     /// Time invariance: the coefficient on the first and on the second half of each training
@@ -157,6 +162,8 @@ pub struct RunScore {
     pub nrmse_nominal: f64,
     pub above_noise: f64,
     pub nrmse_final: Option<f64>,
+    /// RMS free-run error of the final model, in the output's units.
+    pub rms_final: Option<f64>,
 }
 
 /// The result.
@@ -181,14 +188,15 @@ pub struct Discovery {
     pub half_width: usize,
     /// The final model (nominal terms, re-tuned or refined, plus added effects).
     #[serde(skip)]
-    pub final_model: Option<AugModel>,
+    pub final_model: Option<Model>,
     #[serde(skip)]
-    pub nominal_model: Option<AugModel>,
+    pub nominal_model: Option<Model>,
     #[serde(skip)]
-    pub test_runs: Vec<SimRun>,
+    pub test_runs: Vec<RunData>,
 }
 
 struct Prepared {
+    nominal: Model,
     vars: Vec<String>,
     order: usize,
     nom_exprs: Vec<Expr>,
@@ -199,7 +207,7 @@ struct Prepared {
     /// Per run: label residual r and columns [free nominal..., effects...].
     rows: Vec<(Vec<f64>, Vec<Vec<f64>>)>,
     /// Per run of the record set, in its order (simulation runs on time since the start).
-    simruns: Vec<SimRun>,
+    simruns: Vec<RunData>,
     zhat: Vec<Vec<Vec<f64>>>,
     top: Vec<Vec<f64>>,
     noise_sd: Vec<f64>,
@@ -293,7 +301,12 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
     let ys: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[yc].as_slice()).collect();
     // Checked here, where runs have their ids (the derivative code knows only positions).
     rs.require_derivable(n)?;
-    let der = differentiate_runs(&ys, rs.tau, n, &DerivativeOptions::default())?;
+    // Tuned on the training runs only: validation and test runs never influence the fit.
+    let tuning = DerivativeOptions {
+        tune_runs: Some(o.train.clone()),
+        ..DerivativeOptions::default()
+    };
+    let der = differentiate_runs(&ys, rs.tau, n, &tuning)?;
     let nz = vars.len();
     let zhat: Vec<Vec<Vec<f64>>> = rs
         .runs
@@ -397,16 +410,18 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         cols.extend(effects.iter().map(|e| column(&e.expr)));
         rows.push((r, cols));
         let t: Vec<f64> = (0..len).map(|i| i as f64 * rs.tau).collect();
-        simruns.push(SimRun {
+        simruns.push(RunData {
             id: run.id.clone(),
             t,
-            y: y.to_vec(),
+            y: vec![y.to_vec()],
             u: uc.iter().map(|&c| run.channels[c].clone()).collect(),
+            states: Some((0..n).map(|k| der[ri].values[k].clone()).collect()),
             x0: (0..n).map(|k| der[ri].values[k][0]).collect(),
         });
     }
     let eps: Vec<f64> = sd.iter().map(|s| 1e-3 * s).collect();
     Ok(Prepared {
+        nominal: nominal.clone(),
         vars,
         order: n,
         nom_exprs,
@@ -572,26 +587,44 @@ fn rss_at(g: &Gram, idx: &[usize], x: &[f64]) -> f64 {
 }
 
 impl Prepared {
-    fn model(&self, delta: &[f64], effects: &[(usize, f64)]) -> AugModel {
-        let mut terms: Vec<(Expr, f64)> = self
-            .nom_exprs
-            .iter()
-            .cloned()
-            .zip(self.theta0.iter().copied())
-            .collect();
+    /// The nominal with its free coefficients moved by `delta` and the `effects` (index,
+    /// coefficient) appended: monomial effects as monomials, the others as expressions, each
+    /// with its family as origin; `sign` smoothed over 1e-3 of its variable's spread.
+    fn model(&self, delta: &[f64], effects: &[(usize, f64)]) -> Model {
+        let mut m = self.nominal.clone();
+        let eq = &mut m.outputs[0];
+        for (t, &c) in eq.terms.iter_mut().zip(&self.theta0) {
+            t.coefficient = c;
+        }
         for (k, &j) in self.free.iter().enumerate() {
-            terms[j].1 += delta.get(k).copied().unwrap_or(0.0);
+            eq.terms[j].coefficient += delta.get(k).copied().unwrap_or(0.0);
         }
         for &(k, c) in effects {
-            terms.push((self.effects[k].expr.clone(), c));
+            let e = &self.effects[k];
+            let term = match e.expr.monomial() {
+                Some(mono) => {
+                    let ex: Vec<(&str, u32)> =
+                        mono.iter().map(|&(v, p)| (self.vars[v].as_str(), p)).collect();
+                    Term::new(&ex, c)
+                }
+                None => {
+                    for v in e.expr.sign_variables() {
+                        m.sign_smoothing.insert(self.vars[v].clone(), self.eps[v]);
+                    }
+                    Term::expression(e.expr.text(), c)
+                }
+            };
+            eq.terms.push(term.with_origin(Origin::Effect(e.family.clone())));
         }
-        AugModel {
-            order: self.order,
-            n_inputs: self.vars.len() - self.order,
-            names: self.vars.clone(),
-            terms,
-            eps: self.eps.clone(),
-        }
+        m.degree = m.degree.max(
+            m.outputs[0]
+                .terms
+                .iter()
+                .map(|t| t.degree() as usize)
+                .max()
+                .unwrap_or(0),
+        );
+        m
     }
     /// Per term of [`Prepared::model`]'s models: whether the simulation refit must hold it
     /// (nominal terms that are not free); effects are always free.
@@ -600,9 +633,52 @@ impl Prepared {
             .map(|j| !self.free.contains(&j))
             .collect()
     }
-    fn runs(&self, idx: &[usize]) -> Vec<SimRun> {
+    fn runs(&self, idx: &[usize]) -> Vec<RunData> {
         idx.iter().map(|&r| self.simruns[r].clone()).collect()
     }
+}
+
+/// Simulation settings of the gates: looser than the reports' (the defaults, as `ctsid
+/// simulate`), since many candidate models are compared on many runs.
+fn gate_options() -> SimOptions {
+    SimOptions {
+        rtol: 1e-6,
+        atol: 1e-9,
+        max_steps_per_interval: 2000,
+        ..SimOptions::default()
+    }
+}
+
+/// The free-run output of `m` on `run` from the one initial-state convention; `None` when it
+/// cannot be simulated.
+fn simulated(m: &Model, run: &RunData, opts: &SimOptions) -> Option<Vec<f64>> {
+    let c = m.compile().ok()?;
+    free_run(&c, run, INIT_WINDOW, opts)
+        .ok()
+        .map(|mut v| v.swap_remove(0))
+}
+
+/// Free-run NRMSE of `m` on `run` (infinite when it cannot be simulated).
+fn run_nrmse(m: &Model, run: &RunData, opts: &SimOptions) -> f64 {
+    simulated(m, run, opts).map_or(f64::INFINITY, |s| nrmse(&s, &run.y[0]))
+}
+
+/// Mean free-run NRMSE over runs (in parallel).
+fn mean_nrmse(m: &Model, runs: &[RunData], opts: &SimOptions) -> f64 {
+    use rayon::prelude::*;
+    let v: Vec<f64> = runs.par_iter().map(|r| run_nrmse(m, r, opts)).collect();
+    v.iter().sum::<f64>() / v.len().max(1) as f64
+}
+
+/// `m` refined on free-run error of `runs` with the `fixed` coefficients held (the start when
+/// the refinement cannot run).
+fn refit(m: &Model, runs: &[RunData], fixed: &[bool], iterations: usize) -> Model {
+    let opts = RefineOptions {
+        max_iterations: iterations,
+        skip_below: 0.0,
+        ..RefineOptions::default()
+    };
+    refine_holding(m, runs, &opts, fixed).map_or_else(|_| m.clone(), |r| r.model)
 }
 
 /// Least share of validation free-run error one of several effects must remove: the simulation
@@ -669,6 +745,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
 
     // (a) compare and (b) localise.
     let nominal_model = p.model(&[], &[]);
+    let report_opts = SimOptions::default();
     let mut runs = Vec::new();
     let mut windows = Vec::new();
     let mut diverged = 0usize;
@@ -682,16 +759,12 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         } else {
             continue;
         };
-        let sr = &SimRun {
-            x0: sim::fit_x0(&nominal_model, sr),
-            ..sr.clone()
-        };
-        let sim = sim::free_run(&nominal_model, sr);
+        let sim = simulated(&nominal_model, sr, &report_opts);
         diverged += sim.is_none() as usize;
         let (nr, above) = match &sim {
             Some(s) => {
-                let (_, nr) = crate::simulate::rms_nrmse(s, &sr.y);
-                let floor = p.noise_sd[ri] / crate::simulate::std_dev(&sr.y).max(1e-300);
+                let (_, nr) = rms_nrmse(s, &sr.y[0]);
+                let floor = p.noise_sd[ri] / crate::metrics::std_dev(&sr.y[0]).max(1e-300);
                 (nr, (nr * nr - floor * floor).max(0.0).sqrt())
             }
             None => (f64::INFINITY, f64::INFINITY),
@@ -701,7 +774,11 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             // record's own time.
             let m = p.half_width;
             let t0 = rs.runs[ri].t0;
-            let e2: Vec<f64> = s.iter().zip(&sr.y).map(|(a, b)| (a - b).powi(2)).collect();
+            let e2: Vec<f64> = s
+                .iter()
+                .zip(&sr.y[0])
+                .map(|(a, b)| (a - b).powi(2))
+                .collect();
             let mut inside = None;
             for i in 0..e2.len() {
                 let a = i.saturating_sub(m);
@@ -731,6 +808,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             nrmse_nominal: nr,
             above_noise: above,
             nrmse_final: None,
+            rms_final: None,
         });
     }
     // With no run the nominal can simulate there is no error to explain and nothing to
@@ -885,18 +963,19 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let vruns = p.runs(&o.validation);
     let truns = p.runs(&o.train);
     let fixed = p.fixed_mask();
-    let retuned_model = sim::refine(
+    let retuned_model = refit(
         &p.model(&retune.delta, &[]),
         &truns,
         &fixed,
         o.refine_iterations,
     );
+    let gate = gate_options();
     let nt = p.theta0.len();
     // A candidate set fitted on the weak form, then refined on free-run error.
-    let fit_refined = |set: &[usize]| -> Result<(_, AugModel)> {
+    let fit_refined = |set: &[usize]| -> Result<(_, Model)> {
         let sol = pb.fit(&train, set).ok_or_else(numerr)?;
         let pairs: Vec<(usize, f64)> = set.iter().copied().zip(sol.coef.iter().copied()).collect();
-        let m = sim::refine(
+        let m = refit(
             &p.model(&sol.delta, &pairs),
             &truns,
             &fixed,
@@ -909,14 +988,14 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     // bias looked like a friction bump to the regression and passed every other gate; without
     // the bump the validation error was the same. The share of the validation free-run NRMSE
     // each effect removes (NaN where the fit without it fails).
-    let simulation_shares = |cand: &[usize], model: &AugModel| -> Vec<f64> {
-        let with = sim::mean_nrmse(model, &vruns);
+    let simulation_shares = |cand: &[usize], model: &Model| -> Vec<f64> {
+        let with = mean_nrmse(model, &vruns, &gate);
         (0..cand.len())
             .map(|i| {
                 let mut rest = cand.to_vec();
                 rest.remove(i);
                 match fit_refined(&rest) {
-                    Ok((_, m)) => 1.0 - with / sim::mean_nrmse(&m, &vruns),
+                    Ok((_, m)) => 1.0 - with / mean_nrmse(&m, &vruns, &gate),
                     Err(_) => f64::NAN,
                 }
             })
@@ -978,7 +1057,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
                 // effect whose refined coefficient takes the sign its interval excludes is
                 // traded against the others (at 10 % noise a Stribeck hump beside Coulomb
                 // friction went from [0.27, 0.52] to -0.10).
-                let c = model.coefficients();
+                let c = coefficients(&model);
                 let flipped = some(
                     (0..n)
                         .filter(|&i| contradicts(&intervals[i], c[nt + i]))
@@ -1041,9 +1120,9 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     xc.extend(&cand_sol.coef);
     let val_cand = rss_at(&val, &idx_cand, &xc);
     let residual_ratio = val_cand / val_nominal.min(val_retuned).max(1e-300);
-    let sim_nom = sim::mean_nrmse(&nominal_model, &vruns);
-    let sim_ret = sim::mean_nrmse(&retuned_model, &vruns);
-    let sim_cand = sim::mean_nrmse(&cand_model, &vruns);
+    let sim_nom = mean_nrmse(&nominal_model, &vruns, &gate);
+    let sim_ret = mean_nrmse(&retuned_model, &vruns, &gate);
+    let sim_cand = mean_nrmse(&cand_model, &vruns, &gate);
     let simulation_ratio = sim_cand / sim_nom.min(sim_ret);
     let excl: Vec<bool> = intervals
         .iter()
@@ -1089,7 +1168,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
             ));
         }
     }
-    let refined = cand_model.coefficients();
+    let refined = coefficients(&cand_model);
     for (i, &k) in cand.iter().enumerate() {
         if failed.is_none() && !set.is_empty() && contradicts(&intervals[i], refined[nt + i]) {
             failed = Some(format!(
@@ -1129,7 +1208,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
 
     // Verdict; the models were refined on simulation error above (f).
     let test_runs = p.runs(&o.test);
-    let nrmse_before = sim::mean_nrmse(&nominal_model, &test_runs);
+    let nrmse_before = mean_nrmse(&nominal_model, &test_runs, &report_opts);
     let mut effects = Vec::new();
     let mut retuned = Vec::new();
     let mut closest = None;
@@ -1139,7 +1218,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     if failed.is_none() {
         verdict = "added";
         let refined = cand_model.clone();
-        let c = refined.coefficients();
+        let c = coefficients(&refined);
         for (i, &k) in cand.iter().enumerate() {
             let e = &p.effects[k];
             effects.push(FoundEffect {
@@ -1150,7 +1229,6 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
                 interval: intervals[i],
                 inclusion: inclusion[i],
                 aliases: aliases[i].iter().map(|&a| name_of(a)).collect(),
-                in_model_terms: e.expr.monomial().is_some(),
                 reading: reading(&e.family, c[nt + i], &p),
                 halves: dz.get(i).map_or([f64::NAN; 2], |z| [z.0, z.1]),
                 halves_z: dz.get(i).map_or(f64::NAN, |z| z.2),
@@ -1162,7 +1240,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     } else if retune_ok {
         verdict = "retune";
         let refined = retuned_model.clone();
-        retuned = retuned_list(&p, &refined.coefficients(), o);
+        retuned = retuned_list(&p, &coefficients(&refined), o);
         closest = Some(failed.clone().unwrap_or_default());
         final_model = refined;
     } else {
@@ -1180,10 +1258,13 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     }
     for r in runs.iter_mut() {
         if let Some(sr) = p.simruns.iter().find(|s| s.id == r.run) {
-            r.nrmse_final = Some(sim::nrmse(&final_model, sr));
+            let (rms, nr) = simulated(&final_model, sr, &report_opts)
+                .map_or((f64::INFINITY, f64::INFINITY), |s| rms_nrmse(&s, &sr.y[0]));
+            r.nrmse_final = Some(nr);
+            r.rms_final = Some(rms);
         }
     }
-    let nrmse_after = sim::mean_nrmse(&final_model, &test_runs);
+    let nrmse_after = mean_nrmse(&final_model, &test_runs, &report_opts);
     Ok(Discovery {
         verdict: verdict.into(),
         effects,
@@ -1203,8 +1284,9 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     })
 }
 
-fn rms_nrmse_of(sim: &[f64], y: &[f64]) -> f64 {
-    crate::simulate::rms_nrmse(sim, y).1
+/// The coefficients of a one-output model in term order.
+fn coefficients(m: &Model) -> Vec<f64> {
+    m.outputs[0].terms.iter().map(|t| t.coefficient).collect()
 }
 
 fn retuned_list(p: &Prepared, c: &[f64], o: &Options) -> Vec<Retuned> {
@@ -1318,20 +1400,14 @@ fn coordinate_shares(p: &Prepared, train: &[usize]) -> Vec<Share> {
 
 impl Discovery {
     /// The report's plots as `(file name, SVG)`: each test run's measurement against the free
-    /// runs of the nominal and the final model (both from their own [`sim::fit_x0`] start),
+    /// runs of the nominal and the final model (both from the one initial-state convention),
     /// and the conditional mean of the derivative-space residual along each coordinate.
     pub fn plots(&self) -> Vec<(String, String)> {
         use crate::report::svg::{line_plot, Series};
         let mut out = Vec::new();
         if let (Some(nom), Some(fin)) = (&self.nominal_model, &self.final_model) {
             for r in &self.test_runs {
-                let sim_of = |m: &AugModel| {
-                    let rr = SimRun {
-                        x0: sim::fit_x0(m, r),
-                        ..r.clone()
-                    };
-                    sim::free_run(m, &rr)
-                };
+                let sim_of = |m: &Model| simulated(m, r, &SimOptions::default());
                 let (Some(a), Some(b)) = (sim_of(nom), sim_of(fin)) else {
                     continue;
                 };
@@ -1339,7 +1415,7 @@ impl Discovery {
                     Series {
                         label: "measured",
                         x: &r.t,
-                        y: &r.y,
+                        y: &r.y[0],
                         color: "#999999",
                         band: None,
                         dashed: false,
@@ -1367,8 +1443,8 @@ impl Discovery {
                         &format!(
                             "test run {}: NRMSE {} before, {} after",
                             r.id,
-                            num(rms_nrmse_of(&a, &r.y)),
-                            num(rms_nrmse_of(&b, &r.y))
+                            num(nrmse(&a, &r.y[0])),
+                            num(nrmse(&b, &r.y[0]))
                         ),
                         "t (s)",
                         "y",
@@ -1513,15 +1589,16 @@ impl Discovery {
                 }
             );
         }
-        s += "| run | role | NRMSE nominal | above noise | NRMSE final |\n|---|---|---|---|---|\n";
+        s += "| run | role | NRMSE nominal | above noise | NRMSE final | RMS final |\n|---|---|---|---|---|---|\n";
         for r in &self.runs {
             s += &format!(
-                "| {} | {} | {} | {} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} |\n",
                 r.run,
                 r.role,
                 num4(r.nrmse_nominal),
                 num4(r.above_noise),
-                r.nrmse_final.map(num4).unwrap_or_default()
+                r.nrmse_final.map(num4).unwrap_or_default(),
+                r.rms_final.map(num).unwrap_or_default()
             );
         }
         s += &format!(
@@ -1532,64 +1609,31 @@ impl Discovery {
         s
     }
 
-    /// The augmented model file: the nominal output with the final coefficients, monomial effects
-    /// as terms, and the `discovery` section.
+    /// The augmented model file: the final model (the nominal's terms re-tuned or refined,
+    /// each added effect as a term with its family as origin and its bootstrap interval) and
+    /// the `discovery` section. `nominal` must be the model the discovery was run with.
     pub fn augmented_model(&self, nominal: &Model) -> Result<Model> {
-        // A file that simulated without an effect the report calls added would be a silently
-        // wrong model: refuse instead.
-        if let Some(e) = self.effects.iter().find(|e| !e.in_model_terms) {
-            return Err(Error::InvalidData(format!(
-                "no model file written: the added effect {} {} is not a polynomial term, and a {} file holds polynomial terms only; its coefficient ({:.4}) is in the report (and in --report DIR/discovery.json)",
-                e.family,
-                e.formula,
-                crate::model::FORMAT,
-                e.coefficient
-            )));
-        }
-        // The final model's first terms are the nominal ones, parsed from their monomials.
+        let fm = self.final_model.as_ref().ok_or_else(|| {
+            Error::param("discovery", "has no final model (it was not run by discover)")
+        })?;
         let same_nominal = nominal.outputs.len() == 1
-            && self.final_model.as_ref().is_none_or(|fm| {
-                let terms = &nominal.outputs[0].terms;
-                fm.terms.len() == terms.len() + self.effects.len()
-                    && fm
-                        .terms
-                        .iter()
-                        .zip(terms)
-                        .all(|((e, _), t)| e.text() == t.monomial())
-            });
+            && fm.outputs[0].terms.len() == nominal.outputs[0].terms.len() + self.effects.len()
+            && fm.outputs[0]
+                .terms
+                .iter()
+                .zip(&nominal.outputs[0].terms)
+                .all(|(a, b)| a.monomial() == b.monomial());
         if !same_nominal {
             return Err(Error::param(
                 "nominal",
                 "not the nominal model this discovery was run with",
             ));
         }
-        let mut m = nominal.clone();
-        let fm = self.final_model.as_ref();
-        let eq = &mut m.outputs[0];
-        let nt = eq.terms.len();
-        if let Some(fm) = fm {
-            for (t, c) in eq.terms.iter_mut().zip(fm.coefficients()) {
-                t.coefficient = c;
-            }
-            for (i, e) in self.effects.iter().enumerate() {
-                let mono = fm.terms[nt + i]
-                    .0
-                    .monomial()
-                    .expect("non-polynomial effects are refused above");
-                let ex: Vec<(&str, u32)> = mono
-                    .iter()
-                    .map(|&(v, k)| (fm.names[v].as_str(), k))
-                    .collect();
-                eq.terms.push(Term::new(&ex, e.coefficient));
-            }
+        let mut m = fm.clone();
+        let nt = nominal.outputs[0].terms.len();
+        for (t, e) in m.outputs[0].terms[nt..].iter_mut().zip(&self.effects) {
+            t.interval = Some(e.interval);
         }
-        m.degree = m
-            .outputs
-            .iter()
-            .flat_map(|o| o.terms.iter().map(|t| t.degree() as usize))
-            .max()
-            .unwrap_or(0)
-            .max(m.degree);
         let section = serde_json::json!({
             "verdict": self.verdict,
             "effects": self.effects,

@@ -16,10 +16,12 @@
 
 use crate::error::{Error, Result};
 
+pub mod columns;
 pub mod cpu;
 pub mod gpu;
 pub mod select;
 
+pub use columns::WithColumns;
 pub use cpu::{CpuEngine, CpuOptions, DenseEngine};
 
 /// Feature rows Z, stored column-major (variable k is `data[k*n_samples..(k+1)*n_samples]`).

@@ -42,7 +42,8 @@ use crate::error::{Error, Result};
 use crate::model::{derivative_name, Model as ModelFile, OutputEquation, Term as ModelTerm};
 use crate::records::RecordSet;
 use crate::regression::{EngineChoice, Method, Regression};
-use crate::simulate::{fit_initial_state, rms_nrmse, simulate_model, SimOptions};
+use crate::metrics::rms_nrmse;
+use crate::simulate::{initial_state, simulate_model, SimOptions, INIT_WINDOW};
 use crate::util::num4;
 
 /// Labels whose sigma exceeds this multiple of the median label sigma are left out.
@@ -69,9 +70,6 @@ pub const ROBUST_ITERATIONS: usize = 3;
 /// d = 3: fewer extra terms, a larger free-run error). A sparse, exact equation is what a
 /// control engineer asked for. `Settings::label_floor` overrides it.
 pub const LABEL_FLOOR: f64 = 1.0;
-
-/// Samples used to refine each simulated run's initial state.
-pub const INIT_WINDOW: usize = 200;
 
 /// Highest order an identification searches or fits (its derivatives go one order higher).
 pub const MAX_ORDER: usize = 6;
@@ -116,6 +114,10 @@ pub struct Settings {
     pub refine_options: refine::RefineOptions,
     /// What the eta-rule compares across candidate orders (see [`Selection`]).
     pub selection: Selection,
+    /// Named candidate terms beside the monomials, in the expression language of
+    /// [`crate::model::expr`] (`sign(y_d1)`, `abs(y_d1)*y_d1`), for every output; a term that
+    /// reads a derivative at or above an equation's order is left out of that equation.
+    pub terms: Vec<String>,
 }
 
 /// The error profile the eta-rule compares across candidate orders.
@@ -149,6 +151,7 @@ impl Settings {
             progress: false,
             refine: true,
             refine_options: refine::RefineOptions::default(),
+            terms: Vec::new(),
         }
     }
 
@@ -204,6 +207,23 @@ impl Settings {
             ));
         }
         crate::basis::check_degree(self.degree)?;
+        // Every named term must make sense at the highest order searched.
+        let top = self.max_order();
+        let mut names: Vec<String> = self
+            .outputs
+            .iter()
+            .flat_map(|o| (0..top).map(move |k| derivative_name(o, k)))
+            .collect();
+        names.extend(self.inputs.iter().cloned());
+        for t in &self.terms {
+            crate::model::Expr::parse(t, &names).map_err(|e| Error::param("term", e.to_string()))?;
+        }
+        if let Some((_, j)) = crate::util::first_repeat(&self.terms) {
+            return Err(Error::param(
+                "term",
+                format!("'{}' is given twice", self.terms[j]),
+            ));
+        }
         Ok(())
     }
 
@@ -465,8 +485,9 @@ impl Prepared<'_> {
             0.0
         };
         let reg = self.regression(i, w0.iter().filter(|w| **w > 0.0).count(), floor)?;
+        let named = self.named_columns(&f);
         let mut w = w0.clone();
-        let mut model = reg.fit(&f, &y, &label, Some(&w))?;
+        let mut model = reg.fit_with_columns(&f, &named, &y, &label, Some(&w))?;
         for _ in 0..ROBUST_ITERATIONS {
             let pred = model.predict(&f)?;
             let r: Vec<f64> = y.iter().zip(&pred).map(|(a, b)| a - b).collect();
@@ -495,9 +516,58 @@ impl Prepared<'_> {
                     w0[s] * (1.0 - u * u).powi(2)
                 };
             }
-            model = reg.fit(&f, &y, &label, Some(&w))?;
+            model = reg.fit_with_columns(&f, &named, &y, &label, Some(&w))?;
         }
         Ok(model)
+    }
+
+    /// The named terms' columns on the features `f` (those whose variables `f` has).
+    fn named_columns(&self, f: &Features) -> Vec<crate::regression::NamedColumn> {
+        self.settings
+            .terms
+            .iter()
+            .filter_map(|t| crate::model::Expr::parse(t, &f.names).ok())
+            .map(|e| {
+                let mut z = vec![0.0; f.n_vars()];
+                let values = (0..f.n_samples)
+                    .map(|i| {
+                        for (k, zk) in z.iter_mut().enumerate() {
+                            *zk = f.column(k)[i];
+                        }
+                        e.eval(&z)
+                    })
+                    .collect();
+                crate::regression::NamedColumn {
+                    name: e.text().to_string(),
+                    values,
+                }
+            })
+            .collect()
+    }
+
+    /// Smoothing width of `sign` for each variable a `sign` of the model reads: 1e-3 of that
+    /// variable's spread over the training runs (as discover uses), written into the model so
+    /// it simulates the same everywhere.
+    fn sign_smoothing(&self, model: &mut ModelFile, train: &[usize]) {
+        let names = model.variable_names();
+        let ord: Vec<usize> = model.outputs.iter().map(|o| o.order).collect();
+        for i in 0..model.outputs.len() {
+            for t in &model.outputs[i].terms {
+                let Some(e) = t.expression.as_deref().and_then(|e| crate::model::Expr::parse(e, &names).ok()) else {
+                    continue;
+                };
+                for v in e.sign_variables() {
+                    let name = &names[v];
+                    let f = self.design(i, &ord, train).0;
+                    if let Some(k) = f.names.iter().position(|n| n == name) {
+                        let sd = crate::metrics::std_dev(f.column(k));
+                        if sd > 0.0 {
+                            model.sign_smoothing.insert(name.clone(), 1e-3 * sd);
+                        }
+                    }
+                }
+            }
+        }
     }
 
     /// Residuals and labels of a model on some runs (only samples with a usable label).
@@ -575,12 +645,12 @@ fn prepare<'a>(
     let mut derivs = Vec::new();
     for (o, &c) in outputs.iter().enumerate() {
         let runs: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[c].as_slice()).collect();
-        derivs.push(differentiate_runs(
-            &runs,
-            rs.tau,
-            max_order,
-            &DerivativeOptions::default(),
-        )?);
+        // Tuned on the training runs only: test runs never influence the fit.
+        let tuning = DerivativeOptions {
+            tune_runs: Some(split.train.clone()),
+            ..DerivativeOptions::default()
+        };
+        derivs.push(differentiate_runs(&runs, rs.tau, max_order, &tuning)?);
         say(format!(
             "derivatives of '{}' up to order {max_order} on {} runs ({:.2} s)",
             settings.outputs[o],
@@ -598,6 +668,7 @@ fn prepare<'a>(
                 i,
                 max_order,
                 settings.same_filter,
+                &split.train,
             )
         })
         .collect::<Result<_>>()?;
@@ -787,6 +858,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let input_names: Vec<&str> = settings.inputs.iter().map(String::as_str).collect();
     let mut model = ModelFile::new(&input_names, equations, Some(rs.tau));
     model.degree = settings.degree;
+    prep.sign_smoothing(&mut model, &split.train);
     model.validate()?;
     // A single-output search already refined the selected order while scoring it (on at most
     // SCORE_RUNS training runs, gated on the same held-out runs): that model is the result, and
@@ -825,7 +897,6 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let simulations = simulate_runs(
         &model,
         rs,
-        &prep.derivs,
         &outputs,
         &prep.inputs,
         &split.test,
@@ -945,7 +1016,6 @@ fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<
 pub(crate) fn simulate_runs(
     model: &ModelFile,
     rs: &RecordSet,
-    derivs: &[Vec<Derivatives>],
     outputs: &[usize],
     inputs: &[usize],
     runs: &[usize],
@@ -957,12 +1027,6 @@ pub(crate) fn simulate_runs(
         let n = run.len();
         // Time since the run's start (see refine_run).
         let times: Vec<f64> = (0..n).map(|k| k as f64 * rs.tau).collect();
-        let mut x0 = Vec::new();
-        for (o, eq) in model.outputs.iter().enumerate() {
-            for k in 0..eq.order {
-                x0.push(derivs[o][r].values[k][0]);
-            }
-        }
         let us: Vec<Vec<f64>> = inputs.iter().map(|&u| run.channels[u].clone()).collect();
         let opts = SimOptions {
             run: run.id.clone(),
@@ -970,10 +1034,22 @@ pub(crate) fn simulate_runs(
             atol: 1e-9,
             ..Default::default()
         };
-        // The smoothed derivatives at the first sample are the least certain of the run; let the
-        // model's own dynamics refine them on the first samples (Gauss-Newton on the outputs).
+        // The one initial-state convention of every report (see simulate::initial_state).
         let ys: Vec<Vec<f64>> = outputs.iter().map(|&c| run.channels[c].clone()).collect();
-        let x0 = fit_initial_state(&compiled, &times, &ys, &us, &x0, INIT_WINDOW, &opts);
+        let x0 = initial_state(&compiled, &times, &ys, &us, INIT_WINDOW, &opts);
+        let x0 = match x0 {
+            Ok(x0) => x0,
+            Err(e) => {
+                out.push(RunSimulation {
+                    run: run.id.clone(),
+                    rms: Vec::new(),
+                    nrmse: Vec::new(),
+                    simulated: Vec::new(),
+                    error: Some(e.to_string()),
+                });
+                continue;
+            }
+        };
         match simulate_model(&compiled, &x0, &times, &us, &opts) {
             Ok(traj) => {
                 let mut sim = RunSimulation {
@@ -1022,6 +1098,7 @@ fn equation_data(
     i: usize,
     max_order: usize,
     same_filter: bool,
+    train: &[usize],
 ) -> Result<EqData> {
     if !same_filter {
         let ins = inputs
@@ -1042,6 +1119,7 @@ fn equation_data(
         // One linear smoother for every signal of the equation: a parametric model for some
         // runs of one channel would break that.
         exp_sum: false,
+        tune_runs: Some(train.to_vec()),
         ..Default::default()
     };
     let smooth = |c: usize, order: usize| -> Result<Vec<Derivatives>> {
@@ -1082,6 +1160,7 @@ fn simulation_score(
         Some(prep.rs.tau),
     );
     model.degree = prep.settings.degree;
+    prep.sign_smoothing(&mut model, &split.train);
     model.validate()?;
     // Scoring refines every candidate: on at most SCORE_RUNS training runs, to keep the search
     // affordable; the selected structure is refined again on all of them.
@@ -1106,7 +1185,7 @@ fn simulation_score(
             .map(|f| f.1)
             .unwrap_or_else(|| split.train.clone()),
     };
-    let sims = simulate_runs(&model, prep.rs, &prep.derivs, outputs, &prep.inputs, &gate)?;
+    let sims = simulate_runs(&model, prep.rs, outputs, &prep.inputs, &gate)?;
     let (mut e, mut l) = (Vec::new(), Vec::new());
     let mut diverged = false;
     for (sim, &r) in sims.iter().zip(&gate) {
@@ -1139,8 +1218,15 @@ fn equation_of(m: &crate::regression::Model, name: &str, order: usize) -> Output
         .terms
         .iter()
         .map(|t| {
-            let ex: Vec<(&str, u32)> = t.exponents.iter().map(|(k, v)| (k.as_str(), *v)).collect();
-            ModelTerm::new(&ex, t.coefficient)
+            let term = match &t.expression {
+                Some(e) => ModelTerm::expression(e, t.coefficient),
+                None => {
+                    let ex: Vec<(&str, u32)> =
+                        t.exponents.iter().map(|(k, v)| (k.as_str(), *v)).collect();
+                    ModelTerm::new(&ex, t.coefficient)
+                }
+            };
+            term.with_origin(crate::model::Origin::Identified)
         })
         .collect();
     OutputEquation::new(name, order, terms)

@@ -46,9 +46,9 @@ use rayon::prelude::*;
 use crate::error::{Error, Result};
 use crate::lm::{cost, LeastSquares, LmStats};
 use crate::model::{CompiledModel, Model};
+use crate::metrics::nrmse;
 use crate::simulate::{
-    fit_initial_state, rms_nrmse, simulate_model, simulate_model_sensitivities, SimOptions,
-    Trajectory,
+    free_run, simulate_model, simulate_model_sensitivities, SimOptions, Trajectory, INIT_WINDOW,
 };
 use crate::util::num4;
 
@@ -95,23 +95,7 @@ impl Default for RefineOptions {
     }
 }
 
-/// One run's data for the refinement.
-#[derive(Debug, Clone)]
-pub struct RunData {
-    pub id: String,
-    /// Sample times (strictly increasing).
-    pub t: Vec<f64>,
-    /// Measured outputs, `[output][sample]`, in the model's output order.
-    pub y: Vec<Vec<f64>>,
-    /// Inputs, `[input][sample]`, in the model's input order.
-    pub u: Vec<Vec<f64>>,
-    /// Guesses of the state at every sample, `[state][sample]` (for instance the smoothed
-    /// derivatives), used to start each segment; `None` starts later segments from a simulation
-    /// of the starting model.
-    pub states: Option<Vec<Vec<f64>>>,
-    /// Initial state at the first sample.
-    pub x0: Vec<f64>,
-}
+pub use crate::simulate::RunData;
 
 /// The result of [`refine`].
 #[derive(Debug, Clone)]
@@ -428,6 +412,17 @@ fn check_runs(compiled: &crate::model::CompiledModel, runs: &[RunData]) -> Resul
 /// Fails with a typed error when the data do not fit the model, or when the starting model
 /// cannot be simulated over the segments from the given states.
 pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<Refined> {
+    refine_holding(model, runs, opts, &[])
+}
+
+/// [`refine`] with the coefficients `fixed[k]` (in the model's term order, output by output)
+/// held at their values: a nominal term the user marked as known. Shorter masks free the rest.
+pub fn refine_holding(
+    model: &Model,
+    runs: &[RunData],
+    opts: &RefineOptions,
+    fixed: &[bool],
+) -> Result<Refined> {
     let t_start = std::time::Instant::now();
     let compiled = model.compile()?;
     let n = compiled.n_state();
@@ -442,7 +437,7 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
     check_runs(&compiled, runs)?;
     let all_coef = compiled.coefficients();
     let free: Vec<usize> = (0..all_coef.len())
-        .filter(|&k| all_coef[k] != 0.0)
+        .filter(|&k| all_coef[k] != 0.0 && !fixed.get(k).copied().unwrap_or(false))
         .collect();
     let out_scale: Vec<f64> = (0..n_out)
         .map(|i| {
@@ -639,34 +634,25 @@ pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<R
     Ok(stats)
 }
 
-/// Samples used to fit each run's initial state before a free-run simulation of the gate.
-pub const GATE_INIT_WINDOW: usize = 200;
-
 /// Free-run simulation error of `model` on `runs`: per output, the root mean square over runs
 /// of the NRMSE (RMS error over the measured output's standard deviation). Each run starts from
-/// its `x0` refined by [`fit_initial_state`] on its first [`GATE_INIT_WINDOW`] samples, as the
-/// identification's test simulation does, so that two models are compared on equal terms. A
-/// run that diverges makes the error infinite.
+/// the [`crate::simulate::initial_state`] on its first [`crate::simulate::INIT_WINDOW`] samples,
+/// as every report does, so that two models are compared on equal terms. A run that diverges
+/// makes the error infinite.
 pub fn free_run_nrmse(model: &Model, runs: &[RunData]) -> Result<Vec<f64>> {
     let compiled = model.compile()?;
     check_runs(&compiled, runs)?;
     let n_out = compiled.n_outputs();
+    let opts = SimOptions {
+        rtol: 1e-6,
+        atol: 1e-9,
+        ..Default::default()
+    };
     let per_run: Vec<Vec<f64>> = runs
         .par_iter()
-        .map(|r| {
-            let opts = SimOptions {
-                run: r.id.clone(),
-                rtol: 1e-6,
-                atol: 1e-9,
-                ..Default::default()
-            };
-            let x0 = fit_initial_state(&compiled, &r.t, &r.y, &r.u, &r.x0, GATE_INIT_WINDOW, &opts);
-            match simulate_model(&compiled, &x0, &r.t, &r.u, &opts) {
-                Ok(tr) => (0..n_out)
-                    .map(|i| rms_nrmse(&tr.series(compiled.offset(i)), &r.y[i]).1)
-                    .collect(),
-                Err(_) => vec![f64::INFINITY; n_out],
-            }
+        .map(|r| match free_run(&compiled, r, INIT_WINDOW, &opts) {
+            Ok(sim) => (0..n_out).map(|i| nrmse(&sim[i], &r.y[i])).collect(),
+            Err(_) => vec![f64::INFINITY; n_out],
         })
         .collect();
     Ok((0..n_out)

@@ -267,9 +267,20 @@ pub struct Term {
     /// Position in the candidate basis (graded-lex order; 0 is the constant).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub index: Option<usize>,
-    /// The monomial as written, e.g. `y_d1^2*u`.
+    /// The monomial as written, e.g. `y_d1^2*u`, or the expression of a named column.
     #[serde(default)]
     pub name: String,
+    /// The expression of a named column (`sign(y_d1)`); `None` for a monomial.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub expression: Option<String>,
+}
+
+/// A named candidate beside the monomials: an expression and its values on the fit's samples
+/// (computed by the caller, on the CPU).
+#[derive(Debug, Clone)]
+pub struct NamedColumn {
+    pub name: String,
+    pub values: Vec<f64>,
 }
 
 /// One breakpoint of the path, in original units.
@@ -349,10 +360,14 @@ impl Model {
         let mut parts: Vec<(String, f64)> = self
             .terms
             .iter()
-            .filter(|t| !t.exponents.is_empty())
+            .filter(|t| !t.exponents.is_empty() || t.expression.is_some())
             .map(|t| (t.name.clone(), t.coefficient))
             .collect();
-        if let Some(c) = self.terms.iter().find(|t| t.exponents.is_empty()) {
+        if let Some(c) = self
+            .terms
+            .iter()
+            .find(|t| t.exponents.is_empty() && t.expression.is_none())
+        {
             parts.push((String::new(), c.coefficient));
         }
         if parts.is_empty() {
@@ -388,6 +403,16 @@ impl Model {
         let mut out = vec![0.0; features.n_samples];
         for t in &self.terms {
             let mut col = vec![t.coefficient; features.n_samples];
+            if let Some(text) = &t.expression {
+                let e = crate::model::Expr::parse(text, &features.names)?;
+                let mut z = vec![0.0; features.n_vars()];
+                for (i, c) in col.iter_mut().enumerate() {
+                    for (k, zk) in z.iter_mut().enumerate() {
+                        *zk = features.column(k)[i];
+                    }
+                    *c *= e.eval(&z);
+                }
+            }
             for (name, e) in &t.exponents {
                 let k = features
                     .names
@@ -425,6 +450,20 @@ impl Regression {
     pub fn fit(
         &self,
         features: &Features,
+        label: &[f64],
+        label_name: &str,
+        weights: Option<&[f64]>,
+    ) -> Result<Model> {
+        self.fit_with_columns(features, &[], label, label_name, weights)
+    }
+
+    /// [`Regression::fit`] with named candidate columns after the monomials (any engine sweeps
+    /// the monomials; the named columns are swept on the CPU beside it, see
+    /// [`crate::engine::WithColumns`]).
+    pub fn fit_with_columns(
+        &self,
+        features: &Features,
+        named: &[NamedColumn],
         label: &[f64],
         label_name: &str,
         weights: Option<&[f64]>,
@@ -471,7 +510,9 @@ impl Regression {
         }
         if decision.kind == EngineKind::Gpu && f32_safe {
             let attempt = GpuEngine::new(features, &basis, GpuOptions::default())
-                .and_then(|mut g| self.fit_with_engine(&basis, &mut g, label, label_name, weights));
+                .and_then(|mut g| {
+                    self.fit_candidates(&basis, named, &mut g, label, label_name, weights)
+                });
             match attempt {
                 Ok(mut model) => {
                     model.diagnostics.notes.splice(0..0, notes);
@@ -500,7 +541,8 @@ impl Regression {
                 ..CpuOptions::default()
             },
         )?;
-        let mut model = self.fit_with_engine(&basis, &mut engine, label, label_name, weights)?;
+        let mut model =
+            self.fit_candidates(&basis, named, &mut engine, label, label_name, weights)?;
         model.diagnostics.notes.splice(0..0, notes);
         Ok(model)
     }
@@ -514,7 +556,35 @@ impl Regression {
         label_name: &str,
         weights: Option<&[f64]>,
     ) -> Result<Model> {
-        if engine.n_candidates() != basis.len() {
+        self.fit_candidates(basis, &[], engine, label, label_name, weights)
+    }
+
+    /// The fit over the candidates `basis` then `named` (the engine's are the basis).
+    fn fit_candidates(
+        &self,
+        basis: &Basis,
+        named: &[NamedColumn],
+        engine: &mut dyn SweepEngine,
+        label: &[f64],
+        label_name: &str,
+        weights: Option<&[f64]>,
+    ) -> Result<Model> {
+        let values: Vec<Vec<f64>> = named.iter().map(|c| c.values.clone()).collect();
+        let mut with = crate::engine::WithColumns::new(engine, &values)?;
+        let engine: &mut dyn SweepEngine = if named.is_empty() {
+            with.into_inner()
+        } else {
+            &mut with
+        };
+        let nb = basis.len();
+        let name_of = |j: usize| {
+            if j < nb {
+                basis.name(j)
+            } else {
+                named[j - nb].name.clone()
+            }
+        };
+        if engine.n_candidates() != basis.len() + named.len() {
             return Err(Error::param(
                 "engine",
                 format!(
@@ -534,7 +604,7 @@ impl Regression {
         let n = self
             .effective_samples
             .map_or(n_rows, |e| (e.round() as usize).clamp(2, n_rows.max(2)));
-        let p = basis.len();
+        let p = nb + named.len();
         let mut scorer = select::EbicScorer::new(n, p, self.ebic_gamma, self.rss_floor);
         let patience = self.ebic_patience;
         // A path that enters as many terms as samples interpolates them (R^2 = 1, eBIC -inf):
@@ -600,13 +670,22 @@ impl Regression {
             }
             let id = support.remove(best.0);
             cols.remove(best.0);
-            pruned.push(basis.name(id));
+            pruned.push(name_of(id));
             ls = select::least_squares(&cols, &y_w)?;
             score = select::ebic(n, ls.rss, support.len(), p, self.ebic_gamma, floor);
         }
 
         let names = basis.names();
         let term = |id: usize, c: f64| {
+            if id >= nb {
+                return Term {
+                    exponents: BTreeMap::new(),
+                    coefficient: c,
+                    index: Some(id),
+                    name: name_of(id),
+                    expression: Some(name_of(id)),
+                };
+            }
             let e = basis.code(id).exponents(names.len());
             Term {
                 exponents: e
@@ -618,6 +697,7 @@ impl Regression {
                 coefficient: c,
                 index: Some(id),
                 name: basis.name(id),
+                expression: None,
             }
         };
         let mut terms: Vec<Term> = support
@@ -647,7 +727,7 @@ impl Regression {
                     .collect();
                 PathPoint {
                     alpha: bp.alpha,
-                    active: bp.active.iter().map(|j| basis.name(*j)).collect(),
+                    active: bp.active.iter().map(|j| name_of(*j)).collect(),
                     active_index: bp.active.clone(),
                     coefficients,
                     intercept,
@@ -673,7 +753,7 @@ impl Regression {
                 .iter()
                 .filter_map(|e| {
                     if let Event::SkippedCollinear { candidate, .. } = e {
-                        Some(basis.name(*candidate))
+                        Some(name_of(*candidate))
                     } else {
                         None
                     }

@@ -859,6 +859,79 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
     }
 }
 
+/// One measured run of a model's outputs and inputs: what refinement and scoring work on.
+#[derive(Debug, Clone)]
+pub struct RunData {
+    pub id: String,
+    /// Sample times (strictly increasing).
+    pub t: Vec<f64>,
+    /// Measured outputs, `[output][sample]`, in the model's output order.
+    pub y: Vec<Vec<f64>>,
+    /// Inputs, `[input][sample]`, in the model's input order.
+    pub u: Vec<Vec<f64>>,
+    /// Guesses of the state at every sample, `[state][sample]` (for instance the smoothed
+    /// derivatives), used to start each refinement segment; `None` starts later segments from a
+    /// simulation of the starting model.
+    pub states: Option<Vec<Vec<f64>>>,
+    /// A guess of the initial state at the first sample.
+    pub x0: Vec<f64>,
+}
+
+/// Samples at the start of a run on which its initial state is fitted: the one convention of
+/// `ctsid simulate`, identify's scores and refinement gate, and discover's reports, so that one
+/// model on one run gets one score everywhere.
+pub const INIT_WINDOW: usize = 200;
+
+/// The initial state of `model` for a measured run: each output's derivatives at the first
+/// sample from a local polynomial fit ([`estimate_initial_derivatives`]), refined on the
+/// model's own simulated outputs over the first `window` samples ([`fit_initial_state`]).
+///
+/// `ys[i]` are the samples of output `i`, `us[c]` the inputs; `run` names the run in errors.
+/// Fails when a run is too short for the local fit or its first samples are not finite.
+pub fn initial_state(
+    model: &CompiledModel,
+    t: &[f64],
+    ys: &[Vec<f64>],
+    us: &[Vec<f64>],
+    window: usize,
+    opts: &SimOptions,
+) -> Result<Vec<f64>> {
+    if ys.len() != model.n_outputs() {
+        return Err(Error::param(
+            "outputs",
+            format!("{} measured outputs for a model of {}", ys.len(), model.n_outputs()),
+        ));
+    }
+    let mut x0 = Vec::with_capacity(model.n_state());
+    for (i, y) in ys.iter().enumerate() {
+        let order = model.orders()[i];
+        let name = &model.names()[model.offset(i)];
+        let what = format!("estimating the initial state of output '{name}' (order {order})");
+        x0.extend(estimate_initial_derivatives(t, y, order, &opts.run, &what)?);
+    }
+    let window = window.max(initial_window(model.orders().iter().copied().max().unwrap_or(1)));
+    Ok(fit_initial_state(model, t, ys, us, &x0, window, opts))
+}
+
+/// The free run of `model` on a measured run from its [`initial_state`] on the first `window`
+/// samples: the simulated outputs, `[output][sample]`.
+pub fn free_run(
+    model: &CompiledModel,
+    run: &RunData,
+    window: usize,
+    opts: &SimOptions,
+) -> Result<Vec<Vec<f64>>> {
+    let opts = SimOptions {
+        run: run.id.clone(),
+        ..opts.clone()
+    };
+    let x0 = initial_state(model, &run.t, &run.y, &run.u, window, &opts)?;
+    let tr = simulate_model(model, &x0, &run.t, &run.u, &opts)?;
+    Ok((0..model.n_outputs())
+        .map(|i| tr.series(model.offset(i)))
+        .collect())
+}
+
 /// Simulates `sys` driven by `input` from state `x0` at `times[0]`, returning the states at every
 /// time in `times` (strictly increasing).
 pub fn simulate<S: System + ?Sized, I: Input + ?Sized>(
@@ -1232,39 +1305,6 @@ impl crate::lm::LeastSquares for InitialState<'_> {
     }
 }
 
-/// Population standard deviation (0 for an empty slice).
-pub fn std_dev(x: &[f64]) -> f64 {
-    if x.is_empty() {
-        return 0.0;
-    }
-    let mean = x.iter().sum::<f64>() / x.len() as f64;
-    (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / x.len() as f64).sqrt()
-}
-
-/// RMS of `sim - meas` and NRMSE = RMS / standard deviation of `meas` (infinite when `meas`
-/// is constant and the error is not zero).
-pub fn rms_nrmse(sim: &[f64], meas: &[f64]) -> (f64, f64) {
-    let n = sim.len().min(meas.len());
-    if n == 0 {
-        return (0.0, 0.0);
-    }
-    let rms = (sim
-        .iter()
-        .zip(meas)
-        .map(|(a, b)| (a - b).powi(2))
-        .sum::<f64>()
-        / n as f64)
-        .sqrt();
-    let sd = std_dev(&meas[..n]);
-    let nrmse = if sd > 0.0 {
-        rms / sd
-    } else if rms == 0.0 {
-        0.0
-    } else {
-        f64::INFINITY
-    };
-    (rms, nrmse)
-}
 
 #[cfg(test)]
 mod tests {
@@ -1404,8 +1444,6 @@ mod tests {
             estimate_initial_derivatives(&t[..10], &y[..10], 3, "r", "x"),
             Err(Error::RunTooShort { .. })
         ));
-        let (rms, nr) = rms_nrmse(&[1.0, 3.0], &[0.0, 2.0]);
-        assert_eq!((rms, nr), (1.0, 1.0));
     }
 
     #[test]

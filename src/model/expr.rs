@@ -1,4 +1,5 @@
-//! A tiny expression language for named effects: `-sign(y_d1)`, `abs(y_d1)*y_d1`, `sqrt(abs(y))*sign(y)`.
+//! The expression language of named model terms: `-sign(y_d1)`, `abs(y_d1)*y_d1`,
+//! `sqrt(abs(y))*sign(y)`.
 //!
 //! Grammar: numbers, variables (the model's state names `y`, `y_d1`, ... and input names),
 //! `+ - * /`, `^` with a numeric exponent, parentheses, and the functions `sign abs sqrt tanh sin
@@ -6,7 +7,14 @@
 //! indices of the evaluation vector `z` when parsing, so an unknown name is a parse error that
 //! names it. The one discontinuity, `sign`, can be evaluated smoothed (`x / sqrt(x^2 + eps^2)`)
 //! for the integrator: Radau with step-size control cannot step across a relay that chatters in a
-//! stick phase.
+//! stick phase. The width `eps` belongs to the variable the argument depends on first (its first
+//! variable), and the model file stores it, so that a model simulates the same everywhere.
+//!
+//! [`Expr::derivative`] differentiates symbolically: the integrator's Newton steps and the
+//! refinement's sensitivities need exact Jacobians of every term. The derivative of a smoothed
+//! `sign` is the slope of the smoothed curve, `eps^2 / (x^2 + eps^2)^(3/2)`, and 0 where it is
+//! exact; those of `abs`, `sat` and `relu` are taken piecewise (their kinks are a set of measure
+//! zero that a Newton step does not need to resolve).
 
 use crate::error::{Error, Result};
 
@@ -20,7 +28,9 @@ enum Node {
     Mul(Box<Node>, Box<Node>),
     Div(Box<Node>, Box<Node>),
     Pow(Box<Node>, f64),
-    Fun(Fun, Box<Node>),
+    /// A function of its argument; the index is the argument's first variable (the one whose
+    /// smoothing width a smoothed `sign` and its slope use), resolved when parsing.
+    Fun(Fun, Box<Node>, Option<usize>),
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,6 +44,11 @@ enum Fun {
     Exp,
     Sat,
     Relu,
+    // Derivatives only (not in the grammar): the slope of the smoothed sign, the unit step
+    // (relu'), and the indicator of |x| < 1 (sat').
+    SignSlope,
+    Step,
+    Inside,
 }
 
 /// Longest expression, in tokens, and deepest nesting of parentheses, calls or signs: parsing
@@ -88,6 +103,55 @@ impl Expr {
         eval(&self.root, z, Some(eps))
     }
 
+    /// `d expr / d z_v` as an expression (see the module docs for the kinks); its text is
+    /// `d(<expr>)/d<v>`, for messages only.
+    pub fn derivative(&self, v: usize) -> Expr {
+        Expr {
+            text: format!("d({})/dz{v}", self.text),
+            root: diff(&self.root, v),
+        }
+    }
+
+    /// Whether the expression is the number 0 (a derivative with respect to a variable it does
+    /// not contain).
+    pub fn is_zero(&self) -> bool {
+        num_of(&self.root) == Some(0.0)
+    }
+
+    /// The indices (into `z`) of the variables the expression reads, in order of appearance.
+    pub fn variables(&self) -> Vec<usize> {
+        let mut v = Vec::new();
+        collect_vars(&self.root, &mut v);
+        v
+    }
+
+    /// The variables whose smoothing width a `sign` in the expression uses.
+    pub fn sign_variables(&self) -> Vec<usize> {
+        fn walk(n: &Node, out: &mut Vec<usize>) {
+            match n {
+                Node::Num(_) | Node::Var(_) => {}
+                Node::Fun(f, a, var) => {
+                    if *f == Fun::Sign {
+                        if let Some(i) = var {
+                            if !out.contains(i) {
+                                out.push(*i)
+                            }
+                        }
+                    }
+                    walk(a, out)
+                }
+                Node::Neg(a) | Node::Pow(a, _) => walk(a, out),
+                Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
+                    walk(a, out);
+                    walk(b, out)
+                }
+            }
+        }
+        let mut v = Vec::new();
+        walk(&self.root, &mut v);
+        v
+    }
+
     /// Whether the expression is a product of integer powers of single variables (a monomial of
     /// the model file), with those exponents.
     pub fn monomial(&self) -> Option<Vec<(usize, u32)>> {
@@ -130,10 +194,36 @@ fn first_var(n: &Node) -> Option<usize> {
     match n {
         Node::Num(_) => None,
         Node::Var(i) => Some(*i),
-        Node::Neg(a) | Node::Pow(a, _) | Node::Fun(_, a) => first_var(a),
+        Node::Neg(a) | Node::Pow(a, _) | Node::Fun(_, a, _) => first_var(a),
         Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
             first_var(a).or_else(|| first_var(b))
         }
+    }
+}
+
+fn collect_vars(n: &Node, out: &mut Vec<usize>) {
+    match n {
+        Node::Num(_) => {}
+        Node::Var(i) => {
+            if !out.contains(i) {
+                out.push(*i)
+            }
+        }
+        Node::Neg(a) | Node::Pow(a, _) | Node::Fun(_, a, _) => collect_vars(a, out),
+        Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
+            collect_vars(a, out);
+            collect_vars(b, out)
+        }
+    }
+}
+
+fn sign(x: f64) -> f64 {
+    if x > 0.0 {
+        1.0
+    } else if x < 0.0 {
+        -1.0
+    } else {
+        0.0
     }
 }
 
@@ -154,20 +244,20 @@ fn eval(n: &Node, z: &[f64], eps: Option<&[f64]>) -> f64 {
                 x.powf(*e)
             }
         }
-        Node::Fun(f, a) => {
+        Node::Fun(f, a, var) => {
             let x = eval(a, z, eps);
+            let width = match (eps, var) {
+                (Some(e), Some(i)) => e.get(*i).copied().filter(|w| *w > 0.0),
+                _ => None,
+            };
             match f {
-                Fun::Sign => match eps.and_then(|e| first_var(a).map(|i| e[i])) {
-                    Some(e) if e > 0.0 => x / (x * x + e * e).sqrt(),
-                    _ => {
-                        if x > 0.0 {
-                            1.0
-                        } else if x < 0.0 {
-                            -1.0
-                        } else {
-                            0.0
-                        }
-                    }
+                Fun::Sign => match width {
+                    Some(e) => x / (x * x + e * e).sqrt(),
+                    None => sign(x),
+                },
+                Fun::SignSlope => match width {
+                    Some(e) => e * e / (x * x + e * e).powf(1.5),
+                    None => 0.0,
                 },
                 Fun::Abs => x.abs(),
                 Fun::Sqrt => x.sqrt(),
@@ -177,7 +267,115 @@ fn eval(n: &Node, z: &[f64], eps: Option<&[f64]>) -> f64 {
                 Fun::Exp => x.exp(),
                 Fun::Sat => x.clamp(-1.0, 1.0),
                 Fun::Relu => x.max(0.0),
+                Fun::Step => (x > 0.0) as u8 as f64,
+                Fun::Inside => (x.abs() < 1.0) as u8 as f64,
             }
+        }
+    }
+}
+
+// Constructors that fold the zeros and ones a derivative produces, so that `d(3*y)/dy` is `3`
+// and not `0*y + 3*1`.
+fn num_of(n: &Node) -> Option<f64> {
+    match n {
+        Node::Num(v) => Some(*v),
+        _ => None,
+    }
+}
+fn add(a: Node, b: Node) -> Node {
+    match (num_of(&a), num_of(&b)) {
+        (Some(x), Some(y)) => Node::Num(x + y),
+        (Some(x), _) if x == 0.0 => b,
+        (_, Some(y)) if y == 0.0 => a,
+        _ => Node::Add(Box::new(a), Box::new(b)),
+    }
+}
+fn sub(a: Node, b: Node) -> Node {
+    match (num_of(&a), num_of(&b)) {
+        (Some(x), Some(y)) => Node::Num(x - y),
+        (_, Some(y)) if y == 0.0 => a,
+        (Some(x), _) if x == 0.0 => neg(b),
+        _ => Node::Sub(Box::new(a), Box::new(b)),
+    }
+}
+fn neg(a: Node) -> Node {
+    match a {
+        Node::Num(x) => Node::Num(-x),
+        Node::Neg(b) => *b,
+        a => Node::Neg(Box::new(a)),
+    }
+}
+fn mul(a: Node, b: Node) -> Node {
+    match (num_of(&a), num_of(&b)) {
+        (Some(x), Some(y)) => Node::Num(x * y),
+        (Some(x), _) | (_, Some(x)) if x == 0.0 => Node::Num(0.0),
+        (Some(x), _) if x == 1.0 => b,
+        (_, Some(y)) if y == 1.0 => a,
+        _ => Node::Mul(Box::new(a), Box::new(b)),
+    }
+}
+fn div(a: Node, b: Node) -> Node {
+    match (num_of(&a), num_of(&b)) {
+        (Some(x), _) if x == 0.0 => Node::Num(0.0),
+        (_, Some(y)) if y == 1.0 => a,
+        _ => Node::Div(Box::new(a), Box::new(b)),
+    }
+}
+fn fun(f: Fun, a: &Node, var: Option<usize>) -> Node {
+    Node::Fun(f, Box::new(a.clone()), var)
+}
+
+/// `d n / d z_v`, folded.
+fn diff(n: &Node, v: usize) -> Node {
+    match n {
+        Node::Num(_) => Node::Num(0.0),
+        Node::Var(i) => Node::Num((*i == v) as u8 as f64),
+        Node::Neg(a) => neg(diff(a, v)),
+        Node::Add(a, b) => add(diff(a, v), diff(b, v)),
+        Node::Sub(a, b) => sub(diff(a, v), diff(b, v)),
+        Node::Mul(a, b) => add(
+            mul(diff(a, v), (**b).clone()),
+            mul((**a).clone(), diff(b, v)),
+        ),
+        // (a/b)' = a'/b - a b' / b^2
+        Node::Div(a, b) => sub(
+            div(diff(a, v), (**b).clone()),
+            div(
+                mul((**a).clone(), diff(b, v)),
+                Node::Pow(b.clone(), 2.0),
+            ),
+        ),
+        Node::Pow(a, e) => {
+            let da = diff(a, v);
+            let inner = if *e == 1.0 {
+                Node::Num(1.0)
+            } else if *e == 2.0 {
+                (**a).clone()
+            } else {
+                Node::Pow(a.clone(), e - 1.0)
+            };
+            mul(mul(Node::Num(*e), inner), da)
+        }
+        Node::Fun(f, a, var) => {
+            let da = diff(a, v);
+            if num_of(&da) == Some(0.0) {
+                return Node::Num(0.0);
+            }
+            let outer = match f {
+                Fun::Sign => fun(Fun::SignSlope, a, *var),
+                Fun::Abs => fun(Fun::Sign, a, None),
+                Fun::Sqrt => div(Node::Num(0.5), fun(Fun::Sqrt, a, *var)),
+                Fun::Tanh => sub(Node::Num(1.0), Node::Pow(Box::new(fun(Fun::Tanh, a, *var)), 2.0)),
+                Fun::Sin => fun(Fun::Cos, a, *var),
+                Fun::Cos => neg(fun(Fun::Sin, a, *var)),
+                Fun::Exp => fun(Fun::Exp, a, *var),
+                Fun::Sat => fun(Fun::Inside, a, *var),
+                Fun::Relu => fun(Fun::Step, a, *var),
+                // Piecewise constant away from their jumps; the slope's own slope is not needed
+                // (Jacobians are first derivatives).
+                Fun::SignSlope | Fun::Step | Fun::Inside => Node::Num(0.0),
+            };
+            mul(outer, da)
         }
     }
 }
@@ -369,7 +567,8 @@ impl Parser<'_> {
                         return Err(self.err("missing ')'"));
                     }
                     self.pos += 1;
-                    return Ok(Node::Fun(f, Box::new(e)));
+                    let var = first_var(&e);
+                    return Ok(Node::Fun(f, Box::new(e), var));
                 }
                 match self.vars.iter().position(|v| *v == name) {
                     Some(i) => Ok(Node::Var(i)),
@@ -403,6 +602,36 @@ mod tests {
         assert!(Expr::parse(&long, &vars).is_err());
         let fine = format!("{}y{}", "(".repeat(60), ")".repeat(60));
         assert!(Expr::parse(&fine, &vars).is_ok());
+    }
+
+    #[test]
+    fn derivatives_match_central_differences() {
+        let v: Vec<String> = ["y", "y_d1", "u"].iter().map(|s| s.to_string()).collect();
+        let eps = [0.0, 0.3, 0.0];
+        for text in [
+            "-0.5*sign(y_d1) + abs(y_d1)*y_d1 - y^3/2 + sqrt(abs(y))",
+            "tanh(2*y_d1)*u - sin(y)*cos(u) + exp(-y^2)",
+            "sat(y/3)*relu(u - 0.1) + y_d1/(1 + y^2) + y^2.5",
+            "sign(y_d1)*u^2 - 3",
+        ] {
+            let e = Expr::parse(text, &v).unwrap();
+            let z = [1.3, -0.4, 0.7];
+            for k in 0..3 {
+                let d = e.derivative(k);
+                let h = 1e-6;
+                let (mut a, mut b) = (z, z);
+                a[k] += h;
+                b[k] -= h;
+                let fd = (e.eval_smooth(&a, &eps) - e.eval_smooth(&b, &eps)) / (2.0 * h);
+                let an = d.eval_smooth(&z, &eps);
+                assert!((fd - an).abs() < 1e-6 * (1.0 + fd.abs()), "{text} d/dz{k}: {an} vs {fd}");
+            }
+        }
+        let e = Expr::parse("3*y + u", &v).unwrap();
+        assert!(e.derivative(1).is_zero());
+        assert_eq!(e.derivative(0).eval(&[0.0; 3]), 3.0);
+        assert_eq!(e.variables(), vec![0, 2]);
+        assert_eq!(Expr::parse("sign(y_d1)*y", &v).unwrap().sign_variables(), vec![1]);
     }
 
     #[test]

@@ -1,0 +1,276 @@
+//! The compiled model: a fast evaluator of every right-hand side, its Jacobians with respect to
+//! states and inputs, and its derivatives with respect to the coefficients.
+//!
+//! Monomials are evaluated as products of powers; expression terms by their parsed tree, with
+//! `sign` smoothed over the widths the model file gives (see [`super::expr`]). Every term's
+//! partial derivatives are prepared once here (monomials by the power rule, expressions
+//! symbolically), so the integrator's Newton matrices and the refinement's sensitivities are
+//! exact derivatives of the very right-hand side the simulation integrates.
+
+use super::expr::Expr;
+use super::{Model, Var};
+use crate::error::{Error, Result};
+
+/// What a compiled term computes, without its coefficient.
+#[derive(Debug, Clone)]
+enum Kind {
+    /// `prod z_v^e` as (slot in z, exponent).
+    Monomial(Vec<(usize, u32)>),
+    /// An expression and its nonzero partial derivatives (slot in z, d expr / d z_slot).
+    Expression { expr: Expr, grad: Vec<(usize, Expr)> },
+}
+
+#[derive(Debug, Clone)]
+struct CTerm {
+    coef: f64,
+    kind: Kind,
+}
+
+impl CTerm {
+    /// The term's value without its coefficient (its derivative with respect to it).
+    fn basis(&self, z: &[f64], eps: &[f64]) -> f64 {
+        match &self.kind {
+            Kind::Monomial(f) => f.iter().fold(1.0, |a, &(v, e)| match e {
+                1 => a * z[v],
+                2 => a * z[v] * z[v],
+                _ => a * z[v].powi(e as i32),
+            }),
+            Kind::Expression { expr, .. } => expr.eval_smooth(z, eps),
+        }
+    }
+
+    /// Adds `coef * d basis / dz` into `grad`.
+    fn add_gradient(&self, z: &[f64], eps: &[f64], grad: &mut [f64]) {
+        match &self.kind {
+            Kind::Monomial(f) => {
+                for (a, &(v, e)) in f.iter().enumerate() {
+                    let mut p = self.coef * e as f64 * z[v].powi(e as i32 - 1);
+                    for (b, &(w, k)) in f.iter().enumerate() {
+                        if a != b {
+                            p *= z[w].powi(k as i32);
+                        }
+                    }
+                    grad[v] += p;
+                }
+            }
+            Kind::Expression { grad: g, .. } => {
+                for (v, d) in g {
+                    grad[*v] += self.coef * d.eval_smooth(z, eps);
+                }
+            }
+        }
+    }
+}
+
+/// Fast evaluator of a model's right-hand sides.
+///
+/// `z` is the concatenation `[state, inputs]` (see [`Model::variable_names`]); the state holds,
+/// for each output, its derivatives `0..n_i-1`.
+#[derive(Debug, Clone)]
+pub struct CompiledModel {
+    orders: Vec<usize>,
+    offsets: Vec<usize>,
+    n_state: usize,
+    n_inputs: usize,
+    terms: Vec<Vec<CTerm>>,
+    names: Vec<String>,
+    /// Smoothing width of `sign` per slot of z (0: exact).
+    eps: Vec<f64>,
+}
+
+impl CompiledModel {
+    pub(super) fn new(m: &Model) -> Result<CompiledModel> {
+        let table = m.variable_table().map_err(|message| Error::Model {
+            path: "<memory>".into(),
+            message,
+        })?;
+        let n_state = m.state_dim();
+        let slot = |v: Var| match v {
+            Var::State(i) => i,
+            Var::Input(i) => n_state + i,
+        };
+        let names = m.variable_names();
+        let mut terms = Vec::with_capacity(m.outputs.len());
+        for o in &m.outputs {
+            let mut ts = Vec::with_capacity(o.terms.len());
+            for t in &o.terms {
+                let kind = match &t.expression {
+                    Some(text) => {
+                        let expr = Expr::parse(text, &names)?;
+                        let grad = expr
+                            .variables()
+                            .into_iter()
+                            .map(|v| (v, expr.derivative(v)))
+                            .filter(|(_, d)| !d.is_zero())
+                            .collect();
+                        Kind::Expression { expr, grad }
+                    }
+                    None => Kind::Monomial(
+                        t.exponents
+                            .iter()
+                            .map(|(n, &e)| (slot(table[n]), e))
+                            .collect(),
+                    ),
+                };
+                ts.push(CTerm {
+                    coef: t.coefficient,
+                    kind,
+                });
+            }
+            terms.push(ts);
+        }
+        let eps = names
+            .iter()
+            .map(|n| m.sign_smoothing.get(n).copied().unwrap_or(0.0))
+            .collect();
+        Ok(CompiledModel {
+            orders: m.outputs.iter().map(|o| o.order).collect(),
+            offsets: (0..m.outputs.len()).map(|i| m.state_offset(i)).collect(),
+            n_state,
+            n_inputs: m.inputs.len(),
+            terms,
+            names,
+            eps,
+        })
+    }
+
+    pub fn n_state(&self) -> usize {
+        self.n_state
+    }
+    pub fn n_inputs(&self) -> usize {
+        self.n_inputs
+    }
+    pub fn n_outputs(&self) -> usize {
+        self.orders.len()
+    }
+    pub fn orders(&self) -> &[usize] {
+        &self.orders
+    }
+    /// Offset of output `i` in the state vector.
+    pub fn offset(&self, i: usize) -> usize {
+        self.offsets[i]
+    }
+    /// Names of z = [state, inputs].
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+    /// Whether any term is an expression rather than a monomial.
+    pub fn has_expressions(&self) -> bool {
+        self.terms
+            .iter()
+            .flatten()
+            .any(|t| matches!(t.kind, Kind::Expression { .. }))
+    }
+
+    /// All coefficients, output by output in term order (the order of the model file).
+    pub fn coefficients(&self) -> Vec<f64> {
+        self.terms
+            .iter()
+            .flat_map(|ts| ts.iter().map(|t| t.coef))
+            .collect()
+    }
+
+    /// Replaces the coefficients (same order as [`CompiledModel::coefficients`]) without
+    /// recompiling: for refinement loops that simulate many coefficient vectors.
+    pub fn set_coefficients(&mut self, c: &[f64]) -> Result<()> {
+        let n: usize = self.terms.iter().map(|ts| ts.len()).sum();
+        if c.len() != n {
+            return Err(Error::param(
+                "coefficients",
+                format!("got {} values for {n} terms", c.len()),
+            ));
+        }
+        for (t, &v) in self.terms.iter_mut().flat_map(|ts| ts.iter_mut()).zip(c) {
+            t.coef = v;
+        }
+        Ok(())
+    }
+
+    /// `P_i(z)`: the highest derivative of output `i` at `z = [state, inputs]`.
+    pub fn eval_output(&self, i: usize, z: &[f64]) -> f64 {
+        self.terms[i]
+            .iter()
+            .map(|t| t.coef * t.basis(z, &self.eps))
+            .sum()
+    }
+
+    /// The value of every term of output `i` at `z` without its coefficient (the regression
+    /// columns of that equation), in file order.
+    pub fn term_values(&self, i: usize, z: &[f64]) -> Vec<f64> {
+        self.terms[i].iter().map(|t| t.basis(z, &self.eps)).collect()
+    }
+
+    /// `d rhs / d c` for the coefficients `coefs` (indices into [`CompiledModel::coefficients`]):
+    /// written row-major `n_state x coefs.len()` into `out`. Each coefficient only moves the
+    /// top derivative of its own output, by the value of its term.
+    pub fn coefficient_jacobian(&self, x: &[f64], u: &[f64], coefs: &[usize], out: &mut [f64]) {
+        let q = coefs.len();
+        out.iter_mut().for_each(|v| *v = 0.0);
+        let mut z = Vec::with_capacity(x.len() + u.len());
+        z.extend_from_slice(x);
+        z.extend_from_slice(u);
+        for (col, &k) in coefs.iter().enumerate() {
+            let mut rest = k;
+            let mut i = 0;
+            while rest >= self.terms[i].len() {
+                rest -= self.terms[i].len();
+                i += 1;
+            }
+            let row = self.offsets[i] + self.orders[i] - 1;
+            out[row * q + col] = self.terms[i][rest].basis(&z, &self.eps);
+        }
+    }
+
+    /// `dP_i/dz` at `z`, written into `grad` (length n_state + n_inputs).
+    pub fn grad_output(&self, i: usize, z: &[f64], grad: &mut [f64]) {
+        grad.iter_mut().for_each(|g| *g = 0.0);
+        for t in &self.terms[i] {
+            t.add_gradient(z, &self.eps, grad);
+        }
+    }
+
+    /// The state derivative: the chains of integrators closed by the right-hand sides.
+    pub fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        // The solver calls this several times per step: no allocation for the usual sizes.
+        let nz = self.n_state + self.n_inputs;
+        let mut stack = [0.0f64; 32];
+        let mut heap = Vec::new();
+        let z: &mut [f64] = if nz <= stack.len() {
+            &mut stack[..nz]
+        } else {
+            heap.resize(nz, 0.0);
+            &mut heap
+        };
+        z[..x.len()].copy_from_slice(x);
+        z[x.len()..x.len() + u.len()].copy_from_slice(u);
+        let z = &*z;
+        for (i, (&n, &o)) in self.orders.iter().zip(&self.offsets).enumerate() {
+            for k in 0..n - 1 {
+                dx[o + k] = x[o + k + 1];
+            }
+            dx[o + n - 1] = self.eval_output(i, z);
+        }
+    }
+
+    /// Jacobian of [`CompiledModel::rhs`] with respect to the state (row-major n x n) and to the
+    /// inputs (row-major n x n_u).
+    pub fn jacobians(&self, x: &[f64], u: &[f64], jx: &mut [f64], ju: &mut [f64]) {
+        let n = self.n_state;
+        let nu = self.n_inputs;
+        let mut z = Vec::with_capacity(n + nu);
+        z.extend_from_slice(x);
+        z.extend_from_slice(u);
+        jx.iter_mut().for_each(|v| *v = 0.0);
+        ju.iter_mut().for_each(|v| *v = 0.0);
+        let mut g = vec![0.0; n + nu];
+        for (i, (&ord, &o)) in self.orders.iter().zip(&self.offsets).enumerate() {
+            for k in 0..ord - 1 {
+                jx[(o + k) * n + o + k + 1] = 1.0;
+            }
+            self.grad_output(i, &z, &mut g);
+            let row = o + ord - 1;
+            jx[row * n..row * n + n].copy_from_slice(&g[..n]);
+            ju[row * nu..row * nu + nu].copy_from_slice(&g[n..]);
+        }
+    }
+}
