@@ -137,13 +137,9 @@ fn augmented_model_file_is_valid_and_carries_the_discovery() {
     let t = back.outputs[0]
         .terms
         .iter()
-        .find(|t| t.expression.as_deref() == Some("sign(y_d1)"))
-        .expect("no sign(y_d1) term in the file");
-    assert_eq!(
-        t.origin,
-        Some(ctsid::model::Origin::Effect("coulomb_friction".into()))
-    );
-    assert!(back.sign_smoothing.contains_key("y_d1"));
+        .find(|t| t.origin == Some(ctsid::model::Origin::Effect("coulomb_friction".into())))
+        .expect("no coulomb_friction term in the file");
+    assert!(t.expression.is_some() && t.interval.is_some(), "{t:?}");
     assert_eq!(&back, d.final_model.as_ref().map(|f| {
         let mut f = f.clone();
         f.extra = back.extra.clone();
@@ -222,14 +218,17 @@ fn sensor_drift_at_low_noise_is_not_named_an_offset() {
     );
 }
 
-/// The same driven tank, seed 0: the friction-like bump beside the outflow law is fitted 0.97 on
-/// the first half of each training run and 0.31 on the second (the level nears empty at
-/// different times); it is left out as not constant in time and the outflow law is named alone.
+/// The same driven tank, seed 0: a friction-like bump beside the outflow law fails its own
+/// gates and is left out; the outflow law is named alone. (With the smoother tuned on every run
+/// the bump passed its bootstrap and was left out as not constant in time, 0.97 on the first
+/// half of each training run and 0.31 on the second; tuned on the training runs alone it is
+/// included in 77 % of the refits and goes at the first gate. The drift gate itself is judged
+/// by `sensor_drift_at_low_noise_is_not_named_an_offset` above.)
 #[test]
-fn effect_that_changes_along_the_runs_is_left_out_beside_a_constant_one() {
+fn a_second_effect_that_fails_its_gates_is_left_out_beside_the_outflow_law() {
     let (j, d) = run_case("tank", 0, 0.03, DRIVEN_TANK);
     assert!(j.pass, "{}\n{}", j.why, d.text());
-    assert_dropped(&d, "not constant in time");
+    assert_dropped(&d, "coulomb_friction");
 }
 
 #[test]

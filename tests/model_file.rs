@@ -85,7 +85,7 @@ fn expression_terms_evaluate_with_their_smoothing_and_exact_gradients() {
     let mut g = vec![0.0; 4];
     c.grad_output(0, &z, &mut g);
     for k in 0..4 {
-        let h = 1e-9 * z[k].abs().max(1e-6);
+        let h = 1e-7 * z[k].abs().max(0.1);
         let (mut a, mut b) = (z, z);
         a[k] += h;
         b[k] -= h;

@@ -103,7 +103,7 @@ mod tests {
         let v = [1.0, 2.0, 3.0, 4.0];
         let mut out = vec![0.0; 3];
         e.sweep(&v, &mut out).unwrap();
-        assert_eq!(out, vec![10.0, 8.5, -2.0]);
+        assert_eq!(out, vec![10.0, 9.5, -2.0]);
         let st = e.column_stats(None).unwrap();
         assert_eq!((st.mean[2], st.norm[2]), (0.0, 2.0));
         let cols = e.columns(&[2, 1]).unwrap();

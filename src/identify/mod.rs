@@ -32,6 +32,7 @@
 //! cannot refuse much). The refined model is kept only if its free-run NRMSE there is lower, and
 //! the report says which was kept ([`RefinementReport`]).
 
+pub mod complete;
 pub mod profile;
 pub mod refine;
 pub mod split;
@@ -309,6 +310,9 @@ pub struct RefinementReport {
     pub refined: Vec<String>,
     pub iterations: usize,
     pub seconds: f64,
+    /// Terms the regression almost took, tried on simulation error after the refinement
+    /// ([`complete`]).
+    pub completion: Vec<complete::Trial>,
 }
 
 /// Everything an identification produces.
@@ -827,6 +831,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let prep = preps.swap_remove(selected).1;
     let mut reports = Vec::new();
     let mut equations = Vec::new();
+    let mut fits = Vec::new();
     for i in 0..ny {
         let (_, _, w, excluded) = prep.design(i, &ord, &split.train);
         let reuse = candidates[i]
@@ -844,6 +849,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
             Some(Profile::new(&e, &l))
         };
         equations.push(equation_of(&m, &settings.outputs[i], ord[i]));
+        fits.push(m.clone());
         reports.push(OutputReport {
             name: settings.outputs[i].clone(),
             candidates: std::mem::take(&mut candidates[i]),
@@ -873,7 +879,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     } else {
         None
     };
-    let refinement = match scored {
+    let mut refinement = match scored {
         Some((m, report)) if settings.refine => {
             model = m;
             if let Some(r) = &report {
@@ -893,6 +899,20 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         }
         _ => None,
     };
+    if let Some(report) = refinement.as_mut() {
+        let (completed, trials) = complete_selected(&model, report, &prep, &outputs, split, &fits)?;
+        for t in trials.iter().filter(|t| t.kept) {
+            say(format!(
+                "completion on simulation error: {} added to '{}' (gate runs better by {:.1} noise standard deviations)",
+                t.term, t.output, t.z
+            ));
+        }
+        if trials.iter().any(|t| t.kept) {
+            report.refined = completed.outputs.iter().map(|o| o.to_text()).collect();
+        }
+        report.completion = trials;
+        model = completed;
+    }
 
     let simulations = simulate_runs(
         &model,
@@ -944,13 +964,9 @@ fn refine_run(model: &ModelFile, prep: &Prepared, outputs: &[usize], r: usize) -
 }
 
 /// Refines the selected model and gates it (see the module docs).
-fn refine_selected(
-    model: &ModelFile,
-    prep: &Prepared,
-    outputs: &[usize],
-    split: &Split,
-) -> Result<(ModelFile, RefinementReport)> {
-    let (fit, gate_runs, gate) = match &split.validation {
+/// The runs a refinement fits, the runs that judge it, and what those are, in words.
+fn gate_split(prep: &Prepared, split: &Split) -> (Vec<usize>, Vec<usize>, &'static str) {
+    match &split.validation {
         Some(v) => (split.train.clone(), v.clone(), "validation runs"),
         None => match split.folds(prep.settings.folds).into_iter().next() {
             Some((fit, held)) if split.train.len() >= 2 => (fit, held, "held-out training fold"),
@@ -960,7 +976,54 @@ fn refine_selected(
                 "training runs (proxy)",
             ),
         },
+    }
+}
+
+/// The near misses of the selected fits tried on simulation error ([`complete`]).
+fn complete_selected(
+    model: &ModelFile,
+    report: &RefinementReport,
+    prep: &Prepared,
+    outputs: &[usize],
+    split: &Split,
+    fits: &[crate::regression::Model],
+) -> Result<(ModelFile, Vec<complete::Trial>)> {
+    let (fit, gate_runs, _) = gate_split(prep, split);
+    // Terms are judged on runs the refinement does not see; with none (one training run and no
+    // validation) a term would be judged on the data it was fitted to.
+    if gate_runs.iter().any(|r| fit.contains(r)) {
+        return Ok((model.clone(), Vec::new()));
+    }
+    let data = |runs: &[usize]| -> Vec<refine::RunData> {
+        runs.iter()
+            .map(|&r| refine_run(model, prep, outputs, r))
+            .collect()
     };
+    let smoothing = |m: &mut ModelFile| prep.sign_smoothing(m, &split.train);
+    // The measurement noise of each output, as the derivative smoother estimated it.
+    let noise: Vec<f64> = (0..outputs.len())
+        .map(|o| prep.derivs[o].first().map_or(0.0, |d| d.noise_sd))
+        .collect();
+    // Refined already on these very runs (a kept refinement on every training run)?
+    let fit_ids: Vec<String> = fit.iter().map(|&r| prep.rs.runs[r].id.clone()).collect();
+    let refined = report.kept && report.fit_runs == fit_ids;
+    complete::complete(
+        (model, refined),
+        fits,
+        (&data(&fit), &data(&gate_runs)),
+        &noise,
+        &prep.settings.refine_options,
+        &smoothing,
+    )
+}
+
+fn refine_selected(
+    model: &ModelFile,
+    prep: &Prepared,
+    outputs: &[usize],
+    split: &Split,
+) -> Result<(ModelFile, RefinementReport)> {
+    let (fit, gate_runs, gate) = gate_split(prep, split);
     let data = |runs: &[usize]| -> Vec<refine::RunData> {
         runs.iter()
             .map(|&r| refine_run(model, prep, outputs, r))
@@ -990,6 +1053,7 @@ fn refine_selected(
         refined: g.refined.as_ref().map_or_else(Vec::new, |r| eqs(&r.model)),
         iterations: g.refined.as_ref().map_or(0, |r| r.lm.iterations),
         seconds: g.refined.as_ref().map_or(0.0, |r| r.seconds),
+        completion: Vec::new(),
     };
     Ok((g.model, report))
 }

@@ -909,8 +909,23 @@ pub fn initial_state(
         let what = format!("estimating the initial state of output '{name}' (order {order})");
         x0.extend(estimate_initial_derivatives(t, y, order, &opts.run, &what)?);
     }
-    let window = window.max(initial_window(model.orders().iter().copied().max().unwrap_or(1)));
-    Ok(fit_initial_state(model, t, ys, us, &x0, window, opts))
+    let first = initial_window(model.orders().iter().copied().max().unwrap_or(1));
+    let window = window.max(first);
+    // By continuation: over a short horizon the outputs are nearly linear in the initial state
+    // whatever the model, so the fit finds the right basin there, and each doubling of the
+    // window starts from the last one's state. Fitted on all 200 samples at once from the
+    // local fit's guess, a quadratic-drag oscillator at 3 % noise (velocity guess -3.3, truth
+    // about 0) went to a wrong minimum (-0.35, 3.5) and scored NRMSE 0.53 against its own
+    // truth; by continuation 0.004.
+    let mut w = (2 * first).min(window);
+    let mut x = x0;
+    loop {
+        x = fit_initial_state(model, t, ys, us, &x, w, opts);
+        if w >= window {
+            return Ok(x);
+        }
+        w = (2 * w).min(window);
+    }
 }
 
 /// The free run of `model` on a measured run from its [`initial_state`] on the first `window`
