@@ -133,16 +133,18 @@ pub fn emps(dir: &str) -> Result<Setup> {
         })
         .collect();
     runs.push(run("pulses", &te[0], &te[1], 2));
-    let records = RecordSet::new(1e-3, vec!["q".into(), "force".into()], runs)?;
+    // The record's own column names, so that the model files written from it simulate on the
+    // record's files with `ctsid simulate`.
+    let records = RecordSet::new(1e-3, cols.iter().map(|c| c.to_string()).collect(), runs)?;
     let (m, fv) = (95.1089, 203.5034);
     let nominal = Model::new(
-        &["force"],
+        &["force_N"],
         vec![OutputEquation::new(
-            "q",
+            "q_m",
             2,
             vec![
-                Term::new(&[("q_d1", 1)], -fv / m),
-                Term::new(&[("force", 1)], 1.0 / m),
+                Term::new(&[("q_m_d1", 1)], -fv / m),
+                Term::new(&[("force_N", 1)], 1.0 / m),
             ],
         )],
         Some(1e-3),
