@@ -1,7 +1,9 @@
 //! # ctsid: continuous-time sparse identification
 //!
 //! ctsid finds continuous-time models `y^(n) = P(y, y', ..., y^(n-1), u)` of real machines from
-//! short, noisy, uniformly sampled input/output runs, with P a sparse multivariate polynomial.
+//! short, noisy, uniformly sampled input/output runs, with P a sparse multivariate polynomial plus,
+//! where the physics needs them, named terms (`sign(y_d1)` for Coulomb friction, `abs(y_d1)*y_d1`
+//! for drag) in one model type ([`model::Model`]).
 //! The modules follow the pipeline:
 //!
 //! | stage | module | what it assumes |
@@ -11,8 +13,9 @@
 //! | candidate basis | [`basis`] | monomials of degree <= 12 in <= 32 variables |
 //! | sweep engines | [`engine`] | CPU (rayon) or GPU (wgpu compute shaders) |
 //! | sparse regression | [`regression`] | LARS / LassoLars and forward OLS, written once against [`engine::SweepEngine`] |
-//! | model file | [`model`] | `ctsid-model/1` JSON, chains of integrators closed by polynomials |
-//! | simulation | [`simulate`] | Radau IIA with error control, inputs with known breakpoints |
+//! | model file | [`model`] | `ctsid-model/2` JSON, chains of integrators closed by sums of monomials and named terms |
+//! | simulation | [`simulate`] | Radau IIA with error control, inputs with known breakpoints; one initial-state convention |
+//! | scores | [`metrics`] | RMS, NRMSE and fit % of a simulated output |
 //! | built-in plants | [`plants`] | throttle and MIMO plants with known truth, seeded excitation and noise |
 //! | identification | [`identify`] | order search (eta-rule), sigma-weighted fits, test profiles, free-run simulation |
 //! | demonstrations | [`demo`] | the paper's throttle experiment and a MIMO plant, judged against truth |

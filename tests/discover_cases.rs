@@ -140,12 +140,23 @@ fn augmented_model_file_is_valid_and_carries_the_discovery() {
         .find(|t| t.origin == Some(ctsid::model::Origin::Effect("coulomb_friction".into())))
         .expect("no coulomb_friction term in the file");
     assert!(t.expression.is_some() && t.interval.is_some(), "{t:?}");
-    assert_eq!(&back, d.final_model.as_ref().map(|f| {
-        let mut f = f.clone();
-        f.extra = back.extra.clone();
-        f.outputs[0].terms.iter_mut().zip(&back.outputs[0].terms).for_each(|(a, b)| a.interval = b.interval);
-        f
-    }).as_ref().unwrap());
+    assert_eq!(
+        &back,
+        d.final_model
+            .as_ref()
+            .map(|f| {
+                let mut f = f.clone();
+                f.extra = back.extra.clone();
+                f.outputs[0]
+                    .terms
+                    .iter_mut()
+                    .zip(&back.outputs[0].terms)
+                    .for_each(|(a, b)| a.interval = b.interval);
+                f
+            })
+            .as_ref()
+            .unwrap()
+    );
 }
 
 #[test]

@@ -55,7 +55,10 @@ fn emps_names_coulomb_friction_near_the_published_force() {
     // `ctsid simulate` at the RMS the discovery reports for that run (one initial-state
     // convention for both).
     let model = common::cli::temp_file("emps", "augmented.json", "");
-    d.augmented_model(&s.nominal).unwrap().write(&model).unwrap();
+    d.augmented_model(&s.nominal)
+        .unwrap()
+        .write(&model)
+        .unwrap();
     let pulses = format!("{dir}/EMPS_test_DATA_EMPS_PULSES.csv");
     let (ok, out, err) = ctsid(&["simulate", &model, &pulses, "--tau 0.001"]);
     assert!(ok, "{err}");
@@ -128,7 +131,9 @@ fn emps_identify_with_a_sign_term_is_small_and_simulates_the_pulses_record() {
     let terms = &m.outputs[0].terms;
     assert!(terms.len() <= 6, "{} terms:\n{out}", terms.len());
     assert!(
-        terms.iter().any(|t| t.expression.as_deref() == Some("sign(q_m_d1)")),
+        terms
+            .iter()
+            .any(|t| t.expression.as_deref() == Some("sign(q_m_d1)")),
         "{out}"
     );
     let rms: f64 = out
@@ -138,7 +143,10 @@ fn emps_identify_with_a_sign_term_is_small_and_simulates_the_pulses_record() {
         .and_then(|v| v.trim().parse().ok())
         .unwrap_or_else(|| panic!("no pulses row in:\n{out}"));
     // Measured 7.94 mm.
-    eprintln!("EMPS identify --term sign(q_m_d1): {} terms, test RMS {rms:.4e} m\n{m}", terms.len());
+    eprintln!(
+        "EMPS identify --term sign(q_m_d1): {} terms, test RMS {rms:.4e} m\n{m}",
+        terms.len()
+    );
     assert!(rms < 8e-3, "test RMS {rms} m\n{out}");
 }
 

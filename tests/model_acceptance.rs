@@ -39,7 +39,11 @@ fn csv(case: &Case, runs: &[usize], truth: bool) -> String {
                 .iter()
                 .enumerate()
                 .map(|(c, v)| {
-                    let x = if truth && c == 0 { case.truth[r][i] } else { v[i] };
+                    let x = if truth && c == 0 {
+                        case.truth[r][i]
+                    } else {
+                        v[i]
+                    };
                     format!("{x:e}")
                 })
                 .collect();
@@ -52,7 +56,8 @@ fn csv(case: &Case, runs: &[usize], truth: bool) -> String {
 /// The files of case `name` for `seed`, in a folder of the test `tag` (tests run in parallel).
 fn files(name: &str, seed: u64, tag: &str) -> (Case, Files) {
     let case = generate(name, seed, 0.03).unwrap();
-    let dir = std::env::temp_dir().join(format!("ctsid-accept-{tag}-{name}-{}", std::process::id()));
+    let dir =
+        std::env::temp_dir().join(format!("ctsid-accept-{tag}-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let all: Vec<usize> = (0..case.records.runs.len()).collect();
     let data = dir.join("data.csv");
@@ -119,7 +124,10 @@ fn discover_adds(name: &str, seed: u64, family: &str) {
         .terms
         .iter()
         .find(|t| t.origin == Some(Origin::Effect(family.into())));
-    assert!(effect.is_some(), "{family} not in the written model:\n{out}");
+    assert!(
+        effect.is_some(),
+        "{family} not in the written model:\n{out}"
+    );
     let aug_path = f.dir.join("aug.json");
     let after = simulate_clean(aug_path.to_str().unwrap(), &f);
     let before = simulate_clean(&f.nominal, &f);
@@ -196,7 +204,10 @@ fn identify_with(name: &str, seed: u64, extra: &str, term: &str) -> (f64, f64) {
 #[test]
 fn identify_finds_coulomb_friction_as_a_named_term() {
     let (c, nrmse) = identify_with("coulomb", 101, "--degree 1 --term sign(y_d1)", "sign(y_d1)");
-    assert!((c + 0.5).abs() <= 0.05, "sign(y_d1) coefficient {c}, truth -0.5");
+    assert!(
+        (c + 0.5).abs() <= 0.05,
+        "sign(y_d1) coefficient {c}, truth -0.5"
+    );
     assert!(nrmse < 2.0, "{nrmse} %");
 }
 
@@ -208,7 +219,10 @@ fn identify_finds_quadratic_drag_as_a_named_term() {
         "--degree 1 --term abs(y_d1)*y_d1",
         "abs(y_d1)*y_d1",
     );
-    assert!((c + 0.8).abs() <= 0.08, "abs(y_d1)*y_d1 coefficient {c}, truth -0.8");
+    assert!(
+        (c + 0.8).abs() <= 0.08,
+        "abs(y_d1)*y_d1 coefficient {c}, truth -0.8"
+    );
     assert!(nrmse < 2.0, "{nrmse} %");
 }
 
@@ -225,11 +239,7 @@ fn control_runs_on_an_augmented_model() {
     let (aug, _) = discover_cli(&case, &f);
     assert!(aug.outputs[0].terms.iter().any(|t| t.expression.is_some()));
     let path = f.dir.join("aug.json");
-    let (ok, out, err) = ctsid(&[
-        "control",
-        path.to_str().unwrap(),
-        "--setpoint 1 --from 0",
-    ]);
+    let (ok, out, err) = ctsid(&["control", path.to_str().unwrap(), "--setpoint 1 --from 0"]);
     assert!(ok, "{err}");
     assert!(out.contains("settling"), "{out}");
     std::fs::remove_dir_all(&f.dir).ok();

@@ -32,9 +32,12 @@ fn err_of(text: &str) -> String {
 fn mixed() -> Model {
     let mut m = siso();
     m.outputs[0].terms.push(
-        Term::expression("sign(y_d1)", -0.21).with_origin(Origin::Effect("coulomb_friction".into())),
+        Term::expression("sign(y_d1)", -0.21)
+            .with_origin(Origin::Effect("coulomb_friction".into())),
     );
-    m.outputs[0].terms.push(Term::expression("abs(y_d1)*y_d1", 0.5));
+    m.outputs[0]
+        .terms
+        .push(Term::expression("abs(y_d1)*y_d1", 0.5));
     m.outputs[0].terms[1].std_error = Some(1.5);
     m.outputs[0].terms[1].origin = Some(Origin::Identified);
     m.outputs[0].terms[4].interval = Some([-0.25, -0.17]);
@@ -78,8 +81,7 @@ fn expression_terms_evaluate_with_their_smoothing_and_exact_gradients() {
     let z = [0.3, 1e-5, -0.7, 2.0];
     let w = 2.5e-5f64;
     let smooth_sign = 1e-5 / (1e-10f64 + w * w).sqrt();
-    let expect = 37664.0 - 23978.0 * 0.3 + 0.125 * 1e-10 * 2.0 - 675.7 * -0.7
-        - 0.21 * smooth_sign
+    let expect = 37664.0 - 23978.0 * 0.3 + 0.125 * 1e-10 * 2.0 - 675.7 * -0.7 - 0.21 * smooth_sign
         + 0.5 * 1e-5 * 1e-5;
     assert!((c.eval_output(0, &z) - expect).abs() < 1e-9 * expect.abs());
     let mut g = vec![0.0; 4];
@@ -90,7 +92,11 @@ fn expression_terms_evaluate_with_their_smoothing_and_exact_gradients() {
         a[k] += h;
         b[k] -= h;
         let fd = (c.eval_output(0, &a) - c.eval_output(0, &b)) / (2.0 * h);
-        assert!((fd - g[k]).abs() < 1e-5 * (1.0 + fd.abs()), "d/dz{k}: {} vs {fd}", g[k]);
+        assert!(
+            (fd - g[k]).abs() < 1e-5 * (1.0 + fd.abs()),
+            "d/dz{k}: {} vs {fd}",
+            g[k]
+        );
     }
 }
 
@@ -104,18 +110,25 @@ fn unknown_and_misspelt_keys_are_named() {
     let e = err_of(&v2(r#"{"exponent":{"y":1},"coefficient":-1}"#));
     assert!(e.contains("term 1") && e.contains("\"exponent\""), "{e}");
     assert_eq!(e.lines().count(), 1);
-    let e = err_of(&v2(r#"{"exponents":{"y":1},"expression":"sign(y_d1)","coefficient":-1}"#));
+    let e = err_of(&v2(
+        r#"{"exponents":{"y":1},"expression":"sign(y_d1)","coefficient":-1}"#,
+    ));
     assert!(e.contains("both"), "{e}");
     let e = err_of(&v2(r#"{"expression":"sign(v)","coefficient":-1}"#));
     assert!(e.contains("unknown variable 'v'"), "{e}");
     let e = err_of(&v2(r#"{"expression":"sgn(y_d1)","coefficient":-1}"#));
     assert!(e.contains("unknown function 'sgn'"), "{e}");
-    let e = err_of(&v2(r#"{"exponents":{"y":1},"coefficient":-1,"stderr":0.1}"#));
+    let e = err_of(&v2(
+        r#"{"exponents":{"y":1},"coefficient":-1,"stderr":0.1}"#,
+    ));
     assert!(e.contains("\"stderr\""), "{e}");
     let e = err_of(
         r#"{"format":"ctsid-model/2","inputs":["u"],"outputs":[{"name":"y","order":2,"terms":[],"selected_order":2}]}"#,
     );
-    assert!(e.contains("output 'y'") && e.contains("selected_order"), "{e}");
+    assert!(
+        e.contains("output 'y'") && e.contains("selected_order"),
+        "{e}"
+    );
     let e = err_of(
         r#"{"format":"ctsid-model/2","inputs":["u"],"extras":1,"outputs":[{"name":"y","order":2,"terms":[]}]}"#,
     );

@@ -6,9 +6,9 @@
 
 use ctsid::demo::records;
 use ctsid::identify::{identify, Orders, Settings, Split};
+use ctsid::metrics::rms_nrmse;
 use ctsid::plants::{dataset, Plant, ThrottlePreset};
 use ctsid::regression::EngineChoice;
-use ctsid::metrics::rms_nrmse;
 
 #[test]
 fn identify_refines_the_throttle_and_reports_it() {

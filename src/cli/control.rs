@@ -19,7 +19,8 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct ControlArgs {
-    /// Model file (ctsid-model/1, one output and one input) the controller is designed on.
+    /// Model file (ctsid-model/2 or /1, one output and one input) the controller is designed on;
+    /// named terms (friction, drag) are linearised with their exact derivatives.
     pub model: PathBuf,
     /// The output value to hold.
     #[arg(long, allow_hyphen_values = true)]

@@ -13,7 +13,7 @@ use std::path::PathBuf;
 pub struct DiscoverArgs {
     /// CSV file with a header row.
     pub data: PathBuf,
-    /// The nominal model file (ctsid-model/1, one output).
+    /// The nominal model file (ctsid-model/2 or /1, one output).
     #[arg(long)]
     pub nominal: PathBuf,
     /// Run (experiment) id column (without it the file is one run: cut it with --segment).

@@ -13,8 +13,8 @@
 //! errors naming row and column.
 
 use clap::Args;
-use ctsid::model::Model;
 use ctsid::metrics::rms_nrmse;
+use ctsid::model::Model;
 use ctsid::simulate::{free_run, RunData, SimOptions, INIT_WINDOW};
 use ctsid::util::num4;
 use ctsid::Result;

@@ -5,12 +5,12 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use crate::simulate::{free_run, RunData, SimOptions};
 use super::Options;
 use crate::derivatives::{differentiate_runs, DerivativeOptions};
 use crate::error::{Error, Result};
 use crate::model::{Model, OutputEquation, Term};
 use crate::records::{CsvSpec, RecordSet, Run};
+use crate::simulate::{free_run, RunData, SimOptions};
 
 /// Records, nominal model and options of one benchmark, and how many samples the benchmark's
 /// convention gives a model to set its initial state (scored on the rest).

@@ -9,7 +9,6 @@
 //! Coulomb friction in the truth is `Fc tanh(v / 1e-3)` (a relay the integrator can step across;
 //! at velocities of order 1 it is a sign function).
 
-
 use crate::error::Result;
 use crate::model::{Model, OutputEquation, Term};
 use crate::plants::noise::add_noise;

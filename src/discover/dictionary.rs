@@ -7,8 +7,8 @@
 //! `v` is the highest derivative of the output below the model's order (`y_d1` for a second-order
 //! mechanical model, `y` itself for a first-order one).
 
-use crate::model::Expr;
 use crate::error::{Error, Result};
+use crate::model::Expr;
 
 /// One named candidate.
 #[derive(Debug, Clone)]

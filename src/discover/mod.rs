@@ -42,18 +42,18 @@ use serde::Serialize;
 
 use crate::derivatives::{differentiate_runs, DerivativeOptions};
 use crate::error::{Error, Result};
+use crate::identify::refine::{refine_holding, RefineOptions};
+use crate::metrics::{nrmse, rms_nrmse};
+use crate::model::Expr;
+use crate::model::Origin;
 use crate::model::{derivative_name, Model, Term};
 use crate::plants::noise::percentile;
 use crate::plants::rng::Rng;
 use crate::records::RecordSet;
+use crate::simulate::{free_run, RunData, SimOptions, INIT_WINDOW};
 use crate::util::num4;
 use dictionary::{num, Effect, Scales};
-use crate::model::Expr;
 use fit::{Gram, Problem};
-use crate::identify::refine::{refine_holding, RefineOptions};
-use crate::metrics::{nrmse, rms_nrmse};
-use crate::model::Origin;
-use crate::simulate::{free_run, RunData, SimOptions, INIT_WINDOW};
 
 /// Settings of one discovery.
 #[derive(Debug, Clone)]
@@ -603,8 +603,10 @@ impl Prepared {
             let e = &self.effects[k];
             let term = match e.expr.monomial() {
                 Some(mono) => {
-                    let ex: Vec<(&str, u32)> =
-                        mono.iter().map(|&(v, p)| (self.vars[v].as_str(), p)).collect();
+                    let ex: Vec<(&str, u32)> = mono
+                        .iter()
+                        .map(|&(v, p)| (self.vars[v].as_str(), p))
+                        .collect();
                     Term::new(&ex, c)
                 }
                 None => {
@@ -614,7 +616,8 @@ impl Prepared {
                     Term::expression(e.expr.text(), c)
                 }
             };
-            eq.terms.push(term.with_origin(Origin::Effect(e.family.clone())));
+            eq.terms
+                .push(term.with_origin(Origin::Effect(e.family.clone())));
         }
         m.degree = m.degree.max(
             m.outputs[0]
@@ -1614,7 +1617,10 @@ impl Discovery {
     /// the `discovery` section. `nominal` must be the model the discovery was run with.
     pub fn augmented_model(&self, nominal: &Model) -> Result<Model> {
         let fm = self.final_model.as_ref().ok_or_else(|| {
-            Error::param("discovery", "has no final model (it was not run by discover)")
+            Error::param(
+                "discovery",
+                "has no final model (it was not run by discover)",
+            )
         })?;
         let same_nominal = nominal.outputs.len() == 1
             && fm.outputs[0].terms.len() == nominal.outputs[0].terms.len() + self.effects.len()

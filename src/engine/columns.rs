@@ -53,7 +53,11 @@ impl SweepEngine for WithColumns<'_> {
         let sw: f64 = (0..self.n_samples()).map(w).sum();
         for c in self.columns {
             let m = c.iter().enumerate().map(|(i, x)| w(i) * x).sum::<f64>() / sw;
-            let ss: f64 = c.iter().enumerate().map(|(i, x)| w(i) * (x - m) * (x - m)).sum();
+            let ss: f64 = c
+                .iter()
+                .enumerate()
+                .map(|(i, x)| w(i) * (x - m) * (x - m))
+                .sum();
             s.mean.push(m);
             s.norm.push(ss.sqrt());
         }
@@ -78,10 +82,9 @@ impl SweepEngine for WithColumns<'_> {
                         .next()
                         .ok_or_else(|| Error::Numerical("engine returned too few columns".into()))
                 } else {
-                    self.columns
-                        .get(j - nb)
-                        .cloned()
-                        .ok_or_else(|| Error::param("columns", format!("candidate {j} out of range")))
+                    self.columns.get(j - nb).cloned().ok_or_else(|| {
+                        Error::param("columns", format!("candidate {j} out of range"))
+                    })
                 }
             })
             .collect()

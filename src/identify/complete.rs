@@ -10,22 +10,26 @@
 //! support, or entering the path after it; at most [`CANDIDATES`] per output, in that order) is
 //! tried: appended at its path coefficient, the model refined on the fit runs, and kept when its
 //! free runs on the gate runs (runs the refinement does not see) fit the measurement
-//! significantly better. The test is on the change of the squared error, `dSSE = sum (s_b - y)^2
-//! - (s_a - y)^2 = sum d (s_b + s_a - 2 y_true) - 2 sum d e` with `d = s_b - s_a` and `e` the
-//! measurement noise: without a real gain the first sum is small and the second has standard
-//! deviation `2 sigma sqrt(sum d^2)`, so a term is kept when `z = dSSE / (2 sigma sqrt(sum
-//! d^2)) >= `[`Z_KEEP`] (outputs weighted by their noise variance). A relative threshold on the
-//! NRMSE cannot do this: against the measurement a right model cannot go below the noise (3 %
-//! noise: NRMSE 0.058 on those runs), and a term that halves the model error moves the total
-//! from 0.065 to 0.061. This is forward selection on simulation error over a handful of
-//! candidates the derivative fit ranked, not over the whole basis: each trial costs one
-//! refinement.
+//! significantly better. The test is on the change of the squared error,
+//! `dSSE = sum (s_b - y)^2 - (s_a - y)^2 = sum d (s_b + s_a - 2 y_true) - 2 sum d e`, with
+//! `d = s_b - s_a` and `e` the measurement noise: without a real gain the first sum is small and
+//! the second has standard deviation `2 sigma sqrt(sum d^2)`, so a term is kept when
+//! `z = dSSE / (2 sigma sqrt(sum d^2))` reaches [`Z_KEEP`] (outputs weighted by their noise
+//! variance), and when the error above the noise floor drops by [`MIN_GAIN`]. A threshold on
+//! the NRMSE alone cannot do this: against the measurement a right model cannot go below the
+//! noise (3 % noise: NRMSE 0.058 on those runs), and a term that halves the model error moves the
+//! total from 0.065 to 0.061. This is forward selection on simulation error over a handful of
+//! candidates the derivative fit ranked, not over the whole basis; a linearisation screens them
+//! first ([`screen`]), so that only promising ones cost a refinement.
 
 use super::refine::{refine, RefineOptions, RunData};
 use crate::error::Result;
-use crate::simulate::{free_run, SimOptions, INIT_WINDOW};
 use crate::model::{Expr, Model, Origin, Term};
 use crate::regression::Model as Fit;
+use crate::simulate::{free_run, SimOptions, INIT_WINDOW};
+
+/// Free runs on several runs, `[run][output][sample]`.
+type Sims = Vec<Vec<Vec<f64>>>;
 
 /// Most multiple-shooting iterations of a trial's refinement.
 pub const TRIAL_ITERATIONS: usize = 8;
@@ -115,7 +119,7 @@ fn term_of(name: &str, vars: &[String], coefficient: f64) -> Option<Term> {
 }
 
 /// The free runs of `m` on every gate run (`[run][output][sample]`), `None` if one fails.
-fn simulations(m: &Model, runs: &[RunData]) -> Option<Vec<Vec<Vec<f64>>>> {
+fn simulations(m: &Model, runs: &[RunData]) -> Option<Sims> {
     use rayon::prelude::*;
     let c = m.compile().ok()?;
     let opts = SimOptions {
@@ -207,7 +211,7 @@ fn screened_out(best: &Model, i: usize, name: &str) -> Trial {
 /// One trial: `best` with the candidate `(output, name, path coefficient)` appended, refined on
 /// the fit runs and judged on the gate runs against `best_sims`; the refined model and its free
 /// runs when it passes.
-#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+#[allow(clippy::too_many_arguments)]
 fn try_term(
     best: &Model,
     best_sims: &[Vec<Vec<f64>>],
@@ -217,7 +221,7 @@ fn try_term(
     noise: &[f64],
     opts: &RefineOptions,
     smoothing: &dyn Fn(&mut Model),
-) -> (Trial, Option<(Model, Vec<Vec<Vec<f64>>>)>) {
+) -> (Trial, Option<(Model, Sims)>) {
     let mut trial = Trial {
         output: best.outputs[i].name.clone(),
         term: name.to_string(),
@@ -326,7 +330,10 @@ fn screen(
     let mut aug = best.clone();
     let mut index: Vec<Option<usize>> = Vec::new();
     for (i, name, _) in pending {
-        let at = aug.outputs[..=*i].iter().map(|o| o.terms.len()).sum::<usize>();
+        let at = aug.outputs[..=*i]
+            .iter()
+            .map(|o| o.terms.len())
+            .sum::<usize>();
         match term_of(name, vars, 0.0) {
             Some(t) => {
                 aug.outputs[*i].terms.push(t);
@@ -391,7 +398,11 @@ fn screen(
         .map(|k| {
             let Some(k) = k else { return false };
             let mut set = base.clone();
-            set.push(cols.iter().position(|c| c == k).expect("a candidate column"));
+            set.push(
+                cols.iter()
+                    .position(|c| c == k)
+                    .expect("a candidate column"),
+            );
             let e1 = (left(&set) - floor).max(0.0);
             // Excess in NRMSE units goes with the square root of the excess sum of squares.
             e1.sqrt() <= (1.0 - 0.5 * MIN_GAIN) * e0.sqrt()
@@ -450,13 +461,22 @@ pub fn complete(
     // (a constant tried before the missing damping took part of its place).
     while !pending.is_empty() {
         let promising = screen(&best, &pending, &vars, fit_runs, noise, smoothing);
-        let round: Vec<(Trial, Option<(Model, Vec<Vec<Vec<f64>>>)>)> = pending
+        let round: Vec<(Trial, Option<(Model, Sims)>)> = pending
             .iter()
             .zip(&promising)
             .map(|((i, name, c), &p)| {
                 if p {
                     let runs = (fit_runs, gate_runs);
-                    try_term(&best, &best_sims, (*i, name, *c), &vars, runs, noise, opts, smoothing)
+                    try_term(
+                        &best,
+                        &best_sims,
+                        (*i, name, *c),
+                        &vars,
+                        runs,
+                        noise,
+                        opts,
+                        smoothing,
+                    )
                 } else {
                     (screened_out(&best, *i, name), None)
                 }

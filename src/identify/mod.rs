@@ -40,10 +40,10 @@ pub mod split;
 use crate::derivatives::{differentiate_runs, DerivativeOptions, Derivatives};
 use crate::engine::Features;
 use crate::error::{Error, Result};
+use crate::metrics::rms_nrmse;
 use crate::model::{derivative_name, Model as ModelFile, OutputEquation, Term as ModelTerm};
 use crate::records::RecordSet;
 use crate::regression::{EngineChoice, Method, Regression};
-use crate::metrics::rms_nrmse;
 use crate::simulate::{initial_state, simulate_model, SimOptions, INIT_WINDOW};
 use crate::util::num4;
 
@@ -217,7 +217,8 @@ impl Settings {
             .collect();
         names.extend(self.inputs.iter().cloned());
         for t in &self.terms {
-            crate::model::Expr::parse(t, &names).map_err(|e| Error::param("term", e.to_string()))?;
+            crate::model::Expr::parse(t, &names)
+                .map_err(|e| Error::param("term", e.to_string()))?;
         }
         if let Some((_, j)) = crate::util::first_repeat(&self.terms) {
             return Err(Error::param(
@@ -557,7 +558,11 @@ impl Prepared<'_> {
         let ord: Vec<usize> = model.outputs.iter().map(|o| o.order).collect();
         for i in 0..model.outputs.len() {
             for t in &model.outputs[i].terms {
-                let Some(e) = t.expression.as_deref().and_then(|e| crate::model::Expr::parse(e, &names).ok()) else {
+                let Some(e) = t
+                    .expression
+                    .as_deref()
+                    .and_then(|e| crate::model::Expr::parse(e, &names).ok())
+                else {
                     continue;
                 };
                 for v in e.sign_variables() {
@@ -666,8 +671,7 @@ fn prepare<'a>(
         .map(|i| {
             equation_data(
                 rs,
-                outputs,
-                inputs,
+                (outputs, inputs),
                 &derivs,
                 i,
                 max_order,
@@ -914,13 +918,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         model = completed;
     }
 
-    let simulations = simulate_runs(
-        &model,
-        rs,
-        &outputs,
-        &prep.inputs,
-        &split.test,
-    )?;
+    let simulations = simulate_runs(&model, rs, &outputs, &prep.inputs, &split.test)?;
     say(format!("identified in {:.2} s", t.elapsed().as_secs_f64()));
     let weighting = if settings.weighting {
         "samples weighted by 1/(1+(sigma_label/median sigma)^2); labels with sigma above 3x the median, and the first and last m samples of each run (m = smoother states), left out".into()
@@ -1156,8 +1154,7 @@ pub(crate) fn simulate_runs(
 /// weight the samples.
 fn equation_data(
     rs: &RecordSet,
-    outputs: &[usize],
-    inputs: &[usize],
+    (outputs, inputs): (&[usize], &[usize]),
     derivs: &[Vec<Derivatives>],
     i: usize,
     max_order: usize,

@@ -45,8 +45,8 @@ use rayon::prelude::*;
 
 use crate::error::{Error, Result};
 use crate::lm::{cost, LeastSquares, LmStats};
-use crate::model::{CompiledModel, Model};
 use crate::metrics::nrmse;
+use crate::model::{CompiledModel, Model};
 use crate::simulate::{
     free_run, simulate_model, simulate_model_sensitivities, SimOptions, Trajectory, INIT_WINDOW,
 };

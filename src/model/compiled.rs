@@ -17,7 +17,10 @@ enum Kind {
     /// `prod z_v^e` as (slot in z, exponent).
     Monomial(Vec<(usize, u32)>),
     /// An expression and its nonzero partial derivatives (slot in z, d expr / d z_slot).
-    Expression { expr: Expr, grad: Vec<(usize, Expr)> },
+    Expression {
+        expr: Expr,
+        grad: Vec<(usize, Expr)>,
+    },
 }
 
 #[derive(Debug, Clone)]
@@ -197,7 +200,10 @@ impl CompiledModel {
     /// The value of every term of output `i` at `z` without its coefficient (the regression
     /// columns of that equation), in file order.
     pub fn term_values(&self, i: usize, z: &[f64]) -> Vec<f64> {
-        self.terms[i].iter().map(|t| t.basis(z, &self.eps)).collect()
+        self.terms[i]
+            .iter()
+            .map(|t| t.basis(z, &self.eps))
+            .collect()
     }
 
     /// `d rhs / d c` for the coefficients `coefs` (indices into [`CompiledModel::coefficients`]):

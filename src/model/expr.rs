@@ -282,6 +282,7 @@ fn num_of(n: &Node) -> Option<f64> {
         _ => None,
     }
 }
+#[allow(clippy::redundant_guards)] // float literals in patterns read worse
 fn add(a: Node, b: Node) -> Node {
     match (num_of(&a), num_of(&b)) {
         (Some(x), Some(y)) => Node::Num(x + y),
@@ -290,6 +291,7 @@ fn add(a: Node, b: Node) -> Node {
         _ => Node::Add(Box::new(a), Box::new(b)),
     }
 }
+#[allow(clippy::redundant_guards)] // float literals in patterns read worse
 fn sub(a: Node, b: Node) -> Node {
     match (num_of(&a), num_of(&b)) {
         (Some(x), Some(y)) => Node::Num(x - y),
@@ -305,6 +307,7 @@ fn neg(a: Node) -> Node {
         a => Node::Neg(Box::new(a)),
     }
 }
+#[allow(clippy::redundant_guards)] // float literals in patterns read worse
 fn mul(a: Node, b: Node) -> Node {
     match (num_of(&a), num_of(&b)) {
         (Some(x), Some(y)) => Node::Num(x * y),
@@ -314,6 +317,7 @@ fn mul(a: Node, b: Node) -> Node {
         _ => Node::Mul(Box::new(a), Box::new(b)),
     }
 }
+#[allow(clippy::redundant_guards)] // float literals in patterns read worse
 fn div(a: Node, b: Node) -> Node {
     match (num_of(&a), num_of(&b)) {
         (Some(x), _) if x == 0.0 => Node::Num(0.0),
@@ -340,10 +344,7 @@ fn diff(n: &Node, v: usize) -> Node {
         // (a/b)' = a'/b - a b' / b^2
         Node::Div(a, b) => sub(
             div(diff(a, v), (**b).clone()),
-            div(
-                mul((**a).clone(), diff(b, v)),
-                Node::Pow(b.clone(), 2.0),
-            ),
+            div(mul((**a).clone(), diff(b, v)), Node::Pow(b.clone(), 2.0)),
         ),
         Node::Pow(a, e) => {
             let da = diff(a, v);
@@ -365,7 +366,10 @@ fn diff(n: &Node, v: usize) -> Node {
                 Fun::Sign => fun(Fun::SignSlope, a, *var),
                 Fun::Abs => fun(Fun::Sign, a, None),
                 Fun::Sqrt => div(Node::Num(0.5), fun(Fun::Sqrt, a, *var)),
-                Fun::Tanh => sub(Node::Num(1.0), Node::Pow(Box::new(fun(Fun::Tanh, a, *var)), 2.0)),
+                Fun::Tanh => sub(
+                    Node::Num(1.0),
+                    Node::Pow(Box::new(fun(Fun::Tanh, a, *var)), 2.0),
+                ),
                 Fun::Sin => fun(Fun::Cos, a, *var),
                 Fun::Cos => neg(fun(Fun::Sin, a, *var)),
                 Fun::Exp => fun(Fun::Exp, a, *var),
@@ -624,14 +628,20 @@ mod tests {
                 b[k] -= h;
                 let fd = (e.eval_smooth(&a, &eps) - e.eval_smooth(&b, &eps)) / (2.0 * h);
                 let an = d.eval_smooth(&z, &eps);
-                assert!((fd - an).abs() < 1e-6 * (1.0 + fd.abs()), "{text} d/dz{k}: {an} vs {fd}");
+                assert!(
+                    (fd - an).abs() < 1e-6 * (1.0 + fd.abs()),
+                    "{text} d/dz{k}: {an} vs {fd}"
+                );
             }
         }
         let e = Expr::parse("3*y + u", &v).unwrap();
         assert!(e.derivative(1).is_zero());
         assert_eq!(e.derivative(0).eval(&[0.0; 3]), 3.0);
         assert_eq!(e.variables(), vec![0, 2]);
-        assert_eq!(Expr::parse("sign(y_d1)*y", &v).unwrap().sign_variables(), vec![1]);
+        assert_eq!(
+            Expr::parse("sign(y_d1)*y", &v).unwrap().sign_variables(),
+            vec![1]
+        );
     }
 
     #[test]

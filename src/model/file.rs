@@ -412,7 +412,10 @@ fn read_output(
     let terms = raw_terms
         .into_iter()
         .enumerate()
-        .map(|(k, t)| read_term(t, output_names, v1).map_err(|m| format!("output '{}', term {}: {m}", o.name, k + 1)))
+        .map(|(k, t)| {
+            read_term(t, output_names, v1)
+                .map_err(|m| format!("output '{}', term {}: {m}", o.name, k + 1))
+        })
         .collect::<std::result::Result<Vec<_>, _>>()?;
     Ok(OutputEquation {
         name: o.name,
@@ -422,15 +425,16 @@ fn read_output(
 }
 
 /// One term of a file; the message says what is wrong with it (the caller names it).
-fn read_term(
-    t: RawTerm,
-    output_names: &[String],
-    v1: bool,
-) -> std::result::Result<Term, String> {
+fn read_term(t: RawTerm, output_names: &[String], v1: bool) -> std::result::Result<Term, String> {
     if let Some(k) = t.extra.keys().next() {
         return Err(format!("unknown key \"{k}\" (known: {TERM_KEYS})"));
     }
-    if v1 && (t.expression.is_some() || t.std_error.is_some() || t.interval.is_some() || t.origin.is_some()) {
+    if v1
+        && (t.expression.is_some()
+            || t.std_error.is_some()
+            || t.interval.is_some()
+            || t.origin.is_some())
+    {
         return Err(format!(
             "expressions, standard errors, intervals and origins need \"format\": \"{FORMAT}\""
         ));
@@ -477,9 +481,14 @@ fn read_exponents(
             return Err(format!("'{name}' appears twice in the exponents{note}"));
         }
         // The range is validate_at's; here only what a u32 can hold.
-        let e = v.as_u64().and_then(|e| u32::try_from(e).ok()).ok_or_else(|| {
-            format!("exponent of '{name}' is {v}; exponents must be integers in 0..={MAX_EXPONENT}")
-        })?;
+        let e = v
+            .as_u64()
+            .and_then(|e| u32::try_from(e).ok())
+            .ok_or_else(|| {
+                format!(
+                    "exponent of '{name}' is {v}; exponents must be integers in 0..={MAX_EXPONENT}"
+                )
+            })?;
         if e > 0 {
             exponents.insert(name.clone(), e);
         }
@@ -651,7 +660,10 @@ impl Model {
         }
         for o in &self.outputs {
             if o.order == 0 {
-                return Err(format!("output '{}' has order 0; orders start at 1", o.name));
+                return Err(format!(
+                    "output '{}' has order 0; orders start at 1",
+                    o.name
+                ));
             }
             if o.order > MAX_ORDER {
                 return Err(format!(
@@ -784,7 +796,6 @@ impl Model {
         CompiledModel::new(self)
     }
 }
-
 
 impl std::fmt::Display for OutputEquation {
     /// `q_d2 = -2.13992*q_d1 + 0.0105145*force - 0.210733*sign(q_d1)`: coefficients to six

@@ -509,8 +509,8 @@ impl Regression {
             ));
         }
         if decision.kind == EngineKind::Gpu && f32_safe {
-            let attempt = GpuEngine::new(features, &basis, GpuOptions::default())
-                .and_then(|mut g| {
+            let attempt =
+                GpuEngine::new(features, &basis, GpuOptions::default()).and_then(|mut g| {
                     self.fit_candidates(&basis, named, &mut g, label, label_name, weights)
                 });
             match attempt {

@@ -899,7 +899,11 @@ pub fn initial_state(
     if ys.len() != model.n_outputs() {
         return Err(Error::param(
             "outputs",
-            format!("{} measured outputs for a model of {}", ys.len(), model.n_outputs()),
+            format!(
+                "{} measured outputs for a model of {}",
+                ys.len(),
+                model.n_outputs()
+            ),
         ));
     }
     let mut x0 = Vec::with_capacity(model.n_state());
@@ -1319,7 +1323,6 @@ impl crate::lm::LeastSquares for InitialState<'_> {
         ))
     }
 }
-
 
 #[cfg(test)]
 mod tests {
