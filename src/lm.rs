@@ -1,6 +1,6 @@
-//! Levenberg-Marquardt, written once for the three simulation-error fits of the crate: the
-//! refinement of identified models ([`crate::identify::refine`]), the refit of nominal-plus-effect
-//! models ([`crate::discover::sim`]) and the initial-state fit of a free run
+//! Levenberg-Marquardt, written once for the two simulation-error fits of the crate: the
+//! refinement of every model's coefficients and initial states ([`crate::identify::refine`],
+//! which discover uses too) and the initial-state fit of a free run
 //! ([`crate::simulate::fit_initial_state`]). Each supplies its residuals and its normal equations
 //! (they know the Jacobian's structure: blocks per segment or per run, sensitivities from the
 //! simulator) through [`LeastSquares`]; the damping logic lives here.

@@ -20,7 +20,7 @@
 //! noise (3 % noise: NRMSE 0.058 on those runs), and a term that halves the model error moves the
 //! total from 0.065 to 0.061. This is forward selection on simulation error over a handful of
 //! candidates the derivative fit ranked, not over the whole basis; a linearisation screens them
-//! first ([`screen`]), so that only promising ones cost a refinement.
+//! first (`screen`), so that only promising ones cost a refinement.
 
 use super::refine::{refine, RefineOptions, RunData};
 use crate::error::Result;
