@@ -189,6 +189,11 @@ fn identify_with(name: &str, seed: u64, extra: &str, term: &str) -> (f64, f64) {
     ]);
     assert!(ok, "{err}");
     let model = Model::read(&m).unwrap();
+    // The equation printed is the model written.
+    assert!(
+        out.contains(&model.outputs[0].to_string()),
+        "{out}\n{model}"
+    );
     let c = model.outputs[0]
         .terms
         .iter()
@@ -242,5 +247,44 @@ fn control_runs_on_an_augmented_model() {
     let (ok, out, err) = ctsid(&["control", path.to_str().unwrap(), "--setpoint 1 --from 0"]);
     assert!(ok, "{err}");
     assert!(out.contains("settling"), "{out}");
+    std::fs::remove_dir_all(&f.dir).ok();
+}
+
+/// Runs outside the split never change the model: the same identification on a file without the
+/// test runs (and without the two runs no list names) writes the same model, byte for byte.
+#[test]
+fn runs_outside_the_split_do_not_change_the_model() {
+    let (case, f) = files("coulomb", 106, "split");
+    let used: Vec<usize> = TRAIN.iter().chain(&VALIDATION).copied().collect();
+    let fewer = f.dir.join("fewer.csv");
+    std::fs::write(&fewer, csv(&case, &used, false)).unwrap();
+    let identify_on = |data: &str, name: &str, test: bool| {
+        let m = f.dir.join(name).to_str().unwrap().to_string();
+        let mut args = vec![
+            "identify",
+            data,
+            "--output y --input u --order 2 --degree 1 --quiet --term sign(y_d1)",
+            "--run-column run --time-column t",
+        ];
+        let (tl, vl, sl) = (
+            ids(&case, &TRAIN),
+            ids(&case, &VALIDATION),
+            ids(&case, &TEST),
+        );
+        args.extend(["--train", &tl, "--validation", &vl]);
+        if test {
+            args.extend(["--test", &sl]);
+        }
+        args.extend(["-o", &m]);
+        let (ok, _, err) = ctsid(&args);
+        assert!(ok, "{err}");
+        let mut model = Model::read(&m).unwrap();
+        // The training section records the scores on the test runs; the model is the rest.
+        model.extra.clear();
+        model.to_json_string().unwrap()
+    };
+    let all = identify_on(&f.data, "all.json", true);
+    let only = identify_on(fewer.to_str().unwrap(), "only.json", false);
+    assert_eq!(all, only);
     std::fs::remove_dir_all(&f.dir).ok();
 }
