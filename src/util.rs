@@ -41,3 +41,155 @@ pub fn short(x: f64) -> String {
         format!("{x:e}")
     }
 }
+
+/// A file written whole or not at all: the bytes go to a temporary file in the target's folder
+/// (`.NAME.tmp-PID`), renamed over the target by [`AtomicFile::commit`]. Dropped without a
+/// commit (an error on the way), the temporary file is removed and the target is untouched; a
+/// process killed half way leaves the target as it was (and the temporary file beside it).
+pub struct AtomicFile {
+    target: std::path::PathBuf,
+    tmp: std::path::PathBuf,
+    file: Option<std::io::BufWriter<std::fs::File>>,
+}
+
+impl AtomicFile {
+    /// Creates the temporary file beside `target`.
+    pub fn create(target: &std::path::Path) -> crate::Result<AtomicFile> {
+        let io = |e: std::io::Error| crate::Error::Io {
+            path: target.display().to_string(),
+            message: e.to_string(),
+        };
+        let name = target.file_name().ok_or_else(|| crate::Error::Io {
+            path: target.display().to_string(),
+            message: "not a file name".into(),
+        })?;
+        let mut tmp_name = std::ffi::OsString::from(".");
+        tmp_name.push(name);
+        tmp_name.push(format!(".tmp-{}", std::process::id()));
+        let tmp = target.with_file_name(tmp_name);
+        let file = std::fs::File::create(&tmp).map_err(io)?;
+        Ok(AtomicFile {
+            target: target.to_path_buf(),
+            tmp,
+            file: Some(std::io::BufWriter::new(file)),
+        })
+    }
+
+    /// Flushes and renames the temporary file over the target.
+    pub fn commit(mut self) -> crate::Result<()> {
+        let io = |e: std::io::Error| crate::Error::Io {
+            path: self.target.display().to_string(),
+            message: e.to_string(),
+        };
+        let file = self.file.take().expect("committed once");
+        let file = file.into_inner().map_err(|e| io(e.into_error()))?;
+        file.sync_all().map_err(io)?;
+        drop(file);
+        std::fs::rename(&self.tmp, &self.target).map_err(io)
+    }
+}
+
+impl std::io::Write for AtomicFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.file.as_mut().expect("open until committed").write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.file.as_mut().expect("open until committed").flush()
+    }
+}
+
+impl Drop for AtomicFile {
+    fn drop(&mut self) {
+        if self.file.take().is_some() {
+            let _ = std::fs::remove_file(&self.tmp);
+        }
+    }
+}
+
+/// Writes `bytes` to `path` whole or not at all ([`AtomicFile`]).
+pub fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> crate::Result<()> {
+    use std::io::Write;
+    let mut f = AtomicFile::create(path)?;
+    f.write_all(bytes).map_err(|e| crate::Error::Io {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    f.commit()
+}
+
+#[cfg(test)]
+mod atomic_tests {
+    use super::*;
+    use std::io::Write;
+
+    #[test]
+    fn a_file_is_replaced_whole_or_left_as_it_was() {
+        let dir = std::env::temp_dir().join(format!("ctsid-atomic-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("out.csv");
+        std::fs::write(&p, "old").unwrap();
+        // An error half way (the writer dropped without commit): the old content stays, no
+        // temporary file is left.
+        {
+            let mut f = AtomicFile::create(&p).unwrap();
+            f.write_all(b"new, half").unwrap();
+        }
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "old");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        write_atomic(&p, b"new").unwrap();
+        assert_eq!(std::fs::read_to_string(&p).unwrap(), "new");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
+
+/// Opens `path` for reading when it is a regular file of at most `max_bytes` (if given): a
+/// folder, a pipe or a device (`/dev/zero` never ends, a FIFO without a writer never answers)
+/// is refused before it is opened, with a message that says which it is.
+pub fn open_regular(
+    path: &std::path::Path,
+    max_bytes: Option<u64>,
+) -> crate::Result<std::fs::File> {
+    let err = |message: String| crate::Error::Io {
+        path: path.display().to_string(),
+        message,
+    };
+    let m = std::fs::metadata(path).map_err(|e| err(e.to_string()))?;
+    if m.is_dir() {
+        return Err(err("is a folder; give a file".into()));
+    }
+    if !m.is_file() {
+        return Err(err(
+            "is a pipe, a socket or a device, not a regular file; save the data to a file first"
+                .into(),
+        ));
+    }
+    if let Some(max) = max_bytes.filter(|&max| m.len() > max) {
+        return Err(err(format!(
+            "is {} bytes; a file of this kind is at most {max}",
+            m.len()
+        )));
+    }
+    std::fs::File::open(path).map_err(|e| err(e.to_string()))
+}
+
+#[cfg(test)]
+mod open_tests {
+    #[test]
+    fn folders_devices_and_oversized_files_are_refused_up_front() {
+        let dir = std::env::temp_dir();
+        let e = super::open_regular(&dir, None).unwrap_err().to_string();
+        assert!(e.contains("is a folder"), "{e}");
+        let dev = std::path::Path::new("/dev/zero");
+        if dev.exists() {
+            let e = super::open_regular(dev, None).unwrap_err().to_string();
+            assert!(e.contains("not a regular file"), "{e}");
+        }
+        let p = dir.join(format!("ctsid-open-{}", std::process::id()));
+        std::fs::write(&p, "12345").unwrap();
+        assert!(super::open_regular(&p, Some(5)).is_ok());
+        let e = super::open_regular(&p, Some(4)).unwrap_err().to_string();
+        assert!(e.contains("at most 4"), "{e}");
+        std::fs::remove_file(&p).ok();
+    }
+}

@@ -283,7 +283,7 @@ fn write_trace(path: &PathBuf, tr: &control::Trace, setpoint: f64, names: &[Stri
         path: path.display().to_string(),
         message: e.to_string(),
     };
-    let mut w = std::io::BufWriter::new(std::fs::File::create(path).map_err(io)?);
+    let mut w = ctsid::util::AtomicFile::create(path)?;
     let hats: Vec<String> = names.iter().map(|n| format!("{n}_hat")).collect();
     writeln!(w, "t,setpoint,y,y_measured,{},u", hats.join(",")).map_err(io)?;
     for i in 0..tr.t.len() {
@@ -300,7 +300,7 @@ fn write_trace(path: &PathBuf, tr: &control::Trace, setpoint: f64, names: &[Stri
         )
         .map_err(io)?;
     }
-    w.flush().map_err(io)
+    w.commit()
 }
 
 fn write_plots(

@@ -73,11 +73,10 @@ pub fn write_with_columns(
         )));
     }
     let out_name = output.map_or("standard output".to_string(), |o| o.display().to_string());
-    let sink: Box<dyn Write> = match output {
-        Some(o) => Box::new(std::fs::File::create(o).map_err(|e| Error::Io {
-            path: out_name.clone(),
-            message: e.to_string(),
-        })?),
+    // A file is written whole or not at all (Ctrl-C on a long write leaves the old one).
+    let mut file = output.map(ctsid::util::AtomicFile::create).transpose()?;
+    let sink: Box<dyn Write + '_> = match file.as_mut() {
+        Some(f) => Box::new(f),
         None => Box::new(std::io::stdout().lock()),
     };
     let mut w = csv::Writer::from_writer(sink);
@@ -104,5 +103,7 @@ pub fn write_with_columns(
     w.flush().map_err(|e| Error::Io {
         path: out_name.clone(),
         message: e.to_string(),
-    })
+    })?;
+    drop(w);
+    file.map_or(Ok(()), |f| f.commit())
 }

@@ -145,10 +145,7 @@ pub fn run(a: RegressArgs) -> Result<()> {
     if let Some(out) = &a.output {
         let text =
             serde_json::to_string_pretty(&model).map_err(|e| Error::InvalidData(e.to_string()))?;
-        std::fs::write(out, text).map_err(|e| Error::Io {
-            path: out.display().to_string(),
-            message: e.to_string(),
-        })?;
+        ctsid::util::write_atomic(out, text.as_bytes())?;
         eprintln!("model written to {}", out.display());
     }
     Ok(())

@@ -1,12 +1,12 @@
 //! `ctsid simulate MODEL.json DATA.csv [--run-column R] [--tau T] [--time-column C] [--segment S] [-o SIM.csv]`
 //!
 //! Simulates every run of a record from an initial state estimated from its first samples, with
-//! the inputs interpolated linearly between samples. The initial state is found in two steps:
-//! a least-squares polynomial of degree n+1 on the first max(15, 4(n+2)) samples of each output,
-//! differentiated at the first sample (`ctsid::simulate::estimate_initial_derivatives`), then
-//! refined by Gauss-Newton on the model's own simulated outputs over the first `--init-window`
-//! samples (default 200; `ctsid::simulate::fit_initial_state`), which corrects the fast modes
-//! and the noise that a local fit cannot. Prints RMS and NRMSE (RMS error over the
+//! the inputs interpolated linearly between samples, by the library's one convention
+//! (`ctsid::simulate::initial_state`, as identify and discover score models): a least-squares
+//! polynomial of degree n+1 on the first max(15, 4(n+2)) samples of each output, differentiated
+//! at the first sample, then refined by Levenberg-Marquardt on the model's own simulated outputs
+//! over windows that double up to the first `--init-window` samples (default 200), which
+//! corrects the fast modes and the noise that a local fit cannot. Prints RMS and NRMSE (RMS error over the
 //! standard deviation of the measured output) per run and output, and over all runs (pooled
 //! samples); `-o` writes the data with one `<output>_sim` column per output beside it.
 //! The data are read by the shared record loader ([`RecordSet`]): runs, uniform time, one-line

@@ -85,14 +85,21 @@ pub fn siso_order(model: &Model) -> Result<usize> {
 
 /// `P(y, 0, ..., 0, u)`, its derivative in u and the sum of its terms' magnitudes (the scale a
 /// root is judged against), at rest at output `y`.
-fn rest_eval(c: &CompiledModel, size: &CompiledModel, n: usize, y: f64, u: f64) -> (f64, f64, f64) {
+fn rest_eval(c: &CompiledModel, n: usize, y: f64, u: f64) -> (f64, f64, f64) {
     let mut z = vec![0.0; n + 1];
     z[0] = y;
     z[n] = u;
     let mut g = vec![0.0; n + 1];
     c.grad_output(0, &z, &mut g);
-    let za: Vec<f64> = z.iter().map(|v| v.abs()).collect();
-    (c.eval_output(0, &z), g[n], size.eval_output(0, &za))
+    // The size of the sum the root cancels: sum |c_k phi_k(z)| over the terms (for named terms
+    // too, where |c| at |z| says nothing: cos(y) or s*sat(u/s) - u can come out negative).
+    let size: f64 = c
+        .term_values(0, &z)
+        .iter()
+        .zip(c.coefficients())
+        .map(|(v, k)| (k * v).abs())
+        .sum();
+    (c.eval_output(0, &z), g[n], size)
 }
 
 /// Starting inputs for the steady-input search, nearest zero first.
@@ -112,14 +119,8 @@ pub fn steady_input(model: &Model, y: f64) -> Result<f64> {
         ));
     }
     let c = model.compile()?;
-    let mut abs = model.clone();
-    abs.outputs[0]
-        .terms
-        .iter_mut()
-        .for_each(|t| t.coefficient = t.coefficient.abs());
-    let size = abs.compile()?;
     let name = &model.outputs[0].name;
-    let (p0, _, _) = rest_eval(&c, &size, n, y, 0.0);
+    let (p0, _, _) = rest_eval(&c, n, y, 0.0);
     if !p0.is_finite() {
         return Err(Error::InvalidData(format!(
             "the model is not finite at rest at {name} = {y:?}; choose another value"
@@ -129,7 +130,7 @@ pub fn steady_input(model: &Model, y: f64) -> Result<f64> {
     let mut zero_slope_root = false;
     for &start in &STARTS {
         let mut u = start;
-        let (mut p, mut dp, mut sz) = rest_eval(&c, &size, n, y, u);
+        let (mut p, mut dp, mut sz) = rest_eval(&c, n, y, u);
         for _ in 0..100 {
             if p.abs() <= 1e-12 * sz || dp == 0.0 || !dp.is_finite() {
                 break;
@@ -140,7 +141,7 @@ pub fn steady_input(model: &Model, y: f64) -> Result<f64> {
             let mut moved = false;
             for _ in 0..40 {
                 let un = u - lambda * step;
-                let (pn, dpn, szn) = rest_eval(&c, &size, n, y, un);
+                let (pn, dpn, szn) = rest_eval(&c, n, y, un);
                 if pn.is_finite() && pn.abs() < p.abs() {
                     (u, p, dp, sz) = (un, pn, dpn, szn);
                     moved = true;
@@ -165,7 +166,7 @@ pub fn steady_input(model: &Model, y: f64) -> Result<f64> {
     match best {
         Some(u) => Ok(u),
         None if zero_slope_root || (0..=3).all(|k| {
-            let (_, dp, _) = rest_eval(&c, &size, n, y, STARTS[k]);
+            let (_, dp, _) = rest_eval(&c, n, y, STARTS[k]);
             dp == 0.0
         }) => Err(Error::InvalidData(format!(
             "the input has no effect on the model at {name} = {y:?} (dP/du = 0 where it would hold it): it cannot be controlled there; choose another setpoint"

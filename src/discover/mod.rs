@@ -26,8 +26,8 @@
 //! any other.
 //!
 //! Assumptions: one output (the model file may have several; discover refuses them with an error),
-//! uniformly sampled runs, only `y` and the inputs measured; initial states of the free runs come
-//! from the derivative smoother at the first sample.
+//! uniformly sampled runs, only `y` and the inputs measured; initial states of the free runs are
+//! fitted on each run's first samples ([`crate::simulate::initial_state`]).
 
 pub mod benchmarks;
 pub mod cases;
@@ -342,12 +342,21 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         median,
         p99,
     };
+    // The nominal's monomials and its named terms: the dictionary offers neither again.
     let nom_monos: Vec<Vec<(usize, u32)>> = eq
         .terms
         .iter()
+        .filter(|t| t.is_monomial())
         .map(|t| monomial_exponents(t, &vars))
         .collect();
-    let effects = dictionary::build(&vars, n, &scales, &nom_monos, &o.user_effects)?;
+    let bare = |e: &str| -> String { e.chars().filter(|c| !c.is_whitespace()).collect() };
+    let nom_named: Vec<String> = eq
+        .terms
+        .iter()
+        .filter_map(|t| t.expression.as_deref().map(bare))
+        .collect();
+    let mut effects = dictionary::build(&vars, n, &scales, &nom_monos, &o.user_effects)?;
+    effects.retain(|e| !nom_named.contains(&bare(e.expr.text())));
     let effects = distinct_on_data(effects, &o.user_effects, &zhat, &o.train)?;
     // Zero crossings of the smoothed output (the raw one crosses its mean at every noise sample).
     let train_y: Vec<&[f64]> = o.train.iter().map(|&r| zhat[r][0].as_slice()).collect();
@@ -419,7 +428,7 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
             x0: (0..n).map(|k| der[ri].values[k][0]).collect(),
         });
     }
-    let eps: Vec<f64> = sd.iter().map(|s| 1e-3 * s).collect();
+    let eps: Vec<f64> = sd.iter().map(|s| crate::identify::SIGN_WIDTH * s).collect();
     Ok(Prepared {
         nominal: nominal.clone(),
         vars,
@@ -595,6 +604,7 @@ impl Prepared {
         let eq = &mut m.outputs[0];
         for (t, &c) in eq.terms.iter_mut().zip(&self.theta0) {
             t.coefficient = c;
+            t.origin.get_or_insert(Origin::Nominal);
         }
         for (k, &j) in self.free.iter().enumerate() {
             eq.terms[j].coefficient += delta.get(k).copied().unwrap_or(0.0);

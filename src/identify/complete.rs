@@ -405,7 +405,8 @@ fn screen(
             );
             let e1 = (left(&set) - floor).max(0.0);
             // Excess in NRMSE units goes with the square root of the excess sum of squares.
-            e1.sqrt() <= (1.0 - 0.5 * MIN_GAIN) * e0.sqrt()
+            // Nothing above the floor: nothing a term could show.
+            e0 > 0.0 && e1.sqrt() <= (1.0 - 0.5 * MIN_GAIN) * e0.sqrt()
         })
         .collect()
 }
@@ -500,9 +501,12 @@ pub fn complete(
         }
         pending.remove(k);
     }
-    // Without a kept term the model stays as given (its own refinement was gated).
-    if best == start {
-        best = model.clone();
+    // Without a kept term the model stays as given (its own refinement was gated), and so it
+    // does when the completed model, refined without a gate where the given one was not
+    // refined on these runs, does not beat the given one on the gate runs.
+    if best == start || gate_nrmse(&best_sims, gate_runs) >= gate {
+        trials.iter_mut().for_each(|t| t.kept = false);
+        return Ok((model.clone(), trials));
     }
     Ok((best, trials))
 }

@@ -31,6 +31,13 @@
 //! runs (refined on the others; with one training run, the training run itself, a proxy that
 //! cannot refuse much). The refined model is kept only if its free-run NRMSE there is lower, and
 //! the report says which was kept ([`RefinementReport`]).
+//!
+//! # Named terms and completion
+//! `Settings::terms` adds named candidate columns (`sign(y_d1)`, ...) beside the monomials of
+//! every equation. After the refinement, the terms the regression almost took are tried on
+//! simulation error ([`complete`]): a small true term hidden behind a correlated larger one in
+//! the derivative fit (viscous damping beside quadratic drag) comes back there. The derivative
+//! smoother is tuned on the training runs only, so that test runs never influence a fit.
 
 pub mod complete;
 pub mod profile;
@@ -71,6 +78,10 @@ pub const ROBUST_ITERATIONS: usize = 3;
 /// d = 3: fewer extra terms, a larger free-run error). A sparse, exact equation is what a
 /// control engineer asked for. `Settings::label_floor` overrides it.
 pub const LABEL_FLOOR: f64 = 1.0;
+
+/// Smoothing width of a `sign` term, as a fraction of its variable's spread on the training
+/// runs (discover uses the same).
+pub const SIGN_WIDTH: f64 = 1e-3;
 
 /// Highest order an identification searches or fits (its derivatives go one order higher).
 pub const MAX_ORDER: usize = 6;
@@ -220,7 +231,13 @@ impl Settings {
             crate::model::Expr::parse(t, &names)
                 .map_err(|e| Error::param("term", e.to_string()))?;
         }
-        if let Some((_, j)) = crate::util::first_repeat(&self.terms) {
+        // Compared as the model file compares expressions: without spaces.
+        let bare: Vec<String> = self
+            .terms
+            .iter()
+            .map(|t| t.chars().filter(|c| !c.is_whitespace()).collect())
+            .collect();
+        if let Some((_, j)) = crate::util::first_repeat(&bare) {
             return Err(Error::param(
                 "term",
                 format!("'{}' is given twice", self.terms[j]),
@@ -557,22 +574,23 @@ impl Prepared<'_> {
         let names = model.variable_names();
         let ord: Vec<usize> = model.outputs.iter().map(|o| o.order).collect();
         for i in 0..model.outputs.len() {
-            for t in &model.outputs[i].terms {
-                let Some(e) = t
-                    .expression
-                    .as_deref()
-                    .and_then(|e| crate::model::Expr::parse(e, &names).ok())
-                else {
-                    continue;
-                };
-                for v in e.sign_variables() {
-                    let name = &names[v];
-                    let f = self.design(i, &ord, train).0;
-                    if let Some(k) = f.names.iter().position(|n| n == name) {
-                        let sd = crate::metrics::std_dev(f.column(k));
-                        if sd > 0.0 {
-                            model.sign_smoothing.insert(name.clone(), 1e-3 * sd);
-                        }
+            let vars: Vec<usize> = model.outputs[i]
+                .terms
+                .iter()
+                .filter_map(|t| t.expression.as_deref())
+                .filter_map(|e| crate::model::Expr::parse(e, &names).ok())
+                .flat_map(|e| e.sign_variables())
+                .collect();
+            if vars.is_empty() {
+                continue;
+            }
+            let f = self.design(i, &ord, train).0;
+            for v in vars {
+                let name = &names[v];
+                if let Some(k) = f.names.iter().position(|n| n == name) {
+                    let sd = crate::metrics::std_dev(f.column(k));
+                    if sd > 0.0 {
+                        model.sign_smoothing.insert(name.clone(), SIGN_WIDTH * sd);
                     }
                 }
             }
@@ -961,7 +979,6 @@ fn refine_run(model: &ModelFile, prep: &Prepared, outputs: &[usize], r: usize) -
     }
 }
 
-/// Refines the selected model and gates it (see the module docs).
 /// The runs a refinement fits, the runs that judge it, and what those are, in words.
 fn gate_split(prep: &Prepared, split: &Split) -> (Vec<usize>, Vec<usize>, &'static str) {
     match &split.validation {
@@ -1015,6 +1032,7 @@ fn complete_selected(
     )
 }
 
+/// Refines the selected model and gates it (see the module docs).
 fn refine_selected(
     model: &ModelFile,
     prep: &Prepared,
@@ -1073,8 +1091,8 @@ fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<
     })
 }
 
-/// Free-run simulation of a model on some runs, starting from the smoothed derivatives at the
-/// first sample; a diverging run is reported, not fatal.
+/// Free-run simulation of a model on some runs, from the one initial-state convention
+/// ([`initial_state`]); a diverging run is reported, not fatal.
 pub(crate) fn simulate_runs(
     model: &ModelFile,
     rs: &RecordSet,

@@ -157,14 +157,6 @@ impl CompiledModel {
     pub fn names(&self) -> &[String] {
         &self.names
     }
-    /// Whether any term is an expression rather than a monomial.
-    pub fn has_expressions(&self) -> bool {
-        self.terms
-            .iter()
-            .flatten()
-            .any(|t| matches!(t.kind, Kind::Expression { .. }))
-    }
-
     /// All coefficients, output by output in term order (the order of the model file).
     pub fn coefficients(&self) -> Vec<f64> {
         self.terms

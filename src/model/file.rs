@@ -26,7 +26,7 @@ pub const SECTIONS: [&str; 2] = ["training", "discovery"];
 pub enum Origin {
     /// Selected by the sparse regression of `identify`.
     Identified,
-    /// Given by the user (a nominal model, a `--term`).
+    /// Given by the user (a term of the nominal model handed to `discover`).
     Nominal,
     /// Added by `discover`, with the effect's family (`coulomb_friction`, ...).
     Effect(String),
@@ -342,6 +342,10 @@ impl<'de> Deserialize<'de> for Pairs {
 /// are summed in `u32`; no identified model comes near it.
 pub const MAX_EXPONENT: u32 = 64;
 
+/// Largest model file read: a model of 100,000 terms takes about 10 MB; anything far larger is
+/// not a model file (or a device that never ends).
+pub const MAX_FILE_BYTES: u64 = 256 << 20;
+
 /// Highest derivative order a model file may give an output (that of the derivative estimates).
 pub const MAX_ORDER: usize = crate::derivatives::MAX_ORDER;
 
@@ -577,10 +581,15 @@ impl Model {
 
     /// Reads and validates a model file.
     pub fn read(path: &str) -> Result<Model> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::Io {
+        use std::io::Read;
+        let io = |e: std::io::Error| Error::Io {
             path: path.into(),
             message: e.to_string(),
-        })?;
+        };
+        let mut text = String::new();
+        crate::util::open_regular(std::path::Path::new(path), Some(MAX_FILE_BYTES))?
+            .read_to_string(&mut text)
+            .map_err(io)?;
         Model::from_json_str(&text, path)
     }
 
@@ -596,10 +605,7 @@ impl Model {
     /// Writes the model file.
     pub fn write(&self, path: &str) -> Result<()> {
         let text = self.to_json_string()?;
-        std::fs::write(path, text + "\n").map_err(|e| Error::Io {
-            path: path.into(),
-            message: e.to_string(),
-        })
+        crate::util::write_atomic(std::path::Path::new(path), (text + "\n").as_bytes())
     }
 
     /// Checks names, orders, exponents and coefficients; the error names the term at fault.

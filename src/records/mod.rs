@@ -377,10 +377,7 @@ impl RecordSet {
     pub fn from_csv(path: impl AsRef<Path>, spec: &CsvSpec) -> Result<RecordSet> {
         let path = path.as_ref();
         let p = path.display().to_string();
-        let file = std::fs::File::open(path).map_err(|e| Error::Io {
-            path: p.clone(),
-            message: e.to_string(),
-        })?;
+        let file = crate::util::open_regular(path, None)?;
         Self::from_reader(file, &p, spec)
     }
 

@@ -24,10 +24,7 @@ pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
         })
         .collect();
     let p = dir.join(safe);
-    std::fs::write(&p, text).map_err(|e| Error::Io {
-        path: p.display().to_string(),
-        message: e.to_string(),
-    })
+    crate::util::write_atomic(&p, text.as_bytes())
 }
 
 /// A table rendered as Markdown and as CSV from the same rows.
