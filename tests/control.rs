@@ -445,3 +445,32 @@ fn the_command_prints_the_design_and_writes_the_trace() {
         &["'plant'", "output 'z'", "same machine"],
     );
 }
+
+#[test]
+fn eigenvalues_of_pure_chains_of_even_order_converge() {
+    // y^(n) = -a y + u for even n: the roots of s^n = -a sit symmetric about the origin, and the
+    // plain Schur iteration stalled on n = 4, 6 ('did not converge'; control refused the model).
+    for n in [2usize, 4, 6] {
+        let a = 2.0f64;
+        let mut m = nalgebra::DMatrix::zeros(n, n);
+        for k in 0..n - 1 {
+            m[(k, k + 1)] = 1.0;
+        }
+        m[(n - 1, 0)] = -a;
+        let e = control::design::eigenvalues(&m).unwrap_or_else(|e| panic!("n = {n}: {e}"));
+        assert_eq!(e.len(), n);
+        let r = a.powf(1.0 / n as f64);
+        for (re, im) in &e {
+            let z = num_complex_pow(*re, *im, n);
+            assert!(
+                ((re * re + im * im).sqrt() - r).abs() < 1e-9 && (z.0 + a).abs() < 1e-7 && z.1.abs() < 1e-7,
+                "n = {n}: {e:?}"
+            );
+        }
+    }
+}
+
+/// (re + i im)^n as (re, im).
+fn num_complex_pow(re: f64, im: f64, n: usize) -> (f64, f64) {
+    (0..n).fold((1.0, 0.0), |(a, b), _| (a * re - b * im, a * im + b * re))
+}

@@ -231,6 +231,18 @@ fn identify_cli_errors_are_one_line() {
             vec!["--output", "y", "--input", "u", "--test", "9"],
             "run '9' does not exist",
         ),
+        // Counted before expanding (eight such ranges used to take 4.4 GB and 21 s).
+        (
+            vec![
+                "--output",
+                "y",
+                "--input",
+                "u",
+                "--test",
+                "0-9999999,0-9999999,0-9999999,0-9999999,0-9999999,0-9999999,0-9999999,0-9999999",
+            ],
+            "the list names more than",
+        ),
         (
             vec![
                 "--output", "y", "--input", "u", "--train", "0-2", "--test", "2,3",

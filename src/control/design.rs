@@ -190,7 +190,24 @@ pub fn eigenvalues(m: &DMatrix<f64>) -> Result<Vec<(f64, f64)>> {
     // iteration's error scales with the matrix norm.
     let mut bal = m.clone();
     balance(&mut bal);
-    let schur = nalgebra::Schur::try_new(bal, f64::EPSILON, 10_000).ok_or_else(|| {
+    // The shifted QR iteration can stall on a matrix whose eigenvalues lie symmetric about the
+    // origin (the companion matrix of y^(4) = -a y + u: the four roots of -a). An orthogonal
+    // similarity keeps the eigenvalues and breaks that symmetry of the iteration: up to three
+    // seeded rotations are tried before the error.
+    let mut rng = crate::plants::rng::Rng::new(0x6569_6773);
+    let mut attempt = bal.clone();
+    let mut schur = None;
+    for _ in 0..4 {
+        schur = nalgebra::Schur::try_new(attempt.clone(), f64::EPSILON, 10_000);
+        if schur.is_some() {
+            break;
+        }
+        let n = bal.nrows();
+        let r = DMatrix::from_fn(n, n, |_, _| rng.uniform() - 0.5);
+        let q = r.qr().q();
+        attempt = q.transpose() * &bal * &q;
+    }
+    let schur = schur.ok_or_else(|| {
         Error::InvalidData("the eigenvalues of a linearisation did not converge".into())
     })?;
     let mut e: Vec<(f64, f64)> = schur

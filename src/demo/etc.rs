@@ -278,7 +278,8 @@ pub fn run(o: &EtcOptions) -> Result<String> {
     // The equation against the truth.
     let _ = writeln!(
         out,
-        "## Identified equation (3 % noise, n = 3, d = {})\n\n    {}\n",
+        "## Identified equation ({} % noise, n = 3, d = {})\n\n    {}\n",
+        crate::util::num4(100.0 * o.noise),
         o.degree,
         id.model.outputs[0].to_text()
     );

@@ -7,7 +7,7 @@ use crate::identify::{identify, Orders, Settings, Split};
 use crate::plants::{dataset, Plant};
 use crate::regression::EngineChoice;
 use crate::report::{write_file, Table};
-use crate::Result;
+use crate::{Error, Result};
 use std::fmt::Write;
 use std::path::PathBuf;
 
@@ -99,22 +99,12 @@ pub fn run(o: &MimoOptions) -> Result<String> {
             s.engine = engine;
             s.progress = o.progress;
             let t = std::time::Instant::now();
-            let id = match identify(&rs, &split, &s) {
-                Ok(id) => id,
-                Err(e) => {
-                    summary.row(vec![
-                        d.to_string(),
-                        crate::basis::count(11, d).unwrap_or(0).to_string(),
-                        format!("{engine:?}"),
-                        "-".into(),
-                        format!("failed: {e}"),
-                        "-".into(),
-                        "-".into(),
-                        "-".into(),
-                    ]);
-                    continue;
-                }
-            };
+            // An engine the user named that cannot run is the demo's failure, not a table cell.
+            let id = identify(&rs, &split, &s).map_err(|e| {
+                Error::Numerical(format!(
+                    "demo mimo: degree {d} with engine {engine} failed: {e}"
+                ))
+            })?;
             let secs = t.elapsed().as_secs_f64();
             let (mut found, mut total, mut extra, mut worst) = (0, 0, 0, 0.0f64);
             let _ = writeln!(out, "\n## d = {d}, engine {}\n", id.outputs[0].engine);

@@ -10,7 +10,16 @@ pub fn parse_runs(text: &str) -> Result<Vec<String>> {
 
 /// As [`parse_runs`], with `what` naming the setting in errors (`train`, `orders`, ...).
 pub fn parse_list(text: &str, what: &str) -> Result<Vec<String>> {
-    let mut out = Vec::new();
+    parse_list_at_most(text, what, 10_000_000)
+}
+
+/// [`parse_list`] of at most `most` names, counted before any range is expanded: a list of
+/// run ids need not name more runs than the record has, and `0-10000000` eight times over
+/// would otherwise take gigabytes before the first unknown id is found.
+pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<String>> {
+    // (prefix, part, range) per item; ranges are checked and counted first.
+    let mut items = Vec::new();
+    let mut count: u64 = 0;
     for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         // Pieces of a cut run (`RUN#0-4`, see `RecordSet::segmented`) take ranges too.
         let whole = part;
@@ -18,24 +27,34 @@ pub fn parse_list(text: &str, what: &str) -> Result<Vec<String>> {
             Some((run, rest)) => (format!("{run}#"), rest),
             None => (String::new(), part),
         };
-        match part.split_once('-') {
-            Some((a, b)) if a.trim().parse::<i64>().is_ok() && b.trim().parse::<i64>().is_ok() => {
-                let (a, b) = (
-                    a.trim().parse::<i64>().unwrap(),
-                    b.trim().parse::<i64>().unwrap(),
-                );
-                if b < a {
-                    return Err(Error::param(
-                        what,
-                        format!("range '{whole}' runs backwards; write {prefix}{b}-{a}"),
-                    ));
-                }
-                if b - a > 10_000_000 {
-                    return Err(Error::param(what, format!("range '{whole}' is too long")));
-                }
-                out.extend((a..=b).map(|i| format!("{prefix}{i}")));
+        let range = part
+            .split_once('-')
+            .and_then(|(a, b)| Some((a.trim().parse::<i64>().ok()?, b.trim().parse::<i64>().ok()?)));
+        if let Some((a, b)) = range {
+            if b < a {
+                return Err(Error::param(
+                    what,
+                    format!("range '{whole}' runs backwards; write {prefix}{b}-{a}"),
+                ));
             }
-            _ => out.push(format!("{prefix}{part}")),
+            count = count.saturating_add((b - a) as u64 + 1);
+        } else {
+            count += 1;
+        }
+        if count > most as u64 {
+            let shown: String = whole.chars().take(40).collect();
+            return Err(Error::param(
+                what,
+                format!("the list names more than {most} (at '{shown}'); there are only {most} to name"),
+            ));
+        }
+        items.push((prefix, part, range));
+    }
+    let mut out = Vec::with_capacity(count as usize);
+    for (prefix, part, range) in items {
+        match range {
+            Some((a, b)) => out.extend((a..=b).map(|i| format!("{prefix}{i}"))),
+            None => out.push(format!("{prefix}{part}")),
         }
     }
     if out.is_empty() {
