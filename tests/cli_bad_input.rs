@@ -266,6 +266,11 @@ fn usage_errors_are_one_line() {
         &["identify", &data, identify, "--orders 2,2 --tau 0.01"],
         &["listed twice"],
     );
+    // A trailing comma is an empty name, not a second output ('1 orders for 2 outputs').
+    fails(
+        &["identify", &data, "--output y, --degree 2 --order 1"],
+        &["empty name", "--output"],
+    );
 }
 
 #[test]

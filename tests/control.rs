@@ -463,7 +463,9 @@ fn eigenvalues_of_pure_chains_of_even_order_converge() {
         for (re, im) in &e {
             let z = num_complex_pow(*re, *im, n);
             assert!(
-                ((re * re + im * im).sqrt() - r).abs() < 1e-9 && (z.0 + a).abs() < 1e-7 && z.1.abs() < 1e-7,
+                ((re * re + im * im).sqrt() - r).abs() < 1e-9
+                    && (z.0 + a).abs() < 1e-7
+                    && z.1.abs() < 1e-7,
                 "n = {n}: {e:?}"
             );
         }

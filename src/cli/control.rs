@@ -278,7 +278,12 @@ pub fn run(a: ControlArgs) -> Result<()> {
 /// sampled sixth-order loops the design cannot hold 11-23 %).
 const DESIGN_STRAY: f64 = 5.0;
 
-fn write_trace(path: &std::path::Path, tr: &control::Trace, setpoint: f64, names: &[String]) -> Result<()> {
+fn write_trace(
+    path: &std::path::Path,
+    tr: &control::Trace,
+    setpoint: f64,
+    names: &[String],
+) -> Result<()> {
     let io = |e: std::io::Error| Error::Io {
         path: path.display().to_string(),
         message: e.to_string(),

@@ -167,8 +167,14 @@ pub fn check_output_dir(dir: &Path) -> Result<()> {
 
 /// Value parser for names in comma lists: `--input "u, t"` means `u` and `t` (CSV headers are
 /// trimmed too).
+/// A channel name from a comma-separated list, trimmed; an empty one (`--output y,`) is named
+/// as such rather than counted as a channel.
 pub fn trimmed(s: &str) -> std::result::Result<String, String> {
-    Ok(s.trim().to_string())
+    let t = s.trim();
+    if t.is_empty() {
+        return Err("an empty name in the list (a doubled or trailing comma?)".into());
+    }
+    Ok(t.to_string())
 }
 
 /// Whether two existing paths are one file (hard and symbolic links included).

@@ -27,9 +27,9 @@ pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<Str
             Some((run, rest)) => (format!("{run}#"), rest),
             None => (String::new(), part),
         };
-        let range = part
-            .split_once('-')
-            .and_then(|(a, b)| Some((a.trim().parse::<i64>().ok()?, b.trim().parse::<i64>().ok()?)));
+        let range = part.split_once('-').and_then(|(a, b)| {
+            Some((a.trim().parse::<i64>().ok()?, b.trim().parse::<i64>().ok()?))
+        });
         if let Some((a, b)) = range {
             if b < a {
                 return Err(Error::param(
@@ -45,7 +45,9 @@ pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<Str
             let shown: String = whole.chars().take(40).collect();
             return Err(Error::param(
                 what,
-                format!("the list names more than {most} (at '{shown}'); there are only {most} to name"),
+                format!(
+                    "the list names more than {most} (at '{shown}'); there are only {most} to name"
+                ),
             ));
         }
         items.push((prefix, part, range));
