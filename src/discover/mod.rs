@@ -729,6 +729,94 @@ fn contradicts(interval: &[f64; 2], refined: f64) -> bool {
     (interval[0] > 0.0 && refined < 0.0) || (interval[1] < 0.0 && refined > 0.0)
 }
 
+/// A stretch of a run where the nominal's error is high: (run, start s, end s).
+type Window = (String, f64, f64);
+
+/// (a) and (b): the nominal's free-run NRMSE on every run of the split (and the part above the
+/// noise floor), and the time windows where its error exceeds three noise levels, in the
+/// record's own time. An error when the nominal diverges on every run: there is no error to
+/// explain and nothing to compare an augmented model with.
+fn compare(
+    p: &Prepared,
+    rs: &RecordSet,
+    o: &Options,
+    nominal_model: &Model,
+    report_opts: &SimOptions,
+) -> Result<(Vec<RunScore>, Vec<Window>)> {
+    let mut runs = Vec::new();
+    let mut windows = Vec::new();
+    let mut diverged = 0usize;
+    for (ri, sr) in p.simruns.iter().enumerate() {
+        let role = if o.train.contains(&ri) {
+            "train"
+        } else if o.validation.contains(&ri) {
+            "validation"
+        } else if o.test.contains(&ri) {
+            "test"
+        } else {
+            continue;
+        };
+        let sim = simulated(nominal_model, sr, report_opts);
+        diverged += sim.is_none() as usize;
+        let (nr, above) = match &sim {
+            Some(s) => {
+                let (_, nr) = rms_nrmse(s, &sr.y[0]);
+                let floor = p.noise_sd[ri] / crate::metrics::std_dev(&sr.y[0]).max(1e-300);
+                (nr, (nr * nr - floor * floor).max(0.0).sqrt())
+            }
+            None => (f64::INFINITY, f64::INFINITY),
+        };
+        if let Some(s) = &sim {
+            let t0 = rs.runs[ri].t0;
+            windows.extend(
+                hot_windows(s, &sr.y[0], p.half_width, 3.0 * p.noise_sd[ri])
+                    .into_iter()
+                    .map(|(a, b)| (sr.id.clone(), t0 + sr.t[a], t0 + sr.t[b])),
+            );
+        }
+        runs.push(RunScore {
+            run: sr.id.clone(),
+            role: role.into(),
+            nrmse_nominal: nr,
+            above_noise: above,
+            nrmse_final: None,
+            rms_final: None,
+        });
+    }
+    if !runs.is_empty() && diverged == runs.len() {
+        return Err(Error::InvalidData(format!(
+            "the nominal model diverges in free run on every run ({} of them): discover needs a nominal that simulates the record; check its coefficients with `ctsid simulate`",
+            runs.len()
+        )));
+    }
+    Ok((runs, windows))
+}
+
+/// Sample ranges `(first, last)` where the moving RMS of `sim - y` over `2m + 1` samples
+/// exceeds `level` (a window still open at the end closes at the last sample).
+fn hot_windows(sim: &[f64], y: &[f64], m: usize, level: f64) -> Vec<(usize, usize)> {
+    let e2: Vec<f64> = sim.iter().zip(y).map(|(a, b)| (a - b).powi(2)).collect();
+    let mut out = Vec::new();
+    let mut inside = None;
+    for i in 0..e2.len() {
+        let a = i.saturating_sub(m);
+        let b = (i + m + 1).min(e2.len());
+        let rms = (e2[a..b].iter().sum::<f64>() / (b - a) as f64).sqrt();
+        match (rms > level, inside) {
+            (true, None) => inside = Some(i),
+            (false, Some(st)) => {
+                out.push((st, i));
+                inside = None;
+            }
+            _ => {}
+        }
+    }
+    if let (Some(st), Some(last)) = (inside, e2.len().checked_sub(1)) {
+        out.push((st, last));
+    }
+    out
+}
+
 /// Runs the workflow.
 pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discovery> {
     let p = prepare(rs, nominal, o)?;
@@ -759,79 +847,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     // (a) compare and (b) localise.
     let nominal_model = p.model(&[], &[]);
     let report_opts = SimOptions::default();
-    let mut runs = Vec::new();
-    let mut windows = Vec::new();
-    let mut diverged = 0usize;
-    for (ri, sr) in p.simruns.iter().enumerate() {
-        let role = if o.train.contains(&ri) {
-            "train"
-        } else if o.validation.contains(&ri) {
-            "validation"
-        } else if o.test.contains(&ri) {
-            "test"
-        } else {
-            continue;
-        };
-        let sim = simulated(&nominal_model, sr, &report_opts);
-        diverged += sim.is_none() as usize;
-        let (nr, above) = match &sim {
-            Some(s) => {
-                let (_, nr) = rms_nrmse(s, &sr.y[0]);
-                let floor = p.noise_sd[ri] / crate::metrics::std_dev(&sr.y[0]).max(1e-300);
-                (nr, (nr * nr - floor * floor).max(0.0).sqrt())
-            }
-            None => (f64::INFINITY, f64::INFINITY),
-        };
-        if let Some(s) = &sim {
-            // Moving RMS of the error over a window, against three noise levels; reported in the
-            // record's own time.
-            let m = p.half_width;
-            let t0 = rs.runs[ri].t0;
-            let e2: Vec<f64> = s
-                .iter()
-                .zip(&sr.y[0])
-                .map(|(a, b)| (a - b).powi(2))
-                .collect();
-            let mut inside = None;
-            for i in 0..e2.len() {
-                let a = i.saturating_sub(m);
-                let b = (i + m + 1).min(e2.len());
-                let rms = (e2[a..b].iter().sum::<f64>() / (b - a) as f64).sqrt();
-                let hot = rms > 3.0 * p.noise_sd[ri];
-                match (hot, inside) {
-                    (true, None) => inside = Some(i),
-                    (false, Some(st)) => {
-                        windows.push((sr.id.clone(), t0 + sr.t[st], t0 + sr.t[i]));
-                        inside = None;
-                    }
-                    _ => {}
-                }
-            }
-            if let Some(st) = inside {
-                windows.push((
-                    sr.id.clone(),
-                    t0 + sr.t[st],
-                    t0 + *sr.t.last().unwrap_or(&0.0),
-                ));
-            }
-        }
-        runs.push(RunScore {
-            run: sr.id.clone(),
-            role: role.into(),
-            nrmse_nominal: nr,
-            above_noise: above,
-            nrmse_final: None,
-            rms_final: None,
-        });
-    }
-    // With no run the nominal can simulate there is no error to explain and nothing to
-    // compare an augmented model with.
-    if !runs.is_empty() && diverged == runs.len() {
-        return Err(Error::InvalidData(format!(
-            "the nominal model diverges in free run on every run ({} of them): discover needs a nominal that simulates the record; check its coefficients with `ctsid simulate`",
-            runs.len()
-        )));
-    }
+    let (mut runs, windows) = compare(&p, rs, o, &nominal_model, &report_opts)?;
     let shares = coordinate_shares(&p, &o.train);
 
     // (c) regression.
