@@ -49,3 +49,8 @@ pub mod simulate;
 pub mod util;
 
 pub use error::{Error, Result};
+
+// The README's library quick start is compiled with the doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
