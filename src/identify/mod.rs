@@ -51,7 +51,7 @@ use crate::metrics::rms_nrmse;
 use crate::model::{derivative_name, Model as ModelFile, OutputEquation, Term as ModelTerm};
 use crate::records::RecordSet;
 use crate::regression::{EngineChoice, Method, Regression};
-use crate::simulate::{initial_state, simulate_model, SimOptions, INIT_WINDOW};
+use crate::simulate::{self, SimOptions, INIT_WINDOW};
 use crate::util::num4;
 
 /// Labels whose sigma exceeds this multiple of the median label sigma are left out.
@@ -922,18 +922,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         _ => None,
     };
     if let Some(report) = refinement.as_mut() {
-        let (completed, trials) = complete_selected(&model, report, &prep, &outputs, split, &fits)?;
-        for t in trials.iter().filter(|t| t.kept) {
-            say(format!(
-                "completion on simulation error: {} added to '{}' (gate runs better by {:.1} noise standard deviations)",
-                t.term, t.output, t.z
-            ));
-        }
-        if trials.iter().any(|t| t.kept) {
-            report.refined = completed.outputs.iter().map(|o| o.to_text()).collect();
-        }
-        report.completion = trials;
-        model = completed;
+        model = complete_selected(&model, report, &prep, &outputs, split, &fits)?;
     }
 
     let simulations = simulate_runs(&model, rs, &outputs, &prep.inputs, &split.test)?;
@@ -994,8 +983,33 @@ fn gate_split(prep: &Prepared, split: &Split) -> (Vec<usize>, Vec<usize>, &'stat
     }
 }
 
-/// The near misses of the selected fits tried on simulation error ([`complete`]).
+/// The near misses of the selected fits tried on simulation error ([`complete`]): the completed
+/// model, with the trials (and the refined equations, when a term was kept) in `report`.
 fn complete_selected(
+    model: &ModelFile,
+    report: &mut RefinementReport,
+    prep: &Prepared,
+    outputs: &[usize],
+    split: &Split,
+    fits: &[crate::regression::Model],
+) -> Result<ModelFile> {
+    let (completed, trials) = completion_trials(model, report, prep, outputs, split, fits)?;
+    for t in trials.iter().filter(|t| t.kept) {
+        if prep.settings.progress {
+            eprintln!(
+                "completion on simulation error: {} added to '{}' (gate runs better by {:.1} noise standard deviations)",
+                t.term, t.output, t.z
+            );
+        }
+    }
+    if trials.iter().any(|t| t.kept) {
+        report.refined = completed.outputs.iter().map(|o| o.to_text()).collect();
+    }
+    report.completion = trials;
+    Ok(completed)
+}
+
+fn completion_trials(
     model: &ModelFile,
     report: &RefinementReport,
     prep: &Prepared,
@@ -1092,7 +1106,7 @@ fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<
 }
 
 /// Free-run simulation of a model on some runs, from the one initial-state convention
-/// ([`initial_state`]); a diverging run is reported, not fatal.
+/// ([`simulate::free_run`]); a run that cannot be simulated is reported, not fatal.
 pub(crate) fn simulate_runs(
     model: &ModelFile,
     rs: &RecordSet,
@@ -1101,62 +1115,49 @@ pub(crate) fn simulate_runs(
     runs: &[usize],
 ) -> Result<Vec<RunSimulation>> {
     let compiled = model.compile()?;
-    let mut out = Vec::new();
-    for &r in runs {
-        let run = &rs.runs[r];
-        let n = run.len();
-        // Time since the run's start (see refine_run).
-        let times: Vec<f64> = (0..n).map(|k| k as f64 * rs.tau).collect();
-        let us: Vec<Vec<f64>> = inputs.iter().map(|&u| run.channels[u].clone()).collect();
-        let opts = SimOptions {
-            run: run.id.clone(),
-            rtol: 1e-6,
-            atol: 1e-9,
-            ..Default::default()
-        };
-        // The one initial-state convention of every report (see simulate::initial_state).
-        let ys: Vec<Vec<f64>> = outputs.iter().map(|&c| run.channels[c].clone()).collect();
-        let x0 = initial_state(&compiled, &times, &ys, &us, INIT_WINDOW, &opts);
-        let x0 = match x0 {
-            Ok(x0) => x0,
-            Err(e) => {
-                out.push(RunSimulation {
+    let opts = SimOptions {
+        rtol: 1e-6,
+        atol: 1e-9,
+        ..Default::default()
+    };
+    let out = runs
+        .iter()
+        .map(|&r| {
+            let run = &rs.runs[r];
+            // Time since the run's start (see refine_run).
+            let data = simulate::RunData {
+                id: run.id.clone(),
+                t: (0..run.len()).map(|k| k as f64 * rs.tau).collect(),
+                y: outputs.iter().map(|&c| run.channels[c].clone()).collect(),
+                u: inputs.iter().map(|&c| run.channels[c].clone()).collect(),
+                states: None,
+                x0: Vec::new(),
+            };
+            match simulate::free_run(&compiled, &data, INIT_WINDOW, &opts) {
+                Ok(simulated) => {
+                    let (rms, nrmse) = simulated
+                        .iter()
+                        .zip(&data.y)
+                        .map(|(s, y)| rms_nrmse(s, y))
+                        .unzip();
+                    RunSimulation {
+                        run: run.id.clone(),
+                        rms,
+                        nrmse,
+                        simulated,
+                        error: None,
+                    }
+                }
+                Err(e) => RunSimulation {
                     run: run.id.clone(),
-                    rms: Vec::new(),
-                    nrmse: Vec::new(),
+                    rms: vec![f64::NAN; outputs.len()],
+                    nrmse: vec![f64::NAN; outputs.len()],
                     simulated: Vec::new(),
                     error: Some(e.to_string()),
-                });
-                continue;
+                },
             }
-        };
-        match simulate_model(&compiled, &x0, &times, &us, &opts) {
-            Ok(traj) => {
-                let mut sim = RunSimulation {
-                    run: run.id.clone(),
-                    rms: Vec::new(),
-                    nrmse: Vec::new(),
-                    simulated: Vec::new(),
-                    error: None,
-                };
-                for (o, &c) in outputs.iter().enumerate() {
-                    let ys = traj.series(compiled.offset(o));
-                    let (rms, nrmse) = rms_nrmse(&ys, &run.channels[c]);
-                    sim.rms.push(rms);
-                    sim.nrmse.push(nrmse);
-                    sim.simulated.push(ys);
-                }
-                out.push(sim);
-            }
-            Err(e) => out.push(RunSimulation {
-                run: run.id.clone(),
-                rms: vec![f64::NAN; outputs.len()],
-                nrmse: vec![f64::NAN; outputs.len()],
-                simulated: Vec::new(),
-                error: Some(e.to_string()),
-            }),
-        }
-    }
+        })
+        .collect();
     Ok(out)
 }
 

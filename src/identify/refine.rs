@@ -363,12 +363,7 @@ fn levenberg_marquardt(
 
 /// Standard deviation (population) of a pooled set of samples.
 fn spread<'a>(values: impl Iterator<Item = &'a f64>) -> f64 {
-    let v: Vec<f64> = values.copied().collect();
-    if v.is_empty() {
-        return 0.0;
-    }
-    let m = v.iter().sum::<f64>() / v.len() as f64;
-    (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64).sqrt()
+    crate::metrics::std_dev(&values.copied().collect::<Vec<f64>>())
 }
 
 /// Every run has the model's channels, all of one length (at least 2 samples), an initial
@@ -404,6 +399,57 @@ fn check_runs(compiled: &crate::model::CompiledModel, runs: &[RunData]) -> Resul
         }
     }
     Ok(())
+}
+
+/// The shooting segments of every run (about `l` samples each; a remainder shorter than half
+/// of that joins the last) and each segment's starting state: the run's initial state, the
+/// state guesses where given, else a simulation of the starting model, else the measured
+/// outputs with zero derivatives.
+fn segments(
+    compiled: &CompiledModel,
+    runs: &[RunData],
+    l: usize,
+    sim_opts: &SimOptions,
+) -> (Vec<Segment>, Vec<Vec<f64>>) {
+    let (n, n_out) = (compiled.n_state(), compiled.n_outputs());
+    let mut segs = Vec::new();
+    let mut seg_x0: Vec<Vec<f64>> = Vec::new();
+    for (ri, r) in runs.iter().enumerate() {
+        let len = r.t.len();
+        let mut starts: Vec<usize> = (0..len - 1).step_by(l).collect();
+        if starts.len() > 1 && len - 1 - starts[starts.len() - 1] < l / 2 {
+            starts.pop();
+        }
+        let fallback = match &r.states {
+            Some(_) => None,
+            None => simulate_model(compiled, &r.x0, &r.t, &r.u, sim_opts).ok(),
+        };
+        for (k, &a) in starts.iter().enumerate() {
+            let last = k + 1 == starts.len();
+            let b = if last { len - 1 } else { starts[k + 1] };
+            segs.push(Segment {
+                run: ri,
+                a,
+                b,
+                last,
+            });
+            let x = if a == 0 {
+                r.x0.clone()
+            } else if let Some(st) = &r.states {
+                st.iter().map(|c| c[a]).collect()
+            } else if let Some(tr) = &fallback {
+                tr.state(a).to_vec()
+            } else {
+                let mut x = vec![0.0; n];
+                for i in 0..n_out {
+                    x[compiled.offset(i)] = r.y[i][a];
+                }
+                x
+            };
+            seg_x0.push(x);
+        }
+    }
+    (segs, seg_x0)
 }
 
 /// Refines the nonzero coefficients of `model` (structure fixed) and the initial state of every
@@ -455,48 +501,7 @@ pub fn refine_holding(
         ..Default::default()
     };
 
-    // Segments and their starting states.
-    let mut segs = Vec::new();
-    let mut seg_x0: Vec<Vec<f64>> = Vec::new();
-    for (ri, r) in runs.iter().enumerate() {
-        let len = r.t.len();
-        let l = opts.segment_len;
-        let mut starts: Vec<usize> = (0..len - 1).step_by(l).collect();
-        // A remainder shorter than half a segment joins the previous one.
-        if starts.len() > 1 && len - 1 - starts[starts.len() - 1] < l / 2 {
-            starts.pop();
-        }
-        // Later segments start from the guesses, or from a simulation of the starting model.
-        let fallback = match &r.states {
-            Some(_) => None,
-            None => simulate_model(&compiled, &r.x0, &r.t, &r.u, &sim_opts).ok(),
-        };
-        for (k, &a) in starts.iter().enumerate() {
-            let last = k + 1 == starts.len();
-            let b = if last { len - 1 } else { starts[k + 1] };
-            segs.push(Segment {
-                run: ri,
-                a,
-                b,
-                last,
-            });
-            let x = if a == 0 {
-                r.x0.clone()
-            } else if let Some(st) = &r.states {
-                st.iter().map(|c| c[a]).collect()
-            } else if let Some(tr) = &fallback {
-                tr.state(a).to_vec()
-            } else {
-                // Measured outputs, zero derivatives.
-                let mut x = vec![0.0; n];
-                for i in 0..n_out {
-                    x[compiled.offset(i)] = r.y[i][a];
-                }
-                x
-            };
-            seg_x0.push(x);
-        }
-    }
+    let (segs, seg_x0) = segments(&compiled, runs, opts.segment_len, &sim_opts);
     let state_scale: Vec<f64> = (0..n)
         .map(|j| {
             let s = match runs[0].states {
