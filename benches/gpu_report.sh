@@ -22,10 +22,13 @@ if [[ "${1:-}" == "--small" ]]; then mode=small; shift; fi
 
 if command -v cargo >/dev/null 2>&1; then
     cargo build --release --example gpu_report
-    cargo test --release --test gpu_sweep --no-run
+    # The test binary's path as cargo prints it: a bench of the same name (benches/gpu_sweep.rs,
+    # a criterion harness) also builds deps/gpu_sweep-*, so the newest file is not always the test.
+    gputest=$(cargo test --release --test gpu_sweep --no-run 2>&1 \
+        | sed -n 's/.*Executable tests\/gpu_sweep.rs (\(.*\))$/\1/p' | tail -1)
+    [[ -x "$gputest" ]] || { echo "gpu_report.sh: cannot find the gpu_sweep test binary" >&2; exit 2; }
     tdir=${CARGO_TARGET_DIR:-target}
     report="$tdir/release/examples/gpu_report"
-    gputest=$(ls -t "$tdir"/release/deps/gpu_sweep-* | grep -v '\.d$' | head -1)
     if [[ $mode == stage ]]; then
         mkdir -p "$BIN_DIR"
         cp "$report" "$BIN_DIR/gpu_report"
@@ -55,6 +58,8 @@ if [[ $mode == small ]]; then
 fi
 
 echo "== GPU correctness tests (CTSID_REQUIRE_GPU=1) =="
-CTSID_REQUIRE_GPU=1 "$gputest" --test-threads 1
+# One test at a time: on the H200 a parallel run of this binary once hung (no output for 470 s).
+tests_rc=0; CTSID_REQUIRE_GPU=1 "$gputest" --test-threads 1 || tests_rc=$?
 echo "== report: 25,000 samples x {12,376 (n_z=11,d=6), 100,947 (n_z=17,d=6), 497,420 (n_z=13,d=9)} =="
 "$report" --require-real-gpu --samples 25000 --sizes 11:6,17:6,13:9 --reps 20 --check 2000 "$@"
+exit "$tests_rc"

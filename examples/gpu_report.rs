@@ -16,7 +16,7 @@
 //!
 //! Usage: gpu_report [--samples N] [--sizes NZ:D,NZ:D,...] [--reps K] [--check K]
 //!                   [--peak PAIRS_PER_S] [--require-real-gpu] [--cpu-max-pairs P]
-//!                   [--cpu-path-budget S] [--steps N]
+//!                   [--cpu-path-budget S] [--steps N] [--no-bounds-checks]
 
 use std::time::Instant;
 
@@ -121,6 +121,7 @@ fn main() {
             &basis,
             GpuOptions {
                 allow_cpu_adapter: !require_real,
+                bounds_checks: !args.iter().any(|a| a == "--no-bounds-checks"),
                 ..Default::default()
             },
         ) {

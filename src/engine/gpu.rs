@@ -73,6 +73,11 @@ pub struct GpuOptions {
     pub memory_budget_bytes: u64,
     /// How long to wait for one submission before calling the device hung.
     pub timeout: Duration,
+    /// Keep wgpu's bounds checks in the shaders (default). Off only to measure what they cost.
+    pub bounds_checks: bool,
+    /// Lower bound on samples per block; tests use it to force long compensated sums on
+    /// adapters whose layout would otherwise cut the samples into short blocks.
+    pub min_block_samples: usize,
 }
 
 impl Default for GpuOptions {
@@ -85,6 +90,8 @@ impl Default for GpuOptions {
             max_pairs_per_dispatch: 4_000_000_000,
             memory_budget_bytes: 4 << 30,
             timeout: Duration::from_secs(300),
+            bounds_checks: true,
+            min_block_samples: 0,
         }
     }
 }
@@ -331,6 +338,9 @@ impl GpuEngine {
             .div_ceil(options.max_block_samples.max(chunk))
             .max(target_wg.div_ceil(tiles_total))
             .clamp(1, max_blocks.max(1));
+        let n_blocks = n_blocks
+            .min(n_s.div_ceil(options.min_block_samples.max(1)))
+            .max(1);
         let block_samples = n_s.div_ceil(n_blocks).div_ceil(chunk) * chunk;
         let n_blocks = n_s.div_ceil(block_samples);
 
@@ -482,11 +492,25 @@ impl GpuEngine {
             ("LEVEL_END2", level_end[2]),
             ("LEVEL_END3", level_end[3]),
         ]);
+        // naga's forced loop bounding puts a counter and an exit test in every loop, which keeps
+        // the driver from unrolling the R- and NF-loops of sweep.wgsl and so from keeping the
+        // per-candidate arrays in registers. Every loop in both shaders ends after a number of
+        // iterations fixed by constants of the header or by uniform counts (`n_blocks`,
+        // `block_samples`, `n_samples`), so the counters buy nothing.
+        let checks = wgpu::ShaderRuntimeChecks {
+            bounds_checks: options.bounds_checks,
+            force_loop_bounding: false,
+            ..wgpu::ShaderRuntimeChecks::checked()
+        };
         let module = |label: &str, src: String| {
-            device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            let desc = wgpu::ShaderModuleDescriptor {
                 label: Some(label),
                 source: wgpu::ShaderSource::Wgsl(src.into()),
-            })
+            };
+            // SAFETY: the shaders are ours (no user text reaches them) and every loop in them
+            // terminates (see above); with `bounds_checks` off, every index stays inside its
+            // buffer by construction of the layout (windows, blocks and tables sized above).
+            unsafe { device.create_shader_module_trusted(desc, checks) }
         };
         let sweep_mod = module(
             "sweep",
