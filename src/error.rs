@@ -114,6 +114,9 @@ pub enum Error {
     #[error("model file {path}: {message}")]
     Model { path: String, message: String },
 
+    #[error("run '{run}': the model has an unstable mode growing at {rate:.3e} /s (e-fold every {:.3e} s) near t = {time:?} s, faster than the simulation's steps; the model is unstable there", 1.0 / rate)]
+    UnstableMode { run: String, time: f64, rate: f64 },
+
     #[error("simulation diverged at t = {time:?} s (run '{run}', state {state}); the model is unstable there or the step is too large")]
     Diverged {
         run: String,

@@ -38,6 +38,7 @@ pub mod discover;
 pub mod engine;
 pub mod error;
 pub mod identify;
+pub mod linalg;
 pub mod lm;
 pub mod metrics;
 pub mod model;

@@ -417,6 +417,31 @@ fn stage_matrix(a: &[[f64; 3]; 3], n: usize, h: f64, jacs: [&[f64]; 3]) -> Optio
     DenseLu::factor(m, mat)
 }
 
+/// Growth exponent (e-folds) that accepted steps may step over before the simulation calls the
+/// model unstable. Radau IIA is L-stable: a step `h` across a mode growing at rate `r` with
+/// `r h >> 1` damps that mode instead of following it, and the error estimate (which compares
+/// two damped answers) does not notice; `y' = 1e10 y + 3u` simulated to a bounded trajectory.
+/// A mode stepped over by e^20 (5e8) would have amplified any rounding error past the signal.
+const HIDDEN_GROWTH_LIMIT: f64 = 20.0;
+
+/// The largest real part among the eigenvalues of the row-major `n x n` Jacobian, when a step
+/// `h` could step over it (`h ||J||_inf >= 0.5`: no eigenvalue exceeds the norm), else `-inf`.
+/// Also `-inf` when the eigenvalues cannot be computed: the divergence checks still apply.
+fn fast_growth_rate(jac: &[f64], n: usize, h: f64) -> f64 {
+    let norm = jac
+        .chunks_exact(n.max(1))
+        .map(|row| row.iter().map(|v| v.abs()).sum::<f64>())
+        .fold(0.0, f64::max);
+    if !(h * norm >= 0.5) || !norm.is_finite() {
+        return f64::NEG_INFINITY;
+    }
+    let m = nalgebra::DMatrix::from_row_slice(n, n, jac);
+    match crate::linalg::eigenvalues(&m) {
+        Ok(e) => e.iter().map(|z| z.0).fold(f64::NEG_INFINITY, f64::max),
+        Err(_) => f64::NEG_INFINITY,
+    }
+}
+
 enum StepOutcome {
     Ok(Vec<f64>),
     /// Newton did not converge: retry with a smaller step.
@@ -436,6 +461,13 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     lu_cache: LuCache,
     /// Scratch of [`Self::radau_step`] (stage values, residuals), reused across steps.
     scratch: Vec<f64>,
+    /// Guard against unstable modes that the L-stable step damps instead of following: the
+    /// largest real part among the eigenvalues of the last Jacobian that a step could step over
+    /// (`-inf` when none could), the Jacobian it was computed for, and the growth exponent
+    /// stepped over by consecutive accepted steps (see [`HIDDEN_GROWTH_LIMIT`]).
+    fast_rate: f64,
+    fast_rate_jac: Vec<f64>,
+    hidden_growth: f64,
     /// Forward sensitivities, when asked for.
     sens: Option<Sens<'a>>,
     /// Divergence threshold on |state|: `opts.bound` times the run's scale.
@@ -521,8 +553,37 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 .all(|(a, b)| (a - b).abs() <= 1e-3 * scale)
         };
         let (rk_a, n) = (&self.rk.a, self.n);
-        self.lu_cache
-            .get_or_factor(h, jac, close, || stage_matrix(rk_a, n, h, [jac, jac, jac]))
+        let mut fresh = false;
+        let lu = self.lu_cache.get_or_factor(h, jac, close, || {
+            fresh = true;
+            stage_matrix(rk_a, n, h, [jac, jac, jac])
+        });
+        if fresh && self.fast_rate_jac != jac {
+            self.fast_rate = fast_growth_rate(jac, n, h);
+            self.fast_rate_jac.clear();
+            self.fast_rate_jac.extend_from_slice(jac);
+        }
+        lu
+    }
+
+    /// After an accepted step of length `h` ending at `t`: an error when the steps since the
+    /// last one that could follow the fastest growing mode have stepped over more growth than
+    /// [`HIDDEN_GROWTH_LIMIT`].
+    fn check_hidden_growth(&mut self, t: f64, h: f64) -> Result<()> {
+        let stepped_over = self.fast_rate * h;
+        if stepped_over > 1.0 {
+            self.hidden_growth += stepped_over;
+        } else {
+            self.hidden_growth = 0.0;
+        }
+        if self.hidden_growth > HIDDEN_GROWTH_LIMIT {
+            return Err(Error::UnstableMode {
+                run: self.opts.run.clone(),
+                time: t,
+                rate: self.fast_rate,
+            });
+        }
+        Ok(())
     }
 
     /// One Radau IIA step from (t, x0) with step h, given the factors of [`Self::factors`]
@@ -812,6 +873,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                         if let Some(e) = self.diverged(t, x) {
                             return Err(e);
                         }
+                        self.check_hidden_growth(t, hh)?;
                         // A step clipped to land on b says little about the next one: keep the
                         // old guess unless the step was nearly full length and asks for less.
                         if !last || (fac < 1.0 && hh >= 0.5 * *h) {
@@ -1071,6 +1133,9 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
         n,
         u,
         lu_cache: LuCache::default(),
+        fast_rate: f64::NEG_INFINITY,
+        fast_rate_jac: Vec::new(),
+        hidden_growth: 0.0,
         scratch: Vec::new(),
         sens,
         sens_lu: LuCache::default(),
@@ -1327,6 +1392,66 @@ impl crate::lm::LeastSquares for InitialState<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// x' = A x + b u, row-major A.
+    struct Linear {
+        a: Vec<f64>,
+        b: Vec<f64>,
+    }
+
+    impl System for Linear {
+        fn dim(&self) -> usize {
+            self.b.len()
+        }
+        fn n_inputs(&self) -> usize {
+            1
+        }
+        fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+            let n = self.b.len();
+            for (i, d) in dx.iter_mut().enumerate() {
+                *d = (0..n).map(|j| self.a[i * n + j] * x[j]).sum::<f64>() + self.b[i] * u[0];
+            }
+        }
+    }
+
+    #[test]
+    fn an_unstable_mode_too_fast_for_the_steps_is_an_error_not_a_damped_trajectory() {
+        let times: Vec<f64> = (0..200).map(|k| k as f64 * 0.01).collect();
+        let run = |a: Vec<f64>| {
+            let sys = Linear {
+                a,
+                b: vec![1.0, 0.0],
+            };
+            simulate(
+                &sys,
+                &ConstantInput(vec![1.0]),
+                &[0.1, 0.0],
+                &times,
+                &SimOptions::default(),
+            )
+        };
+        // A slow stable mode feeding one growing at 1e9 /s: without the guard the L-stable
+        // step damped the fast mode and returned a bounded trajectory.
+        match run(vec![-1.0, 0.0, 1.0, 1e9]) {
+            Err(Error::UnstableMode { rate, .. }) => assert!((rate / 1e9 - 1.0).abs() < 1e-6),
+            other => panic!(
+                "expected an unstable mode, got {:?}",
+                other.map(|t| t.state(199).to_vec())
+            ),
+        }
+        // The same with the fast mode stable is a stiff system, simulated as before.
+        let tr = run(vec![-1.0, 0.0, 1.0, -1e9]).unwrap();
+        let x = tr.state(199);
+        assert!(x[0].is_finite() && x[1].abs() < 1e-8, "{x:?}");
+        // A slowly growing mode is followed, not refused: x' = 0.5 x grows by e^(0.5 * 1.99).
+        let tr = run(vec![0.5, 0.0, 0.0, -1.0]).unwrap();
+        let want = (0.1 + 2.0) * (0.5f64 * 1.99).exp() - 2.0;
+        assert!(
+            (tr.state(199)[0] - want).abs() < 1e-6 * want,
+            "{:?}",
+            tr.state(199)
+        );
+    }
 
     #[test]
     fn dense_lu_solves_with_pivoting_and_refuses_singular_matrices() {
