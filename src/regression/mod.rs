@@ -475,10 +475,35 @@ impl Regression {
                 max_candidates: self.max_candidates,
             },
         )?;
-        let mut notes = Vec::new();
+        let notes = Vec::new();
         features.check()?;
-        // f32 sweeps build monomials from the raw features: beyond about 1e30 they overflow
-        // (degree 6 on features of 1e6). Such data are swept in f64 on the CPU.
+        // Each feature is scaled by a power of two to a largest magnitude near 1 (exact: the
+        // products and the path are those of the raw data, without their overflow), and the
+        // coefficients are mapped back at the end. Raw features of 1e60 at degree 3 gave
+        // monomials whose squares overflow: the cubic term was dropped without a word.
+        let pows = power_of_two_scales(features);
+        let scaled = scale_features(features, &pows);
+        let features = &scaled;
+        let mut model =
+            self.fit_scaled(&basis, features, named, label, label_name, weights, notes)?;
+        unscale(&mut model, &basis, &pows)?;
+        Ok(model)
+    }
+
+    /// [`Regression::fit_with_columns`] on features already scaled (see there).
+    #[allow(clippy::too_many_arguments)]
+    fn fit_scaled(
+        &self,
+        basis: &Basis,
+        features: &Features,
+        named: &[NamedColumn],
+        label: &[f64],
+        label_name: &str,
+        weights: Option<&[f64]>,
+        mut notes: Vec<String>,
+    ) -> Result<Model> {
+        // f32 sweeps build monomials from the (scaled) features; a label beyond about 1e30
+        // overflows them. Such data are swept in f64 on the CPU.
         let largest = (0..features.n_vars())
             .map(|k| {
                 features
@@ -493,8 +518,7 @@ impl Regression {
         notes.push(decision.reason.clone());
         if !f32_safe {
             notes.push(format!(
-                "features up to {largest:.1e} at degree {}: monomials beyond the f32 range, so the sweeps run in f64 on the CPU",
-                self.degree
+                "a label up to {label_scale:.1e}: sums beyond the f32 range, so the sweeps run in f64 on the CPU"
             ));
         }
         // An explicit request for f32 (the GPU, or CPU f32) is refused rather than overflowed.
@@ -503,8 +527,7 @@ impl Regression {
             return Err(Error::param(
                 "engine",
                 format!(
-                    "f32 sweeps were asked for (GPU or f32 precision), and features up to {largest:.1e} at degree {} overflow them; rescale the features or use the CPU engine in f64",
-                    self.degree
+                    "f32 sweeps were asked for (GPU or f32 precision), and a label up to {label_scale:.1e} overflows them; rescale the label or use the CPU engine in f64"
                 ),
             ));
         }
@@ -776,4 +799,89 @@ impl Regression {
             path: path_points,
         })
     }
+}
+
+/// Per feature, the power of two `p` with `2^p` nearest its largest magnitude (0 for a column
+/// of zeros).
+fn power_of_two_scales(f: &Features) -> Vec<i32> {
+    (0..f.n_vars())
+        .map(|k| {
+            let m = f.column(k).iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            if m > 0.0 && m.is_finite() {
+                m.log2().round() as i32
+            } else {
+                0
+            }
+        })
+        .collect()
+}
+
+/// The features divided by `2^pows[k]`: exact, as long as no value leaves the normal range.
+fn scale_features(f: &Features, pows: &[i32]) -> Features {
+    let mut out = f.clone();
+    for (k, &p) in pows.iter().enumerate() {
+        let col = &mut out.data[k * f.n_samples..(k + 1) * f.n_samples];
+        col.iter_mut()
+            .for_each(|v| *v = times_pow2(*v, -(p as i64)));
+    }
+    out
+}
+
+/// x 2^p, in steps that neither overflow nor underflow on the way.
+fn times_pow2(x: f64, p: i64) -> f64 {
+    let (mut x, mut p) = (x, p);
+    while p != 0 {
+        let step = p.clamp(-1000, 1000);
+        x *= 2f64.powi(step as i32);
+        p -= step;
+    }
+    x
+}
+
+/// Maps coefficients fitted on scaled features back to the data's units: a monomial's
+/// coefficient times `2^-(sum_k e_k p_k)`. A coefficient that leaves f64's normal range on the
+/// way is an error naming the term (the model cannot be written in those units), never a 0.
+fn unscale(model: &mut Model, basis: &Basis, pows: &[i32]) -> Result<()> {
+    if pows.iter().all(|&p| p == 0) {
+        return Ok(());
+    }
+    let nb = basis.len();
+    let shift = |id: usize| -> i64 {
+        basis
+            .code(id)
+            .exponents(pows.len())
+            .iter()
+            .zip(pows)
+            .map(|(&e, &p)| e as i64 * p as i64)
+            .sum()
+    };
+    let map = |c: f64, id: usize, name: &str| -> Result<f64> {
+        if id >= nb {
+            return Ok(c);
+        }
+        let v = times_pow2(c, -shift(id));
+        if c != 0.0 && !(v.is_finite() && v.abs() >= f64::MIN_POSITIVE) {
+            return Err(Error::InvalidData(format!(
+                "the coefficient of {name} in the data's units ({c:e} x 2^{}) is beyond the range of f64; rescale its variables (e.g. to other units)",
+                -shift(id)
+            )));
+        }
+        Ok(v)
+    };
+    for t in &mut model.terms {
+        if let Some(id) = t.index {
+            t.coefficient = map(t.coefficient, id, &t.name)?;
+        }
+    }
+    for bp in &mut model.path {
+        for ((c, &id), name) in bp
+            .coefficients
+            .iter_mut()
+            .zip(&bp.active_index)
+            .zip(&bp.active)
+        {
+            *c = map(*c, id, name)?;
+        }
+    }
+    Ok(())
 }
