@@ -6,16 +6,6 @@ mod cli;
 use clap::Parser;
 
 fn main() {
-    // Mesa's Vulkan loader complains on every adapter probe when XDG_RUNTIME_DIR is unset (as in
-    // containers and CI); give it a private folder before any thread starts, removed at exit.
-    let mut private_dir = None;
-    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-        let dir = std::env::temp_dir().join(format!("ctsid-xdg-{}", std::process::id()));
-        if std::fs::create_dir_all(&dir).is_ok() {
-            std::env::set_var("XDG_RUNTIME_DIR", &dir);
-            private_dir = Some(dir);
-        }
-    }
     let code = match cli::Cli::try_parse() {
         Ok(args) => match cli::run(args) {
             Ok(()) => 0,
@@ -28,9 +18,6 @@ fn main() {
         },
         Err(e) => usage_error(e),
     };
-    if let Some(dir) = private_dir {
-        let _ = std::fs::remove_dir_all(dir);
-    }
     std::process::exit(code);
 }
 

@@ -75,9 +75,13 @@ pub fn run(cli: Cli) -> Result<()> {
 
 /// Whether long stages print progress lines: on a terminal, unless `--quiet`. Piped or
 /// redirected standard error gets none, so logs and scripts see only results and errors.
-pub fn show_progress(quiet: bool) -> bool {
+pub fn show_progress(quiet: bool) -> Option<fn(&str)> {
     use std::io::IsTerminal;
-    !quiet && std::io::stderr().is_terminal()
+    (!quiet && std::io::stderr().is_terminal()).then_some(progress_line as fn(&str))
+}
+
+fn progress_line(line: &str) {
+    eprintln!("{line}");
 }
 
 /// Loads the channels of `spec` from `path` and notes on standard error the samples that look

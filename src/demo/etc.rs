@@ -33,7 +33,8 @@ pub struct EtcOptions {
     pub degree: usize,
     pub engine: EngineChoice,
     pub out: Option<PathBuf>,
-    pub progress: bool,
+    /// Progress lines of the identification (see `identify::Settings::progress`).
+    pub progress: Option<fn(&str)>,
 }
 
 impl Default for EtcOptions {
@@ -50,7 +51,7 @@ impl Default for EtcOptions {
             degree: 3,
             engine: EngineChoice::Auto,
             out: None,
-            progress: true,
+            progress: None,
         }
     }
 }

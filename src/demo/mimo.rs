@@ -24,7 +24,8 @@ pub struct MimoOptions {
     /// Structure search (identify's default unless given).
     pub method: Option<crate::regression::Method>,
     pub out: Option<PathBuf>,
-    pub progress: bool,
+    /// Progress lines of the identification (see `identify::Settings::progress`).
+    pub progress: Option<fn(&str)>,
 }
 
 impl Default for MimoOptions {
@@ -40,7 +41,7 @@ impl Default for MimoOptions {
             engines: vec![EngineChoice::Cpu],
             method: None,
             out: None,
-            progress: true,
+            progress: None,
         }
     }
 }

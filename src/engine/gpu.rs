@@ -104,7 +104,50 @@ pub struct AdapterSummary {
     pub driver: String,
 }
 
+/// Mesa's Vulkan drivers print `XDG_RUNTIME_DIR is invalid or not set in the environment` on
+/// every instance when that variable is unset (containers, CI, services): 32 lines from one
+/// identification. Before the first instance, a process without it gets a private folder
+/// (`<tmp>/ctsid-xdg-<user>`, mode 0700), once. Nothing is set when the folder cannot be made.
+fn quiet_vulkan_loader() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        if std::env::var_os("XDG_RUNTIME_DIR").is_some() {
+            return;
+        }
+        let user = std::env::var("USER").unwrap_or_else(|_| owner_of_this_process());
+        let user: String = user
+            .chars()
+            .filter(|c| c.is_ascii_alphanumeric() || *c == '_' || *c == '-')
+            .collect();
+        let dir = std::env::temp_dir().join(format!("ctsid-xdg-{user}"));
+        if std::fs::create_dir_all(&dir).is_err() {
+            return;
+        }
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            if std::fs::set_permissions(&dir, std::fs::Permissions::from_mode(0o700)).is_err() {
+                return;
+            }
+        }
+        std::env::set_var("XDG_RUNTIME_DIR", &dir);
+    });
+}
+
+/// The uid of this process where /proc tells it, else its pid.
+fn owner_of_this_process() -> String {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        if let Ok(m) = std::fs::metadata("/proc/self") {
+            return m.uid().to_string();
+        }
+    }
+    std::process::id().to_string()
+}
+
 fn new_instance() -> wgpu::Instance {
+    quiet_vulkan_loader();
     let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
     desc.backends = wgpu::Backends::VULKAN;
     wgpu::Instance::new(desc)

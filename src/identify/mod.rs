@@ -119,8 +119,10 @@ pub struct Settings {
     /// Pass every signal of an output's equation (its label, the other outputs' derivatives and
     /// the inputs) through one and the same linear smoother (see `equation_data`).
     pub same_filter: bool,
-    /// Print progress lines to standard error.
-    pub progress: bool,
+    /// Called with each progress line of the long stages (order scoring, completion); `None`
+    /// (the default) is silent: the library prints nothing. The CLI passes a function that
+    /// writes to standard error.
+    pub progress: Option<fn(&str)>,
     /// Refine the selected structure by free-run simulation error (see the module docs).
     pub refine: bool,
     pub refine_options: refine::RefineOptions,
@@ -160,7 +162,7 @@ impl Settings {
             label_floor: LABEL_FLOOR,
             same_filter: true,
             selection: Selection::Simulation,
-            progress: false,
+            progress: None,
             refine: true,
             refine_options: refine::RefineOptions::default(),
             terms: Vec::new(),
@@ -665,8 +667,8 @@ fn prepare<'a>(
 ) -> Result<Prepared<'a>> {
     let t = std::time::Instant::now();
     let say = |msg: String| {
-        if settings.progress {
-            eprintln!("{msg}");
+        if let Some(p) = settings.progress {
+            p(&msg);
         }
     };
     let mut derivs = Vec::new();
@@ -748,8 +750,8 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let max_order = settings.max_order();
     rs.require_derivable(max_order)?;
     let say = |msg: String| {
-        if settings.progress {
-            eprintln!("{msg}");
+        if let Some(p) = settings.progress {
+            p(&msg);
         }
     };
 
@@ -880,7 +882,17 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
             test,
             samples_used: w.iter().filter(|w| **w > 0.0).count(),
             samples_excluded: excluded,
-            engine: m.diagnostics.engine.clone(),
+            // A GPU that failed and fell back is said where the engine is named.
+            engine: std::iter::once(m.diagnostics.engine.clone())
+                .chain(
+                    m.diagnostics
+                        .notes
+                        .iter()
+                        .filter(|n| n.starts_with("GPU engine failed"))
+                        .cloned(),
+                )
+                .collect::<Vec<_>>()
+                .join("; "),
         });
     }
     let input_names: Vec<&str> = settings.inputs.iter().map(String::as_str).collect();
@@ -995,11 +1007,11 @@ fn complete_selected(
 ) -> Result<ModelFile> {
     let (completed, trials) = completion_trials(model, report, prep, outputs, split, fits)?;
     for t in trials.iter().filter(|t| t.kept) {
-        if prep.settings.progress {
-            eprintln!(
+        if let Some(p) = prep.settings.progress {
+            p(&format!(
                 "completion on simulation error: {} added to '{}' (gate runs better by {:.1} noise standard deviations)",
                 t.term, t.output, t.z
-            );
+            ));
         }
     }
     if trials.iter().any(|t| t.kept) {
@@ -1282,11 +1294,11 @@ fn simulation_score(
     } else {
         Profile::new(&e, &l)
     });
-    if let (Some(r), true) = (&report, prep.settings.progress) {
-        eprintln!(
+    if let (Some(r), Some(p)) = (&report, prep.settings.progress) {
+        p(&format!(
             "order {} scoring: {} ({:.2} s, {} iterations)",
             c.order, r.message, r.seconds, r.iterations
-        );
+        ));
     }
     Ok(())
 }

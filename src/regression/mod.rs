@@ -544,9 +544,10 @@ impl Regression {
                 // An explicit request for the GPU fails loudly when there is no adapter at all.
                 Err(e @ Error::NoGpu(_)) if self.engine == EngineChoice::Gpu => return Err(e),
                 Err(e) => {
-                    let line = format!("GPU engine failed ({e}); falling back to the CPU engine");
-                    eprintln!("{line}");
-                    notes.push(line);
+                    // Kept in the model's notes (the CLI prints them); the library prints nothing.
+                    notes.push(format!(
+                        "GPU engine failed ({e}); falling back to the CPU engine"
+                    ));
                 }
             }
         }
