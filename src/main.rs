@@ -12,6 +12,8 @@ fn main() {
             Err(e) => {
                 // One line even when a header or run id from the data carries a line break.
                 let text = e.to_string().replace('\r', "\\r").replace('\n', "\\n");
+                // Bounded whatever a message carries from the data (names, fields, run ids).
+                let text = ctsid::util::clip(&text, 2000);
                 eprintln!("error: {text}");
                 2
             }

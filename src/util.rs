@@ -193,3 +193,14 @@ mod open_tests {
         std::fs::remove_file(&p).ok();
     }
 }
+
+/// `s` cut to at most `max` characters for an error message, the cut said with the length
+/// (a 20 MB field was echoed whole into a one-line error).
+pub fn clip(s: &str, max: usize) -> String {
+    let n = s.chars().count();
+    if n <= max {
+        return s.to_string();
+    }
+    let head: String = s.chars().take(max).collect();
+    format!("{head}... ({n} characters)")
+}

@@ -278,6 +278,38 @@ fn demo_settings_are_checked_before_the_work() {
     fails(&["demo", "mimo", "--degrees", "0"], &["degree", "1..=12"]);
     fails(&["demo", "etc", "--noise=-1"], &["noise"]);
     fails(&["demo", "etc", "--patm", "nan"], &["patm"]);
+    // A setting far outside physics is blamed, not the model identified under it.
+    fails(&["demo", "etc", "--patm", "1e300"], &["patm", "101325"]);
+}
+
+#[test]
+fn a_huge_bad_field_is_cut_in_the_error_and_a_folder_name_is_no_output_file() {
+    let mut text = String::from("t,u,y\n0,");
+    text += &"x".repeat(2_000_000);
+    text += ",1\n0.01,1,2\n";
+    let data = file("hugefield.csv", &text);
+    let model = lag_model("mh.json", Some(1.0));
+    let out = fails(
+        &["simulate", &model, &data, "--time-column t"],
+        &["2000000 characters"],
+    );
+    assert!(
+        out.stderr.len() < 1000,
+        "{} bytes of error",
+        out.stderr.len()
+    );
+    let good = file("good-for-dir.csv", &good_csv());
+    let newdir = dir().join("newdir").display().to_string() + "/";
+    fails(
+        &[
+            "simulate",
+            &model,
+            &good,
+            "--run-column run --tau 0.01 -o",
+            &newdir,
+        ],
+        &["ends in a separator"],
+    );
 }
 
 #[test]

@@ -129,6 +129,11 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
     if out.is_dir() {
         return Err(err("is a folder; give a file name".into()));
     }
+    if name.ends_with('/') || name.ends_with(std::path::MAIN_SEPARATOR) {
+        return Err(err(
+            "names a folder (it ends in a separator); give a file name".into(),
+        ));
+    }
     let parent = out.parent().filter(|p| !p.as_os_str().is_empty());
     if let Some(p) = parent {
         if p.exists() && !p.is_dir() {

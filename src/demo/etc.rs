@@ -13,7 +13,7 @@ use crate::identify::{identify, profile::Profile, Identification, Orders, Settin
 use crate::plants::{dataset, Plant, ThrottlePreset};
 use crate::regression::EngineChoice;
 use crate::report::{svg, write_file, Table};
-use crate::Result;
+use crate::{Error, Result};
 use std::fmt::Write;
 use std::path::PathBuf;
 
@@ -60,6 +60,9 @@ fn prof_cells(p: &Profile) -> Vec<String> {
     p.0.iter().map(|v| format!("{v:.3}")).collect()
 }
 
+/// Largest `--patm` taken (Pa): a hundred atmospheres.
+pub const PATM_MAX: f64 = 1e7;
+
 /// Runs the experiment; returns the report text (also printed by the CLI).
 pub fn run(o: &EtcOptions) -> Result<String> {
     // Settings are checked before the minutes of simulation and fitting, not after.
@@ -67,6 +70,12 @@ pub fn run(o: &EtcOptions) -> Result<String> {
     crate::basis::check_degree(o.degree)?;
     super::check_runs(o.train, o.runs)?;
     crate::util::finite_nonneg("patm", o.patm)?;
+    if o.patm > PATM_MAX {
+        return Err(Error::param(
+            "patm",
+            format!("{:e} Pa is beyond any air pressure a throttle sees; give 0 to {PATM_MAX:e} Pa (the atmosphere is 101325 Pa)", o.patm),
+        ));
+    }
     let t_all = std::time::Instant::now();
     let plant = if o.physical {
         Plant::throttle(ThrottlePreset::Physical)
@@ -144,7 +153,12 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         identify(&rs, &split, &s)
     };
     let search = |eta: f64| -> Result<(Identification, Vec<crate::plants::Run>)> {
-        let runs = dataset(&plant, o.runs, o.samples, o.tau, eta, o.seed)?;
+        // A failure here is the true plant's under these settings, not an identified model's.
+        let runs = dataset(&plant, o.runs, o.samples, o.tau, eta, o.seed).map_err(|e| {
+            Error::InvalidData(format!(
+                "the true throttle (Patm = {patm} Pa) cannot be simulated to make the data: {e}"
+            ))
+        })?;
         Ok((run_identify(&runs, o.degree, None)?, runs))
     };
     // The noise-free and the noisy searches are independent: run them side by side (each one's

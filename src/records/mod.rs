@@ -265,7 +265,7 @@ impl RecordSet {
             .ok_or_else(|| Error::MissingColumn {
                 path: "record set".into(),
                 column: name.into(),
-                available: self.channel_names.join(", "),
+                available: crate::util::clip(&self.channel_names.join(", "), 400),
             })
     }
 
@@ -432,7 +432,7 @@ impl RecordSet {
                 _ => Err(Error::MissingColumn {
                     path: label.into(),
                     column: name.into(),
-                    available: header.join(", "),
+                    available: crate::util::clip(&header.join(", "), 400),
                 }),
             }
         };
@@ -463,7 +463,7 @@ impl RecordSet {
                     path: label.into(),
                     row,
                     column: col.into(),
-                    value: s.into(),
+                    value: crate::util::clip(s, 60),
                 }),
             }
         };
