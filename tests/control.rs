@@ -435,6 +435,26 @@ fn the_command_prints_the_design_and_writes_the_trace() {
         err.contains("has not settled within the 0.5000 s run; give a longer --duration"),
         "{err}"
     );
+    // A nonlinear model that strays from its linear design yet settles, later than the run:
+    // y' = -2 y + 3 u - 0.5 y^3 from 10 to 1 settles in about 9 s, the run is 3.4 s. That is a
+    // --duration to give, not a bandwidth (as it was called before).
+    let cubic = temp_file(
+        "control",
+        "cubic.json",
+        r#"{"format":"ctsid-model/2","tau":0.01,"inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-2},{"exponents":{"u":1},"coefficient":3},{"exponents":{"y":3},"coefficient":-0.5}]}]}"#,
+    );
+    let out = fails(
+        &["control", &cubic, "--setpoint 1 --from 10"],
+        &["'duration'", "it settles in", "give --duration"],
+    );
+    let err = String::from_utf8_lossy(&out.stderr).to_string();
+    let at = err.find("--duration ").unwrap() + 11;
+    let dur = err[at..].split_whitespace().next().unwrap();
+    let (ok, out, err2) = ctsid(&["control", &cubic, "--setpoint 1 --from 10 --duration", dur]);
+    assert!(
+        ok && out.contains("settling (2 %) 9."),
+        "--duration {dur}: {err2}\n{out}"
+    );
     let mut other = oscillator();
     other.outputs[0].name = "z".into();
     other.outputs[0].terms[0] = Term::new(&[("z", 1)], -4.0);
