@@ -533,8 +533,8 @@ impl Regression {
         }
         if decision.kind == EngineKind::Gpu && f32_safe {
             let attempt =
-                GpuEngine::new(features, &basis, GpuOptions::default()).and_then(|mut g| {
-                    self.fit_candidates(&basis, named, &mut g, label, label_name, weights)
+                GpuEngine::new(features, basis, GpuOptions::default()).and_then(|mut g| {
+                    self.fit_candidates(basis, named, &mut g, label, label_name, weights)
                 });
             match attempt {
                 Ok(mut model) => {
@@ -558,7 +558,7 @@ impl Regression {
         };
 
         let mut engine = CpuEngine::new(
-            &basis,
+            basis,
             features,
             CpuOptions {
                 precision,
@@ -566,7 +566,7 @@ impl Regression {
             },
         )?;
         let mut model =
-            self.fit_candidates(&basis, named, &mut engine, label, label_name, weights)?;
+            self.fit_candidates(basis, named, &mut engine, label, label_name, weights)?;
         model.diagnostics.notes.splice(0..0, notes);
         Ok(model)
     }

@@ -432,7 +432,7 @@ fn fast_growth_rate(jac: &[f64], n: usize, h: f64) -> f64 {
         .chunks_exact(n.max(1))
         .map(|row| row.iter().map(|v| v.abs()).sum::<f64>())
         .fold(0.0, f64::max);
-    if !(h * norm >= 0.5) || !norm.is_finite() {
+    if !norm.is_finite() || h * norm < 0.5 || h.is_nan() {
         return f64::NEG_INFINITY;
     }
     let m = nalgebra::DMatrix::from_row_slice(n, n, jac);
