@@ -52,7 +52,7 @@ fn main() {
         let ex = plant.excitation_for(7, r);
         let x0 = sys.t.rest_state();
         let tr = simulate(&sys, &ex, &x0, &times, &truth_options(r)).expect("truth simulates");
-        let y_true = tr.series(0);
+        let y_true = tr.series(0).unwrap();
         let y = add_noise(&y_true, 0.03, &mut Rng::new(stream_seed(7, r as u64, 1000)));
         let mut uk = [0.0];
         let u: Vec<f64> = times

@@ -33,7 +33,7 @@ fn main() {
                 d.values[2][i],
                 runs[r].u[0][i],
             ];
-            let e = d.values[3][i] - c.eval_output(0, &z);
+            let e = d.values[3][i] - c.eval_output(0, &z).unwrap();
             rows.push((
                 e.abs(),
                 r,

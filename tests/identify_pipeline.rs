@@ -64,7 +64,7 @@ fn data(runs: usize, eta: f64, seed: u64) -> (RecordSet, Vec<Vec<f64>>) {
             },
         )
         .unwrap();
-        let y = traj.series(0);
+        let y = traj.series(0).unwrap();
         clean.push(y.clone());
         let y = if eta > 0.0 {
             add_noise(&y, eta, &mut rng)

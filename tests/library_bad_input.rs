@@ -327,11 +327,57 @@ fn a_stiff_stable_model_is_simulated_not_called_divergent() {
         &ctsid::simulate::SimOptions::default(),
     )
     .unwrap();
-    let y = traj.series(0);
+    let y = traj.series(0).unwrap();
     let worst = y
         .iter()
         .zip(&u)
         .map(|(a, b)| (a - b).abs())
         .fold(0.0, f64::max);
     assert!(worst < 1e-3, "max |y - u| = {worst}");
+}
+
+#[test]
+fn public_functions_refuse_wrong_lengths_and_indices() {
+    use ctsid::engine::DenseEngine;
+    use ctsid::metrics::percentile;
+
+    assert!(DenseEngine::from_column_major(3, 2, vec![0.0; 5]).is_err());
+    assert!(DenseEngine::from_column_major(usize::MAX, 2, vec![]).is_err());
+    assert!(DenseEngine::from_column_major(3, 2, vec![0.0; 6]).is_ok());
+    assert!(percentile(&[1.0, 2.0], 101.0).is_nan());
+    assert!(percentile(&[1.0, 2.0], -1.0).is_nan());
+    assert!(percentile(&[], 50.0).is_nan());
+    assert_eq!(percentile(&[1.0, 3.0], 50.0), 2.0);
+
+    let text = r#"{"format":"ctsid-model/2","inputs":["u"],"outputs":[{"name":"y","order":2,"terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":1}]}]}"#;
+    let model = Model::from_json_str(text, "test").unwrap();
+    let c = model.compile().unwrap();
+    assert!(c.eval_output(1, &[0.0; 3]).is_err());
+    assert!(c.eval_output(0, &[0.0; 2]).is_err());
+    assert!(c.term_values(0, &[0.0; 4]).is_err());
+    assert!(c.grad_output(3, &[0.0; 3]).is_err());
+    let mut dx = vec![0.0; 2];
+    assert!(c.rhs(&[0.0; 1], &[0.0], &mut dx).is_err());
+    assert!(c.rhs(&[0.0; 2], &[], &mut dx).is_err());
+    assert!(c.rhs(&[0.0; 2], &[0.0], &mut dx[..1]).is_err());
+    c.rhs(&[1.0, 0.0], &[0.5], &mut dx).unwrap();
+    assert_eq!(dx, vec![0.0, -0.5]);
+    let (mut jx, mut ju) = (vec![0.0; 4], vec![0.0; 2]);
+    assert!(c
+        .jacobians(&[0.0; 2], &[0.0], &mut jx[..3], &mut ju)
+        .is_err());
+    c.jacobians(&[0.0; 2], &[0.0], &mut jx, &mut ju).unwrap();
+    assert_eq!(jx, vec![0.0, 1.0, -1.0, 0.0]);
+
+    let times: Vec<f64> = (0..5).map(|k| k as f64 * 0.1).collect();
+    let tr = ctsid::simulate::simulate(
+        &c,
+        &ctsid::simulate::ConstantInput(vec![1.0]),
+        &[0.0, 0.0],
+        &times,
+        &Default::default(),
+    )
+    .unwrap();
+    assert!(tr.state(5).is_err() && tr.state(4).is_ok());
+    assert!(tr.series(2).is_err() && tr.series(1).unwrap().len() == 5);
 }

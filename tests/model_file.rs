@@ -83,15 +83,14 @@ fn expression_terms_evaluate_with_their_smoothing_and_exact_gradients() {
     let smooth_sign = 1e-5 / (1e-10f64 + w * w).sqrt();
     let expect = 37664.0 - 23978.0 * 0.3 + 0.125 * 1e-10 * 2.0 - 675.7 * -0.7 - 0.21 * smooth_sign
         + 0.5 * 1e-5 * 1e-5;
-    assert!((c.eval_output(0, &z) - expect).abs() < 1e-9 * expect.abs());
-    let mut g = vec![0.0; 4];
-    c.grad_output(0, &z, &mut g);
+    assert!((c.eval_output(0, &z).unwrap() - expect).abs() < 1e-9 * expect.abs());
+    let g = c.grad_output(0, &z).unwrap();
     for k in 0..4 {
         let h = 1e-7 * z[k].abs().max(0.1);
         let (mut a, mut b) = (z, z);
         a[k] += h;
         b[k] -= h;
-        let fd = (c.eval_output(0, &a) - c.eval_output(0, &b)) / (2.0 * h);
+        let fd = (c.eval_output(0, &a).unwrap() - c.eval_output(0, &b).unwrap()) / (2.0 * h);
         assert!(
             (fd - g[k]).abs() < 1e-5 * (1.0 + fd.abs()),
             "d/dz{k}: {} vs {fd}",
@@ -155,15 +154,15 @@ fn hand_written_minimal_file_is_valid_and_evaluates() {
     assert_eq!(m.variable_names(), ["y", "y_d1", "u"]);
     let c = m.compile().unwrap();
     // z = (y, y', u) = (1, 2, 4): -2 + 3*8 + 0.5
-    assert_eq!(c.eval_output(0, &[1.0, 2.0, 4.0]), 22.5);
+    assert_eq!(c.eval_output(0, &[1.0, 2.0, 4.0]).unwrap(), 22.5);
     let mut dx = [0.0; 2];
-    c.rhs(&[1.0, 2.0], &[4.0], &mut dx);
+    c.rhs(&[1.0, 2.0], &[4.0], &mut dx).unwrap();
     assert_eq!(dx, [2.0, 22.5]);
     // Coefficients can be swapped without recompiling.
     let mut c = c;
     assert_eq!(c.coefficients(), vec![-2.0, 3.0, 0.5]);
     c.set_coefficients(&[1.0, 0.0, 0.0]).unwrap();
-    assert_eq!(c.eval_output(0, &[1.0, 2.0, 4.0]), 1.0);
+    assert_eq!(c.eval_output(0, &[1.0, 2.0, 4.0]).unwrap(), 1.0);
     assert!(c.set_coefficients(&[1.0]).is_err());
     // No tau, no degree: still valid, degree inferred.
     let m2 = Model::from_json_str(
@@ -189,20 +188,20 @@ fn mimo_layout_and_cross_derivatives() {
     let x = [1.0, 2.0, 3.0, 4.0, 5.0];
     let u = [7.0, 3.0];
     let mut dx = [0.0; 5];
-    c.rhs(&x, &u, &mut dx);
+    c.rhs(&x, &u, &mut dx).unwrap();
     assert_eq!(dx, [2.0, 2.0 * 5.0 * 1.0, 4.0, 5.0, -2.0 * 9.0]);
     // Analytic Jacobian against central differences.
     let mut jx = [0.0; 25];
     let mut ju = [0.0; 10];
-    c.jacobians(&x, &u, &mut jx, &mut ju);
+    c.jacobians(&x, &u, &mut jx, &mut ju).unwrap();
     for k in 0..5 {
         let mut xp = x;
         let mut xm = x;
         xp[k] += 1e-6;
         xm[k] -= 1e-6;
         let (mut fp, mut fm) = ([0.0; 5], [0.0; 5]);
-        c.rhs(&xp, &u, &mut fp);
-        c.rhs(&xm, &u, &mut fm);
+        c.rhs(&xp, &u, &mut fp).unwrap();
+        c.rhs(&xm, &u, &mut fm).unwrap();
         for r in 0..5 {
             assert!(
                 (jx[r * 5 + k] - (fp[r] - fm[r]) / 2e-6).abs() < 1e-6,

@@ -40,7 +40,7 @@ fn throttle_at_zero_patm_is_the_printed_linear_equation() {
         // The true model file evaluates to the same.
         let m = th.true_model(Some(0.003)).unwrap().compile().unwrap();
         let z = [d[0], d[1], d[2], u];
-        assert!((m.eval_output(0, &z) - lin).abs() <= 1e-9 * lin.abs().max(1e4));
+        assert!((m.eval_output(0, &z).unwrap() - lin).abs() <= 1e-9 * lin.abs().max(1e4));
     }
     assert!(throttle(101_325.0).true_model(None).is_none());
 }
@@ -77,9 +77,9 @@ fn throttle_eigenvalues_and_dc_gain() {
     .unwrap();
     let want = th.p.y0 + 1.222e6 / 23978.0 * u;
     assert!(
-        (tr.state(2)[0] - want).abs() < 1e-8,
+        (tr.state(2).unwrap()[0] - want).abs() < 1e-8,
         "{} vs {want}",
-        tr.state(2)[0]
+        tr.state(2).unwrap()[0]
     );
 }
 
@@ -343,7 +343,7 @@ fn step_control_keeps_accuracy_on_the_stiff_throttle() {
     let model = th.true_model(None).unwrap().compile().unwrap();
     let xc = [x0[0], 0.0, 0.0];
     let comp = simulate(&model, &ex, &xc, &t, &SimOptions::default()).unwrap();
-    let y_tight = tight.series(0);
+    let y_tight = tight.series(0).unwrap();
     let range = y_tight
         .iter()
         .map(|y| (y - x0[0]).abs())
@@ -356,14 +356,14 @@ fn step_control_keeps_accuracy_on_the_stiff_throttle() {
             / range
     };
     assert!(
-        err(&loose.series(0)) < 1e-5,
+        err(&loose.series(0).unwrap()) < 1e-5,
         "loose: {:e}",
-        err(&loose.series(0))
+        err(&loose.series(0).unwrap())
     );
     assert!(
-        err(&comp.series(0)) < 1e-7,
+        err(&comp.series(0).unwrap()) < 1e-7,
         "companion: {:e}",
-        err(&comp.series(0))
+        err(&comp.series(0).unwrap())
     );
     // The stiffness does not force tiny steps: far fewer than an explicit method's 2/624.5 s.
     assert!(loose.steps < 3000, "{} steps", loose.steps);

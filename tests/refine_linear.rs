@@ -68,7 +68,7 @@ pub fn runs_of(system: &Model, first: usize, n_runs: usize, eta: f64) -> Vec<Run
             )
             .unwrap();
             let y = add_noise(
-                &tr.series(0),
+                &tr.series(0).unwrap(),
                 eta,
                 &mut Rng::new(stream_seed(7, r as u64, 1)),
             );

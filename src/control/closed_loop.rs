@@ -208,7 +208,8 @@ impl System for Loop<'_> {
             jac[i * dim..i * dim + np].copy_from_slice(&jp[i * np..(i + 1) * np]);
         }
         let (mut jm, mut ju) = (vec![0.0; n * n], vec![0.0; n]);
-        self.model.jacobians(&x[np..], &u[..1], &mut jm, &mut ju);
+        self.model
+            .jacobians_unchecked(&x[np..], &u[..1], &mut jm, &mut ju);
         for i in 0..n {
             let row = (np + i) * dim + np;
             jac[row..row + n].copy_from_slice(&jm[i * n..(i + 1) * n]);
@@ -219,7 +220,7 @@ impl System for Loop<'_> {
         let np = self.plant.dim();
         self.plant.rhs(&x[..np], &u[..1], &mut dx[..np]);
         let (xh, dxh) = (&x[np..], &mut dx[np..]);
-        self.model.rhs(xh, &u[..1], dxh);
+        self.model.rhs_unchecked(xh, &u[..1], dxh);
         let e = u[1] - xh[0];
         for (d, l) in dxh.iter_mut().zip(self.l) {
             *d += l * e;
@@ -387,7 +388,7 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
             &opts,
         )
         .map_err(|e| diverged(e.to_string()))?;
-        z.copy_from_slice(step.state(1));
+        z.copy_from_slice(step.state_at(1));
         steps += step.steps;
         if steps > MAX_STEPS {
             return Err(Error::InvalidData(format!(

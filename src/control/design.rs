@@ -91,16 +91,16 @@ fn rest_eval(c: &CompiledModel, n: usize, y: f64, u: f64) -> (f64, f64, f64) {
     z[0] = y;
     z[n] = u;
     let mut g = vec![0.0; n + 1];
-    c.grad_output(0, &z, &mut g);
+    c.grad_output_unchecked(0, &z, &mut g);
     // The size of the sum the root cancels: sum |c_k phi_k(z)| over the terms (for named terms
     // too, where |c| at |z| says nothing: cos(y) or s*sat(u/s) - u can come out negative).
     let size: f64 = c
-        .term_values(0, &z)
+        .term_values_unchecked(0, &z)
         .iter()
         .zip(c.coefficients())
         .map(|(v, k)| (k * v).abs())
         .sum();
-    (c.eval_output(0, &z), g[n], size)
+    (c.eval_output_unchecked(0, &z), g[n], size)
 }
 
 /// Starting inputs for the steady-input search, nearest zero first.
@@ -349,7 +349,7 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
     let mut x = vec![0.0; n];
     x[0] = o.setpoint;
     let (mut jx, mut ju) = (vec![0.0; n * n], vec![0.0; n]);
-    c.jacobians(&x, &[u_star], &mut jx, &mut ju);
+    c.jacobians_unchecked(&x, &[u_star], &mut jx, &mut ju);
     let a = DMatrix::from_row_slice(n, n, &jx);
     let b = DVector::from_column_slice(&ju);
     if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {

@@ -3,11 +3,11 @@
 //!
 //! # Method
 //! 1. *Prior.* The signal is the first state of a chain of m = K + 3 integrators driven by white
-//!    noise, observed in white noise ([`statespace`]); in scaled time the two intensities are
+//!    noise, observed in white noise (`statespace`); in scaled time the two intensities are
 //!    equal, so one number, the scaled step h, sets the smoothing level.
 //! 2. *Tuning.* h maximises the profile likelihood of the Kalman innovations over all runs of a
-//!    record set jointly ([`tune`]); the noise variance comes out in closed form.
-//! 3. *Smoothing.* The Rauch-Tung-Striebel smoother ([`smoother`]) gives posterior means and
+//!    record set jointly (`tune`); the noise variance comes out in closed form.
+//! 3. *Smoothing.* The Rauch-Tung-Striebel smoother (`smoother`) gives posterior means and
 //!    variances of every derivative. The covariance recursions are data independent: they are
 //!    computed once per run length and reused by every run, so each run costs O(N m^2).
 //! 4. *Local adaptivity.* Fast transients need less smoothing than the rest of a run, slow
@@ -38,9 +38,12 @@ pub mod benchmark;
 pub mod expsum;
 mod kernel;
 pub mod score;
-pub mod smoother;
-pub mod statespace;
-pub mod tune;
+// The numerical internals (state-space prior, tuning, smoother) are private: their functions
+// assume the chain sizes and levels `derive` checks once (m in 2..=11, lambda > 0 where a
+// stationary prior is asked for).
+pub(crate) mod smoother;
+pub(crate) mod statespace;
+pub(crate) mod tune;
 
 use crate::error::{Error, Result};
 use kernel::Cov;

@@ -4,18 +4,7 @@
 //! each end ("trimmed"). Also the calibration of sigma: the share of errors within 2 sigma, and
 //! the Spearman rank correlation between sigma and |error|.
 
-/// Percentile with linear interpolation between order statistics (numpy's default).
-pub fn percentile(values: &[f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
-    let mut v: Vec<f64> = values.to_vec();
-    v.sort_by(|a, b| a.total_cmp(b));
-    let pos = q / 100.0 * (v.len() - 1) as f64;
-    let lo = pos.floor() as usize;
-    let hi = pos.ceil() as usize;
-    v[lo] + (v[hi] - v[lo]) * (pos - lo as f64)
-}
+pub use crate::metrics::percentile;
 
 /// Normalised error percentile p_q on samples [from, to).
 pub fn normalised_percentile(est: &[f64], truth: &[f64], q: f64, from: usize, to: usize) -> f64 {

@@ -344,7 +344,7 @@ pub fn generate_scaled(name: &str, seed: u64, eta: f64, scale: f64) -> Result<Ca
             ..SimOptions::default()
         };
         let tr = simulate(&truth, &input, &x0, &times, &opts)?;
-        let mut y = tr.series(0);
+        let mut y = tr.series_of(0);
         clean.push(y.clone());
         if name == "negative_drift" {
             let amp = y.iter().fold(0.0f64, |a, v| a.max(v.abs()));

@@ -111,7 +111,7 @@ impl CpuEngine {
             data.par_chunks_mut(n)
                 .enumerate()
                 .for_each(|(j, col)| eval_column(basis, features, j, col));
-            Some(DenseEngine::from_column_major(n, nc, data))
+            Some(DenseEngine::from_column_major(n, nc, data)?)
         } else {
             None
         };

@@ -292,7 +292,7 @@ fn run_normal(
         let w = 1.0 / noise[o].max(1e-300);
         for k in 0..r.t.len() {
             let row = o * r.t.len() + k;
-            res[row] = (y[k] - tr.state(k)[off]) * w;
+            res[row] = (y[k] - tr.state_at(k)[off]) * w;
             for col in 0..q {
                 j[(row, col)] = sens[(k * n + off) * q + col] * w;
             }

@@ -202,9 +202,9 @@ impl<'a> Problem<'a> {
         for (i, y) in run.y.iter().enumerate() {
             let o = model.offset(i);
             let w = self.norm / self.out_scale[i];
-            rows.extend((0..m).map(|k| (tr.state(k)[o] - y[seg.a + k]) * w));
+            rows.extend((0..m).map(|k| (tr.state_at(k)[o] - y[seg.a + k]) * w));
         }
-        let end = tr.state(len - 1).to_vec();
+        let end = tr.state_at(len - 1).to_vec();
         rows.iter()
             .all(|v| v.is_finite())
             .then_some(SegEval { rows, end })
@@ -438,7 +438,7 @@ fn segments(
             } else if let Some(st) = &r.states {
                 st.iter().map(|c| c[a]).collect()
             } else if let Some(tr) = &fallback {
-                tr.state(a).to_vec()
+                tr.state_at(a).to_vec()
             } else {
                 let mut x = vec![0.0; n];
                 for i in 0..n_out {

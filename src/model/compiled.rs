@@ -181,8 +181,82 @@ impl CompiledModel {
         Ok(())
     }
 
-    /// `P_i(z)`: the highest derivative of output `i` at `z = [state, inputs]`.
-    pub fn eval_output(&self, i: usize, z: &[f64]) -> f64 {
+    /// Checks the lengths the public evaluators take: `output` below the number of outputs,
+    /// each `(what, length, wanted)` exact.
+    fn check_args(&self, output: Option<usize>, lens: &[(&str, usize, usize)]) -> Result<()> {
+        if let Some(i) = output {
+            if i >= self.n_outputs() {
+                return Err(Error::param(
+                    "output",
+                    format!("index {i}, but the model has {} outputs", self.n_outputs()),
+                ));
+            }
+        }
+        for &(what, len, want) in lens {
+            if len != want {
+                return Err(Error::param(
+                    what,
+                    format!("{len} values, the model needs {want}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// `P_i(z)`: the highest derivative of output `i` at `z = [state, inputs]`. Refuses an
+    /// output index out of range and a `z` of another length than states + inputs.
+    pub fn eval_output(&self, i: usize, z: &[f64]) -> Result<f64> {
+        self.check_args(Some(i), &[("z", z.len(), self.n_state + self.n_inputs)])?;
+        Ok(self.eval_output_unchecked(i, z))
+    }
+
+    /// The value of every term of output `i` at `z` without its coefficient, in file order.
+    /// Refuses what [`CompiledModel::eval_output`] refuses.
+    pub fn term_values(&self, i: usize, z: &[f64]) -> Result<Vec<f64>> {
+        self.check_args(Some(i), &[("z", z.len(), self.n_state + self.n_inputs)])?;
+        Ok(self.term_values_unchecked(i, z))
+    }
+
+    /// `dP_i/dz` at `z` (length states + inputs). Refuses what [`CompiledModel::eval_output`]
+    /// refuses.
+    pub fn grad_output(&self, i: usize, z: &[f64]) -> Result<Vec<f64>> {
+        self.check_args(Some(i), &[("z", z.len(), self.n_state + self.n_inputs)])?;
+        let mut g = vec![0.0; z.len()];
+        self.grad_output_unchecked(i, z, &mut g);
+        Ok(g)
+    }
+
+    /// The state derivative at state `x` and inputs `u`: the chains of integrators closed by
+    /// the right-hand sides. Refuses `x`, `u` or `dx` of other lengths than the model's.
+    pub fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) -> Result<()> {
+        let (n, nu) = (self.n_state, self.n_inputs);
+        self.check_args(
+            None,
+            &[("x", x.len(), n), ("u", u.len(), nu), ("dx", dx.len(), n)],
+        )?;
+        self.rhs_unchecked(x, u, dx);
+        Ok(())
+    }
+
+    /// Jacobians of [`CompiledModel::rhs`] with respect to the state (row-major n x n) and the
+    /// inputs (row-major n x n_u). Refuses slices of other lengths.
+    pub fn jacobians(&self, x: &[f64], u: &[f64], jx: &mut [f64], ju: &mut [f64]) -> Result<()> {
+        let (n, nu) = (self.n_state, self.n_inputs);
+        self.check_args(
+            None,
+            &[
+                ("x", x.len(), n),
+                ("u", u.len(), nu),
+                ("jx", jx.len(), n * n),
+                ("ju", ju.len(), n * nu),
+            ],
+        )?;
+        self.jacobians_unchecked(x, u, jx, ju);
+        Ok(())
+    }
+
+    /// Unchecked [`CompiledModel::eval_output`]: `P_i(z)`, the highest derivative of output `i` at `z = [state, inputs]`.
+    pub(crate) fn eval_output_unchecked(&self, i: usize, z: &[f64]) -> f64 {
         self.terms[i]
             .iter()
             .map(|t| t.coef * t.basis(z, &self.eps))
@@ -191,7 +265,7 @@ impl CompiledModel {
 
     /// The value of every term of output `i` at `z` without its coefficient (the regression
     /// columns of that equation), in file order.
-    pub fn term_values(&self, i: usize, z: &[f64]) -> Vec<f64> {
+    pub(crate) fn term_values_unchecked(&self, i: usize, z: &[f64]) -> Vec<f64> {
         self.terms[i]
             .iter()
             .map(|t| t.basis(z, &self.eps))
@@ -201,7 +275,13 @@ impl CompiledModel {
     /// `d rhs / d c` for the coefficients `coefs` (indices into [`CompiledModel::coefficients`]):
     /// written row-major `n_state x coefs.len()` into `out`. Each coefficient only moves the
     /// top derivative of its own output, by the value of its term.
-    pub fn coefficient_jacobian(&self, x: &[f64], u: &[f64], coefs: &[usize], out: &mut [f64]) {
+    pub(crate) fn coefficient_jacobian_unchecked(
+        &self,
+        x: &[f64],
+        u: &[f64],
+        coefs: &[usize],
+        out: &mut [f64],
+    ) {
         let q = coefs.len();
         out.iter_mut().for_each(|v| *v = 0.0);
         let mut z = Vec::with_capacity(x.len() + u.len());
@@ -220,7 +300,7 @@ impl CompiledModel {
     }
 
     /// `dP_i/dz` at `z`, written into `grad` (length n_state + n_inputs).
-    pub fn grad_output(&self, i: usize, z: &[f64], grad: &mut [f64]) {
+    pub(crate) fn grad_output_unchecked(&self, i: usize, z: &[f64], grad: &mut [f64]) {
         grad.iter_mut().for_each(|g| *g = 0.0);
         for t in &self.terms[i] {
             t.add_gradient(z, &self.eps, grad);
@@ -228,7 +308,7 @@ impl CompiledModel {
     }
 
     /// The state derivative: the chains of integrators closed by the right-hand sides.
-    pub fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
+    pub(crate) fn rhs_unchecked(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
         // The solver calls this several times per step: no allocation for the usual sizes.
         let nz = self.n_state + self.n_inputs;
         let mut stack = [0.0f64; 32];
@@ -246,13 +326,13 @@ impl CompiledModel {
             for k in 0..n - 1 {
                 dx[o + k] = x[o + k + 1];
             }
-            dx[o + n - 1] = self.eval_output(i, z);
+            dx[o + n - 1] = self.eval_output_unchecked(i, z);
         }
     }
 
     /// Jacobian of [`CompiledModel::rhs`] with respect to the state (row-major n x n) and to the
     /// inputs (row-major n x n_u).
-    pub fn jacobians(&self, x: &[f64], u: &[f64], jx: &mut [f64], ju: &mut [f64]) {
+    pub(crate) fn jacobians_unchecked(&self, x: &[f64], u: &[f64], jx: &mut [f64], ju: &mut [f64]) {
         let n = self.n_state;
         let nu = self.n_inputs;
         let mut z = Vec::with_capacity(n + nu);
@@ -265,7 +345,7 @@ impl CompiledModel {
             for k in 0..ord - 1 {
                 jx[(o + k) * n + o + k + 1] = 1.0;
             }
-            self.grad_output(i, &z, &mut g);
+            self.grad_output_unchecked(i, &z, &mut g);
             let row = o + ord - 1;
             jx[row * n..row * n + n].copy_from_slice(&g[..n]);
             ju[row * nu..row * nu + nu].copy_from_slice(&g[n..]);

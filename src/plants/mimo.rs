@@ -90,7 +90,7 @@ impl MimoPlant {
         let mut z = x.to_vec();
         z.extend_from_slice(u);
         let mut dx = vec![0.0; n];
-        c.rhs(x, u, &mut dx);
+        c.rhs_unchecked(x, u, &mut dx);
         let mut g = vec![0.0; n + u.len()];
         (0..c.n_outputs())
             .map(|i| {
@@ -98,7 +98,7 @@ impl MimoPlant {
                 let ord = c.orders()[i];
                 let mut d: Vec<f64> = x[o..o + ord].to_vec();
                 d.push(dx[o + ord - 1]);
-                c.grad_output(i, &z, &mut g);
+                c.grad_output_unchecked(i, &z, &mut g);
                 let rate: f64 = (0..n).map(|k| g[k] * dx[k]).sum::<f64>()
                     + (0..u.len()).map(|k| g[n + k] * du[k]).sum::<f64>();
                 d.push(rate);

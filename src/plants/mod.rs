@@ -248,7 +248,7 @@ pub fn dataset(
                 for c in 0..n_in {
                     u[c][k] = uk[c];
                 }
-                let d = plant.derivatives(traj.state(k), &uk, &duk);
+                let d = plant.derivatives(traj.state_at(k), &uk, &duk);
                 for (i, di) in d.iter().enumerate() {
                     for (j, v) in di.iter().enumerate() {
                         derivs[i][j][k] = *v;

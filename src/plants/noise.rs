@@ -6,18 +6,7 @@
 
 use super::rng::Rng;
 
-/// The q-th percentile (0..=100) of `v`, linear interpolation; 0 for an empty slice.
-pub fn percentile(v: &[f64], q: f64) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let mut s = v.to_vec();
-    s.sort_by(|a, b| a.partial_cmp(b).unwrap_or(std::cmp::Ordering::Equal));
-    let pos = (q / 100.0).clamp(0.0, 1.0) * (s.len() - 1) as f64;
-    let lo = pos.floor() as usize;
-    let hi = pos.ceil() as usize;
-    s[lo] + (pos - lo as f64) * (s[hi] - s[lo])
-}
+pub use crate::metrics::percentile;
 
 /// `y + eta * percentile(|y|, 99) * nu`.
 pub fn add_noise(y: &[f64], eta: f64, rng: &mut Rng) -> Vec<f64> {

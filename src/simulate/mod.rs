@@ -85,11 +85,11 @@ impl System for CompiledModel {
         self.names()[k].clone()
     }
     fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
-        CompiledModel::rhs(self, x, u, dx)
+        self.rhs_unchecked(x, u, dx)
     }
     fn jacobian(&self, x: &[f64], u: &[f64], jac: &mut [f64]) {
         let mut ju = vec![0.0; self.n_state() * CompiledModel::n_inputs(self)];
-        self.jacobians(x, u, jac, &mut ju);
+        self.jacobians_unchecked(x, u, jac, &mut ju);
     }
 }
 
@@ -255,12 +255,35 @@ pub struct Trajectory {
 }
 
 impl Trajectory {
-    /// State at output time index `k`.
-    pub fn state(&self, k: usize) -> &[f64] {
+    /// State at output time index `k`; refuses `k` beyond the last output time.
+    pub fn state(&self, k: usize) -> Result<&[f64]> {
+        if k >= self.t.len() || (k + 1) * self.dim > self.x.len() {
+            return Err(Error::param(
+                "k",
+                format!(
+                    "time index {k}, but the trajectory has {} output times",
+                    self.t.len()
+                ),
+            ));
+        }
+        Ok(self.state_at(k))
+    }
+    /// The time series of state `j`; refuses `j` beyond the last state.
+    pub fn series(&self, j: usize) -> Result<Vec<f64>> {
+        if j >= self.dim || self.x.len() < self.t.len() * self.dim {
+            return Err(Error::param(
+                "j",
+                format!("state {j}, but the trajectory has {} states", self.dim),
+            ));
+        }
+        Ok(self.series_of(j))
+    }
+    /// Unchecked [`Trajectory::state`], for the crate's own loops over its own trajectories.
+    pub(crate) fn state_at(&self, k: usize) -> &[f64] {
         &self.x[k * self.dim..(k + 1) * self.dim]
     }
-    /// The time series of state `j`.
-    pub fn series(&self, j: usize) -> Vec<f64> {
+    /// Unchecked [`Trajectory::series`].
+    pub(crate) fn series_of(&self, j: usize) -> Vec<f64> {
         (0..self.t.len())
             .map(|k| self.x[k * self.dim + j])
             .collect()
@@ -1009,7 +1032,7 @@ pub fn free_run(
     let x0 = initial_state(model, &run.t, &run.y, &run.u, window, &opts)?;
     let tr = simulate_model(model, &x0, &run.t, &run.u, &opts)?;
     Ok((0..model.n_outputs())
-        .map(|i| tr.series(model.offset(i)))
+        .map(|i| tr.series_of(model.offset(i)))
         .collect())
 }
 
@@ -1217,7 +1240,9 @@ pub fn simulate_model_sensitivities(
         ));
     }
     let input = SampledInput::new(times.to_vec(), inputs.to_vec())?;
-    let pjac = |x: &[f64], u: &[f64], out: &mut [f64]| model.coefficient_jacobian(x, u, coefs, out);
+    let pjac = |x: &[f64], u: &[f64], out: &mut [f64]| {
+        model.coefficient_jacobian_unchecked(x, u, coefs, out)
+    };
     simulate_sensitivities(model, &input, x0, times, opts, coefs.len(), &pjac)
 }
 
@@ -1359,7 +1384,7 @@ impl InitialState<'_> {
         let mut r = Vec::with_capacity(self.t.len() * self.ys.len());
         for (i, (y, s)) in self.ys.iter().zip(&self.scale).enumerate() {
             let o = self.model.offset(i);
-            r.extend((0..self.t.len()).map(|k| (tr.state(k)[o] - y[k]) / s));
+            r.extend((0..self.t.len()).map(|k| (tr.state_at(k)[o] - y[k]) / s));
         }
         r
     }
@@ -1436,20 +1461,20 @@ mod tests {
             Err(Error::UnstableMode { rate, .. }) => assert!((rate / 1e9 - 1.0).abs() < 1e-6),
             other => panic!(
                 "expected an unstable mode, got {:?}",
-                other.map(|t| t.state(199).to_vec())
+                other.map(|t| t.state_at(199).to_vec())
             ),
         }
         // The same with the fast mode stable is a stiff system, simulated as before.
         let tr = run(vec![-1.0, 0.0, 1.0, -1e9]).unwrap();
-        let x = tr.state(199);
+        let x = tr.state_at(199);
         assert!(x[0].is_finite() && x[1].abs() < 1e-8, "{x:?}");
         // A slowly growing mode is followed, not refused: x' = 0.5 x grows by e^(0.5 * 1.99).
         let tr = run(vec![0.5, 0.0, 0.0, -1.0]).unwrap();
         let want = (0.1 + 2.0) * (0.5f64 * 1.99).exp() - 2.0;
         assert!(
-            (tr.state(199)[0] - want).abs() < 1e-6 * want,
+            (tr.state_at(199)[0] - want).abs() < 1e-6 * want,
             "{:?}",
-            tr.state(199)
+            tr.state_at(199)
         );
     }
 
@@ -1523,7 +1548,7 @@ mod tests {
             model.set_coefficients(&base).unwrap();
             for k in 0..times.len() {
                 for r in 0..3 {
-                    let fd = (a.state(k)[r] - b.state(k)[r]) / (2.0 * h);
+                    let fd = (a.state_at(k)[r] - b.state_at(k)[r]) / (2.0 * h);
                     let an = sens[(k * 3 + r) * q + col];
                     let scale = 1e-3 + fd.abs();
                     worst = worst.max((fd - an).abs() / scale);
@@ -1531,7 +1556,7 @@ mod tests {
             }
         }
         assert!(worst < 1e-4, "worst relative mismatch {worst:e}");
-        assert_eq!(tr.state(0), &x0);
+        assert_eq!(tr.state_at(0), &x0);
     }
 
     #[test]

@@ -14,13 +14,24 @@ pub struct DenseEngine {
 }
 
 impl DenseEngine {
-    pub fn from_column_major(n_samples: usize, n_candidates: usize, data: Vec<f64>) -> DenseEngine {
-        assert_eq!(data.len(), n_samples * n_candidates, "matrix size");
-        DenseEngine {
+    /// A design of `n_samples` rows stored column after column; refuses `data` of another
+    /// length than `n_samples * n_candidates`.
+    pub fn from_column_major(
+        n_samples: usize,
+        n_candidates: usize,
+        data: Vec<f64>,
+    ) -> Result<DenseEngine> {
+        if Some(data.len()) != n_samples.checked_mul(n_candidates) {
+            return Err(Error::InvalidData(format!(
+                "a dense design of {n_samples} x {n_candidates} needs that many values, got {}",
+                data.len()
+            )));
+        }
+        Ok(DenseEngine {
             n_samples,
             n_candidates,
             data,
-        }
+        })
     }
 
     /// Builds from columns of equal length.
@@ -31,11 +42,7 @@ impl DenseEngine {
                 "design columns have different lengths".into(),
             ));
         }
-        Ok(DenseEngine::from_column_major(
-            n,
-            columns.len(),
-            columns.concat(),
-        ))
+        DenseEngine::from_column_major(n, columns.len(), columns.concat())
     }
 
     fn col(&self, j: usize) -> &[f64] {
