@@ -3,7 +3,32 @@
 //! ctsid finds continuous-time models `y^(n) = P(y, y', ..., y^(n-1), u)` of real machines from
 //! short, noisy, uniformly sampled input/output runs, with P a sparse multivariate polynomial plus,
 //! where the physics needs them, named terms (`sign(y_d1)` for Coulomb friction, `abs(y_d1)*y_d1`
-//! for drag) in one model type ([`model::Model`]).
+//! for drag) in one model type ([`Model`]).
+//!
+//! # Quick start
+//!
+//! Read a record, say which runs train, validate and test, identify, simulate:
+//!
+//! ```no_run
+//! use ctsid::{Identifier, RecordSet, Split};
+//!
+//! let records = RecordSet::read_csv("machine.csv", &["y", "u"], Some("run"), 0.01)?;
+//! let split = Split::from_lists(&records, "0-3", Some("4"), "5")?;
+//! let fit = Identifier::new().outputs(["y"]).inputs(["u"]).degree(3).fit(&records, &split)?;
+//! println!("{}", fit.model); // y_d2 = ... : the equations
+//! let sim = fit.model.simulate(&records)?; // free runs from the measured inputs
+//! println!("fit on run 5: {:.1} %", sim.runs[5].fit_percent()[0]);
+//! fit.model.write("machine.model.json")?; // ctsid simulate / control / discover read it
+//! # Ok::<(), ctsid::Error>(())
+//! ```
+//!
+//! [`Identifier`] names the other settings (fixed order, named terms such as `sign(y_d1)`,
+//! engine, progress callback); [`Model::read`] loads a model file. The library prints nothing:
+//! progress goes to a callback, notes into the results. `examples/identify_csv.rs` is the same
+//! as a program.
+//!
+//! # Modules
+//!
 //! The modules follow the pipeline:
 //!
 //! | stage | module | what it assumes |
@@ -50,6 +75,10 @@ pub mod simulate;
 pub mod util;
 
 pub use error::{Error, Result};
+pub use identify::{Identification, Identifier, Split};
+pub use model::Model;
+pub use records::RecordSet;
+pub use simulate::Simulation;
 
 // The README's library quick start is compiled with the doctests.
 #[cfg(doctest)]

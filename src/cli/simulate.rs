@@ -15,7 +15,7 @@
 use clap::Args;
 use ctsid::metrics::rms_nrmse;
 use ctsid::model::Model;
-use ctsid::simulate::{free_run, RunData, SimOptions, INIT_WINDOW};
+use ctsid::simulate::{free_run, run_data, SimOptions, INIT_WINDOW};
 use ctsid::util::num4;
 use ctsid::Result;
 use rayon::prelude::*;
@@ -101,17 +101,10 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     let window = args.init_window;
     // One run's simulated outputs (runs are independent: simulated in parallel), from the
     // library's one initial-state convention.
+    // Run by run rather than `Model::simulate` (all runs at once), so that rows are printed
+    // while a long record is still being simulated; the same run data and free run.
     let simulate_run = |run: &ctsid::records::Run| -> Result<Vec<Vec<f64>>> {
-        // Time since the run's start: the model is time invariant, and stamps far from zero
-        // (Unix time) would leave the integrator a few digits of resolution.
-        let data = RunData {
-            id: run.id.clone(),
-            t: (0..run.len()).map(|k| k as f64 * rs.tau).collect(),
-            y: run.channels[..n_out].to_vec(),
-            u: run.channels[n_out..].to_vec(),
-            states: None,
-            x0: Vec::new(),
-        };
+        let data = run_data(&model, &rs, run)?;
         free_run(&compiled, &data, window, &SimOptions::default())
     };
     let mut constant = false;

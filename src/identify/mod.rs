@@ -40,6 +40,7 @@
 //! smoother is tuned on the training runs only, so that test runs never influence a fit.
 
 pub mod complete;
+mod identifier;
 pub mod profile;
 pub mod refine;
 pub mod split;
@@ -85,6 +86,7 @@ pub const SIGN_WIDTH: f64 = 1e-3;
 
 /// Highest order an identification searches or fits (its derivatives go one order higher).
 pub const MAX_ORDER: usize = 6;
+pub use identifier::Identifier;
 use profile::{eta_rule, Profile};
 use rayon::prelude::*;
 use serde::Serialize;

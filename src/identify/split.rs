@@ -112,6 +112,23 @@ pub struct Split {
 }
 
 impl Split {
+    /// The split named by run lists as the CLI takes them (`"0-3"`, `"4,5"`, ids of the record
+    /// set, ranges over numeric ids); refuses unknown runs, empty lists and overlaps.
+    pub fn from_lists(
+        records: &crate::records::RecordSet,
+        train: &str,
+        validation: Option<&str>,
+        test: &str,
+    ) -> Result<Split> {
+        let ids: Vec<String> = records.runs.iter().map(|r| r.id.clone()).collect();
+        let most = ids.len().max(1);
+        let list = |text: &str, what: &str| -> Result<Vec<usize>> {
+            resolve(&parse_list_at_most(text, what, most)?, &ids, what)
+        };
+        let validation = validation.map(|v| list(v, "validation")).transpose()?;
+        Split::new(list(train, "train")?, validation, list(test, "test")?, &ids)
+    }
+
     /// Validates that the lists are non-empty where required and do not overlap.
     pub fn new(
         train: Vec<usize>,

@@ -381,6 +381,24 @@ impl RecordSet {
         Self::from_reader(file, &p, spec)
     }
 
+    /// Loads `columns` of a CSV file whose runs are told apart by `run_column` (the whole file
+    /// is one run without it), sampled every `tau` seconds. [`RecordSet::from_csv`] takes a
+    /// time column instead.
+    pub fn read_csv(
+        path: impl AsRef<Path>,
+        columns: &[&str],
+        run_column: Option<&str>,
+        tau: f64,
+    ) -> Result<RecordSet> {
+        let spec = CsvSpec {
+            columns: columns.iter().map(|c| c.to_string()).collect(),
+            run_column: run_column.map(str::to_string),
+            time_column: None,
+            tau: Some(tau),
+        };
+        Self::from_csv(path, &spec)
+    }
+
     /// Loads from any reader; `label` names the source in messages.
     pub fn from_reader<R: std::io::Read>(
         reader: R,

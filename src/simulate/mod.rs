@@ -29,7 +29,10 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::{Error, Result};
+
+mod records;
 use crate::model::CompiledModel;
+pub use records::{run_data, RunResult, Simulation};
 
 /// The default forward-difference step of [`System::fd_step`] for a state of value `x`.
 pub fn default_fd_step(x: f64) -> f64 {
