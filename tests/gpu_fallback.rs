@@ -5,6 +5,7 @@
 //! its own: the variable must not leak into other tests.
 //!
 //! Without an adapter it skips with a notice, unless CTSID_REQUIRE_GPU=1.
+#![cfg(feature = "gpu")]
 
 use ctsid::engine::Features;
 use ctsid::regression::{EngineChoice, Regression};

@@ -31,6 +31,7 @@
 //!
 //! Runs on any Vulkan adapter, lavapipe included. Without one each test prints
 //! "skipping: no GPU adapter" and passes, unless CTSID_REQUIRE_GPU=1, where that is a failure.
+#![cfg(feature = "gpu")]
 
 use std::time::Instant;
 

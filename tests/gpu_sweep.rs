@@ -3,6 +3,7 @@
 //! Runs on any Vulkan adapter, lavapipe included (sizes are small because lavapipe is slow).
 //! Without an adapter every test prints "skipping: no GPU adapter" and passes, unless
 //! CTSID_REQUIRE_GPU=1, where that is a failure.
+#![cfg(feature = "gpu")]
 
 mod common;
 use common::rng::SplitMix as Rng;

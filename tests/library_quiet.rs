@@ -12,7 +12,7 @@ use ctsid::regression::Regression;
 const CHILD: &str = "CTSID_LIBRARY_QUIET_CHILD";
 
 fn work() {
-    let _ = ctsid::engine::gpu::probe_adapters();
+    let _ = ctsid::engine::select::probe();
     let n = 400;
     let a: Vec<f64> = (0..n)
         .map(|i| ((i * 37) % 101) as f64 / 50.0 - 1.0)

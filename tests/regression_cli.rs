@@ -147,7 +147,7 @@ fn regress_engine_gpu_runs_on_any_adapter_or_fails_clearly() {
         "--engine",
         "gpu",
     ]);
-    if ctsid::engine::gpu::probe_adapters().is_empty() {
+    if ctsid::engine::select::probe().is_empty() {
         assert!(
             std::env::var("CTSID_REQUIRE_GPU").as_deref() != Ok("1"),
             "CTSID_REQUIRE_GPU=1 but no GPU adapter"

@@ -384,7 +384,7 @@ fn bad_settings_are_refused_before_fitting() {
         .build()
         .unwrap()
         .fit(&p.features, &p.label, "y", None);
-    if ctsid::engine::gpu::probe_adapters().is_empty() {
+    if ctsid::engine::select::probe().is_empty() {
         assert!(matches!(gpu, Err(Error::NoGpu(_))), "{gpu:?}");
     } else {
         let m = gpu.unwrap();

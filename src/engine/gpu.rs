@@ -96,12 +96,17 @@ impl Default for GpuOptions {
     }
 }
 
-/// One Vulkan adapter as seen by the selection logic.
-#[derive(Debug, Clone)]
-pub struct AdapterSummary {
-    pub name: String,
-    pub device_type: wgpu::DeviceType,
-    pub driver: String,
+pub use super::select::{AdapterSummary, DeviceType};
+
+/// wgpu's device type as the selection's.
+fn device_type(t: wgpu::DeviceType) -> DeviceType {
+    match t {
+        wgpu::DeviceType::DiscreteGpu => DeviceType::DiscreteGpu,
+        wgpu::DeviceType::IntegratedGpu => DeviceType::IntegratedGpu,
+        wgpu::DeviceType::VirtualGpu => DeviceType::VirtualGpu,
+        wgpu::DeviceType::Other => DeviceType::Other,
+        wgpu::DeviceType::Cpu => DeviceType::Cpu,
+    }
 }
 
 /// Mesa's Vulkan drivers print `XDG_RUNTIME_DIR is invalid or not set in the environment` on
@@ -153,13 +158,13 @@ fn new_instance() -> wgpu::Instance {
     wgpu::Instance::new(desc)
 }
 
-fn type_rank(t: wgpu::DeviceType) -> u32 {
+fn type_rank(t: DeviceType) -> u32 {
     match t {
-        wgpu::DeviceType::DiscreteGpu => 0,
-        wgpu::DeviceType::IntegratedGpu => 1,
-        wgpu::DeviceType::VirtualGpu => 2,
-        wgpu::DeviceType::Other => 3,
-        wgpu::DeviceType::Cpu => 4,
+        DeviceType::DiscreteGpu => 0,
+        DeviceType::IntegratedGpu => 1,
+        DeviceType::VirtualGpu => 2,
+        DeviceType::Other => 3,
+        DeviceType::Cpu => 4,
     }
 }
 
@@ -173,7 +178,7 @@ pub fn probe_adapters() -> Vec<AdapterSummary> {
                 let i = a.get_info();
                 AdapterSummary {
                     name: i.name,
-                    device_type: i.device_type,
+                    device_type: device_type(i.device_type),
                     driver: format!("{} {}", i.driver, i.driver_info),
                 }
             })
@@ -329,7 +334,7 @@ impl GpuEngine {
 
         let instance = new_instance();
         let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
-        adapters.sort_by_key(|a| type_rank(a.get_info().device_type));
+        adapters.sort_by_key(|a| type_rank(device_type(a.get_info().device_type)));
         let seen: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
         let adapter = adapters
             .into_iter()

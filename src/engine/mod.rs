@@ -18,6 +18,7 @@ use crate::error::{Error, Result};
 
 pub mod columns;
 pub mod cpu;
+#[cfg(feature = "gpu")]
 pub mod gpu;
 pub mod select;
 

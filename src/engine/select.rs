@@ -16,8 +16,26 @@
 use std::fmt;
 use std::str::FromStr;
 
-use crate::engine::gpu::AdapterSummary;
 use crate::error::{Error, Result};
+
+/// The kind of a Vulkan adapter, as the selection sees it (wgpu's device types).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum DeviceType {
+    DiscreteGpu,
+    IntegratedGpu,
+    VirtualGpu,
+    Other,
+    /// A software driver such as lavapipe.
+    Cpu,
+}
+
+/// One Vulkan adapter as seen by the selection logic.
+#[derive(Debug, Clone)]
+pub struct AdapterSummary {
+    pub name: String,
+    pub device_type: DeviceType,
+    pub driver: String,
+}
 
 /// What the user asked for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -75,7 +93,7 @@ pub struct Decision {
 pub const AUTO_MIN_PAIRS: u64 = 50_000_000;
 
 /// Decides which engine runs a problem of `n_samples x n_candidates`, given the adapters present
-/// (best first, as [`crate::engine::gpu::probe_adapters`] returns them). Pure.
+/// (best first, as [`probe`] returns them). Pure.
 pub fn decide(
     choice: EngineChoice,
     n_samples: usize,
@@ -83,9 +101,7 @@ pub fn decide(
     adapters: &[AdapterSummary],
 ) -> Result<Decision> {
     let pairs = n_samples as u64 * n_candidates as u64;
-    let real = adapters
-        .iter()
-        .find(|a| a.device_type != wgpu::DeviceType::Cpu);
+    let real = adapters.iter().find(|a| a.device_type != DeviceType::Cpu);
     match choice {
         EngineChoice::Cpu => Ok(Decision { kind: EngineKind::Cpu, reason: "cpu engine: requested with --engine cpu".into() }),
         EngineChoice::Gpu => match real.or(adapters.first()) {
@@ -93,6 +109,7 @@ pub fn decide(
                 kind: EngineKind::Gpu,
                 reason: format!("gpu engine on {} ({:?}): requested with --engine gpu", a.name, a.device_type),
             }),
+            None if cfg!(not(feature = "gpu")) => Err(Error::NoGpu("--engine gpu was requested but this build has no GPU engine (built without the 'gpu' feature); use --engine cpu or auto".into())),
             None => Err(Error::NoGpu("--engine gpu was requested but no Vulkan adapter was found; use --engine cpu or auto".into())),
         },
         EngineChoice::Auto => {
@@ -121,12 +138,24 @@ pub fn decide(
     }
 }
 
+/// The adapters of this machine, best first (none in a build without the `gpu` feature).
+pub fn probe() -> Vec<AdapterSummary> {
+    #[cfg(feature = "gpu")]
+    {
+        crate::engine::gpu::probe_adapters()
+    }
+    #[cfg(not(feature = "gpu"))]
+    {
+        Vec::new()
+    }
+}
+
 /// [`decide`] with the adapters of this machine.
 pub fn choose(choice: EngineChoice, n_samples: usize, n_candidates: usize) -> Result<Decision> {
     let adapters = if choice == EngineChoice::Cpu {
         Vec::new()
     } else {
-        crate::engine::gpu::probe_adapters()
+        probe()
     };
     decide(choice, n_samples, n_candidates, &adapters)
 }
@@ -135,7 +164,7 @@ pub fn choose(choice: EngineChoice, n_samples: usize, n_candidates: usize) -> Re
 mod tests {
     use super::*;
 
-    fn ad(name: &str, t: wgpu::DeviceType) -> AdapterSummary {
+    fn ad(name: &str, t: DeviceType) -> AdapterSummary {
         AdapterSummary {
             name: name.into(),
             device_type: t,
@@ -156,7 +185,7 @@ mod tests {
 
     #[test]
     fn auto_never_picks_a_software_adapter() {
-        let lvp = [ad("llvmpipe", wgpu::DeviceType::Cpu)];
+        let lvp = [ad("llvmpipe", DeviceType::Cpu)];
         let d = decide(EngineChoice::Auto, 25_000, 497_420, &lvp).unwrap();
         assert_eq!(d.kind, EngineKind::Cpu);
         assert!(
@@ -172,8 +201,8 @@ mod tests {
     #[test]
     fn auto_uses_a_real_gpu_only_for_large_problems() {
         let h100 = [
-            ad("NVIDIA H100", wgpu::DeviceType::DiscreteGpu),
-            ad("llvmpipe", wgpu::DeviceType::Cpu),
+            ad("NVIDIA H100", DeviceType::DiscreteGpu),
+            ad("llvmpipe", DeviceType::Cpu),
         ];
         let big = decide(EngineChoice::Auto, 25_000, 12_376, &h100).unwrap();
         assert_eq!(big.kind, EngineKind::Gpu);
@@ -185,7 +214,7 @@ mod tests {
 
     #[test]
     fn gpu_takes_any_adapter_or_fails_clearly() {
-        let lvp = [ad("llvmpipe", wgpu::DeviceType::Cpu)];
+        let lvp = [ad("llvmpipe", DeviceType::Cpu)];
         assert_eq!(
             decide(EngineChoice::Gpu, 10, 10, &lvp).unwrap().kind,
             EngineKind::Gpu

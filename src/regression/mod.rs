@@ -35,8 +35,11 @@ pub use path::{
 };
 
 use crate::basis::{Basis, BasisLimits};
+#[cfg(feature = "gpu")]
 use crate::engine::gpu::{GpuEngine, GpuOptions};
-use crate::engine::select::{choose, EngineKind};
+use crate::engine::select::choose;
+#[cfg(feature = "gpu")]
+use crate::engine::select::EngineKind;
 use crate::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
 use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
@@ -531,6 +534,8 @@ impl Regression {
                 ),
             ));
         }
+        // Without the `gpu` feature there are no adapters, so no decision is Gpu.
+        #[cfg(feature = "gpu")]
         if decision.kind == EngineKind::Gpu && f32_safe {
             let attempt =
                 GpuEngine::new(features, basis, GpuOptions::default()).and_then(|mut g| {

@@ -94,9 +94,20 @@ impl SweepEngine for DenseEngine {
                 "vector lengths do not match the design",
             ));
         }
-        out.par_iter_mut().enumerate().for_each(|(j, o)| {
-            *o = self.col(j).iter().zip(v).map(|(x, y)| x * y).sum();
-        });
+        // X^T v by faer's matrix product: an implementation independent of the matrix-free
+        // engines this one checks. Sequential, so that the reference is deterministic.
+        let x =
+            faer::MatRef::from_column_major_slice(&self.data, self.n_samples, self.n_candidates);
+        let v = faer::ColRef::from_slice(v);
+        let out = faer::ColMut::from_slice_mut(out);
+        faer::linalg::matmul::matmul(
+            out.as_mat_mut(),
+            faer::Accum::Replace,
+            x.transpose(),
+            v.as_mat(),
+            1.0,
+            faer::Par::Seq,
+        );
         Ok(())
     }
 
