@@ -32,7 +32,7 @@ fn model(outputs: usize, order: usize, extra: usize) -> Model {
     for i in 0..outputs {
         let y = format!("y{i}");
         let mut terms = Vec::new();
-        for k in 0..order {
+        for (k, b) in binom.iter().enumerate().take(order) {
             let v = if k == 0 {
                 y.clone()
             } else {
@@ -40,7 +40,7 @@ fn model(outputs: usize, order: usize, extra: usize) -> Model {
             };
             terms.push(format!(
                 r#"{{"exponents": {{"{v}": 1}}, "coefficient": {}}}"#,
-                -binom[k]
+                -b
             ));
         }
         terms.push(r#"{"exponents": {"u1": 1}, "coefficient": 1.0}"#.to_string());

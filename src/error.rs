@@ -6,11 +6,23 @@ use thiserror::Error;
 /// Result alias used across the crate.
 pub type Result<T> = std::result::Result<T, Error>;
 
-/// Everything that can go wrong in ctsid, typed so library callers can react to it.
+/// Everything that can go wrong in ctsid, typed so library callers can react to it. New kinds
+/// may be added: match with a wildcard arm.
 #[derive(Debug, Error)]
+#[non_exhaustive]
 pub enum Error {
+    /// A file or stream that cannot be used, said in words (not a regular file, a missing
+    /// folder, ...).
     #[error("{path}: {message}")]
     Io { path: String, message: String },
+
+    /// An I/O operation on `path` failed; the `std::io::Error` is kept as the source.
+    #[error("{path}: {source}")]
+    File {
+        path: String,
+        #[source]
+        source: std::io::Error,
+    },
 
     #[error("{path}: CSV error at row {row}: {message}")]
     Csv {
@@ -126,6 +138,14 @@ pub enum Error {
 }
 
 impl Error {
+    /// Shorthand for an [`Error::File`]: `path` and the I/O error that happened on it.
+    pub fn file(path: impl Into<String>, source: std::io::Error) -> Self {
+        Error::File {
+            path: path.into(),
+            source,
+        }
+    }
+
     /// Shorthand for an [`Error::InvalidParameter`].
     pub fn param(name: impl Into<String>, reason: impl Into<String>) -> Self {
         Error::InvalidParameter {

@@ -52,6 +52,21 @@ pub fn fit_percent(sim: &[f64], meas: &[f64]) -> f64 {
     100.0 * (1.0 - nrmse(sim, meas))
 }
 
+/// The `q`-th percentile (`q` in 0..=100) of `values`, with linear interpolation between order
+/// statistics (numpy's default). NaN for an empty slice or a `q` outside 0..=100 (or NaN);
+/// NaN values sort last.
+pub fn percentile(values: &[f64], q: f64) -> f64 {
+    if values.is_empty() || !(0.0..=100.0).contains(&q) {
+        return f64::NAN;
+    }
+    let mut v: Vec<f64> = values.to_vec();
+    v.sort_by(|a, b| a.total_cmp(b));
+    let pos = q / 100.0 * (v.len() - 1) as f64;
+    let lo = pos.floor() as usize;
+    let hi = pos.ceil() as usize;
+    v[lo] + (v[hi] - v[lo]) * (pos - lo as f64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -68,19 +83,4 @@ mod tests {
         assert_eq!(nrmse(&[2.0, 3.0], &[2.0, 2.0]), f64::INFINITY);
         assert_eq!(rms(&[], &[]), 0.0);
     }
-}
-
-/// The `q`-th percentile (`q` in 0..=100) of `values`, with linear interpolation between order
-/// statistics (numpy's default). NaN for an empty slice or a `q` outside 0..=100 (or NaN);
-/// NaN values sort last.
-pub fn percentile(values: &[f64], q: f64) -> f64 {
-    if values.is_empty() || !(0.0..=100.0).contains(&q) {
-        return f64::NAN;
-    }
-    let mut v: Vec<f64> = values.to_vec();
-    v.sort_by(|a, b| a.total_cmp(b));
-    let pos = q / 100.0 * (v.len() - 1) as f64;
-    let lo = pos.floor() as usize;
-    let hi = pos.ceil() as usize;
-    v[lo] + (v[hi] - v[lo]) * (pos - lo as f64)
 }

@@ -55,10 +55,7 @@ pub struct AtomicFile {
 impl AtomicFile {
     /// Creates the temporary file beside `target`.
     pub fn create(target: &std::path::Path) -> crate::Result<AtomicFile> {
-        let io = |e: std::io::Error| crate::Error::Io {
-            path: target.display().to_string(),
-            message: e.to_string(),
-        };
+        let io = |e: std::io::Error| crate::Error::file(target.display().to_string(), e);
         let name = target.file_name().ok_or_else(|| crate::Error::Io {
             path: target.display().to_string(),
             message: "not a file name".into(),
@@ -77,10 +74,7 @@ impl AtomicFile {
 
     /// Flushes and renames the temporary file over the target.
     pub fn commit(mut self) -> crate::Result<()> {
-        let io = |e: std::io::Error| crate::Error::Io {
-            path: self.target.display().to_string(),
-            message: e.to_string(),
-        };
+        let io = |e: std::io::Error| crate::Error::file(self.target.display().to_string(), e);
         let file = self.file.take().expect("committed once");
         let file = file.into_inner().map_err(|e| io(e.into_error()))?;
         file.sync_all().map_err(io)?;
@@ -110,10 +104,8 @@ impl Drop for AtomicFile {
 pub fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> crate::Result<()> {
     use std::io::Write;
     let mut f = AtomicFile::create(path)?;
-    f.write_all(bytes).map_err(|e| crate::Error::Io {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    })?;
+    f.write_all(bytes)
+        .map_err(|e| crate::Error::file(path.display().to_string(), e))?;
     f.commit()
 }
 
@@ -154,7 +146,8 @@ pub fn open_regular(
         path: path.display().to_string(),
         message,
     };
-    let m = std::fs::metadata(path).map_err(|e| err(e.to_string()))?;
+    let file_err = |e: std::io::Error| crate::Error::file(path.display().to_string(), e);
+    let m = std::fs::metadata(path).map_err(file_err)?;
     if m.is_dir() {
         return Err(err("is a folder; give a file".into()));
     }
@@ -170,7 +163,7 @@ pub fn open_regular(
             m.len()
         )));
     }
-    std::fs::File::open(path).map_err(|e| err(e.to_string()))
+    std::fs::File::open(path).map_err(file_err)
 }
 
 #[cfg(test)]

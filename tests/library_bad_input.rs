@@ -381,3 +381,18 @@ fn public_functions_refuse_wrong_lengths_and_indices() {
     assert!(tr.state(5).is_err() && tr.state(4).is_ok());
     assert!(tr.series(2).is_err() && tr.series(1).unwrap().len() == 5);
 }
+
+#[test]
+fn io_errors_keep_their_source() {
+    use std::error::Error as _;
+    let e = Model::read("/nonexistent/ctsid/model.json").unwrap_err();
+    let io = e
+        .source()
+        .and_then(|s| s.downcast_ref::<std::io::Error>())
+        .expect("the io::Error is the source");
+    assert_eq!(io.kind(), std::io::ErrorKind::NotFound);
+    assert!(
+        e.to_string().starts_with("/nonexistent/ctsid/model.json: "),
+        "{e}"
+    );
+}

@@ -313,10 +313,7 @@ fn write_trace(
     setpoint: f64,
     names: &[String],
 ) -> Result<()> {
-    let io = |e: std::io::Error| Error::Io {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    };
+    let io = |e: std::io::Error| Error::file(path.display().to_string(), e);
     let mut w = ctsid::util::AtomicFile::create(path)?;
     let hats: Vec<String> = names.iter().map(|n| format!("{n}_hat")).collect();
     writeln!(w, "t,setpoint,y,y_measured,{},u", hats.join(",")).map_err(io)?;

@@ -112,10 +112,7 @@ pub fn write_stdout(text: &str) -> Result<()> {
     let mut o = std::io::stdout().lock();
     o.write_all(text.as_bytes())
         .and_then(|_| o.flush())
-        .map_err(|e| Error::Io {
-            path: "standard output".into(),
-            message: e.to_string(),
-        })
+        .map_err(|e| Error::file("standard output", e))
 }
 
 /// Checks an output file before any work is done: its folder exists, it is not a folder, and

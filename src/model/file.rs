@@ -582,10 +582,7 @@ impl Model {
     /// Reads and validates a model file.
     pub fn read(path: &str) -> Result<Model> {
         use std::io::Read;
-        let io = |e: std::io::Error| Error::Io {
-            path: path.into(),
-            message: e.to_string(),
-        };
+        let io = |e: std::io::Error| Error::file(path, e);
         let mut text = String::new();
         crate::util::open_regular(std::path::Path::new(path), Some(MAX_FILE_BYTES))?
             .read_to_string(&mut text)

@@ -8,10 +8,7 @@ use std::path::Path;
 /// Writes a text file, creating the folder, with an error naming the path. Characters of `name`
 /// other than ASCII letters, digits and `._-` become `_` (names carry run ids from the data).
 pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::Io {
-        path: dir.display().to_string(),
-        message: e.to_string(),
-    })?;
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir.display().to_string(), e))?;
     // Names carry run ids and channel names from the data: keep them inside `dir`.
     let safe: String = name
         .chars()
