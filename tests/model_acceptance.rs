@@ -12,7 +12,7 @@
 
 mod common;
 
-use common::cli::{ctsid, overall_nrmse};
+use common::cli::{ctsid, overall_nrmse, temp_file};
 use ctsid::discover::cases::{generate, Case};
 use ctsid::model::{Model, Origin};
 
@@ -287,4 +287,31 @@ fn runs_outside_the_split_do_not_change_the_model() {
     let only = identify_on(fewer.to_str().unwrap(), "only.json", false);
     assert_eq!(all, only);
     std::fs::remove_dir_all(&f.dir).ok();
+}
+
+#[test]
+fn show_prints_equations_and_each_terms_standard_error() {
+    let text = r#"{"format": "ctsid-model/2", "tau": 0.001, "inputs": ["force_N"],
+      "sign_smoothing": {"q_m_d1": 2.4e-05},
+      "outputs": [{"name": "q_m", "order": 2, "terms": [
+        {"exponents": {"q_m_d1": 1}, "coefficient": -2.14, "origin": "nominal"},
+        {"exponents": {}, "coefficient": 0.04},
+        {"expression": "sign(q_m_d1)", "coefficient": -0.21, "std_error": 0.004,
+         "interval": [-0.22, -0.2], "origin": {"effect": "coulomb_friction"}}]}]}"#;
+    let path = temp_file("show", "m.json", text);
+    let (ok, out, err) = ctsid(&["show", &path]);
+    assert!(ok, "{err}");
+    assert!(
+        out.starts_with("q_m_d2 = -2.14*q_m_d1 + 0.04 - 0.21*sign(q_m_d1)\n"),
+        "{out}"
+    );
+    assert!(
+        out.contains(
+            "| sign(q_m_d1) | -0.21 | 0.004 | 1.9 % | [-0.22, -0.2] | effect: coulomb_friction |"
+        ),
+        "{out}"
+    );
+    assert!(out.contains("| 1 | 0.04 | - | - | - | - |"), "{out}");
+    let (ok, _, err) = ctsid(&["show", "/nonexistent/m.json"]);
+    assert!(!ok && err.lines().count() == 1, "{err}");
 }

@@ -20,6 +20,7 @@ mod derive;
 mod discover;
 mod identify;
 mod score;
+mod show;
 mod simulate;
 
 use clap::{Parser, Subcommand};
@@ -58,6 +59,8 @@ pub enum Command {
     Discover(discover::DiscoverArgs),
     /// Observer and state feedback with integral action designed on a model; a setpoint step simulated around a plant.
     Control(control::ControlArgs),
+    /// Print a model file: its equations, then each term's coefficient, standard error, interval and origin.
+    Show(show::ShowArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -70,6 +73,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Regress(a) => regress::run(a),
         Command::Discover(a) => discover::run(a),
         Command::Control(a) => control::run(a),
+        Command::Show(a) => show::run(a),
     }
 }
 

@@ -1,0 +1,72 @@
+//! `ctsid show MODEL`: a model file as equations, then each term with its coefficient, standard
+//! error, interval and origin, as far as the file has them.
+
+use clap::Args;
+use ctsid::model::{derivative_name, Model, Origin};
+use ctsid::regression::format_coefficient;
+use ctsid::Result;
+
+#[derive(Args, Debug)]
+pub struct ShowArgs {
+    /// Model file (ctsid-model/2 JSON, or /1)
+    pub model: String,
+}
+
+pub fn run(a: ShowArgs) -> Result<()> {
+    let model = Model::read(&a.model)?;
+    outln!("{model}")?;
+    let tau = model
+        .tau
+        .map_or("not recorded".into(), |t| format!("{t} s"));
+    outln!(
+        "\ninputs: {}; identified at tau = {tau}",
+        model.inputs.join(", ")
+    )?;
+    let mut unknown = false;
+    for o in &model.outputs {
+        outln!(
+            "\n{} (order {}):",
+            derivative_name(&o.name, o.order),
+            o.order
+        )?;
+        outln!("| term | coefficient | std. error | rel. | 95 % interval | origin |")?;
+        outln!("|---|---|---|---|---|---|")?;
+        for t in &o.terms {
+            let name = if t.is_monomial() && t.exponents.is_empty() {
+                "1".to_string()
+            } else {
+                t.monomial()
+            };
+            let (se, rel) = match t.std_error {
+                Some(s) => (
+                    format_coefficient(s),
+                    format!(
+                        "{:.1} %",
+                        100.0 * s / t.coefficient.abs().max(f64::MIN_POSITIVE)
+                    ),
+                ),
+                None => {
+                    unknown = true;
+                    ("-".into(), "-".into())
+                }
+            };
+            let interval = t.interval.map_or("-".into(), |[lo, hi]| {
+                format!("[{}, {}]", format_coefficient(lo), format_coefficient(hi))
+            });
+            let origin = match &t.origin {
+                Some(Origin::Identified) => "identified".to_string(),
+                Some(Origin::Nominal) => "nominal".to_string(),
+                Some(Origin::Effect(f)) => format!("effect: {f}"),
+                None => "-".to_string(),
+            };
+            outln!(
+                "| {name} | {} | {se} | {rel} | {interval} | {origin} |",
+                format_coefficient(t.coefficient)
+            )?;
+        }
+    }
+    if unknown {
+        outln!("\n'-': no standard error was estimated for that term (identify does not estimate them yet; discover does for the effects it adds).")?;
+    }
+    Ok(())
+}
