@@ -117,6 +117,17 @@ fn recovers_perturbed_coefficients_of_a_linear_system() {
         );
     }
     assert!(r.cost_after < r.cost_before);
+    // A kept refinement writes each coefficient's standard error (inflated for the correlation
+    // of simulation errors); the true values lie within a few of them.
+    for (t, b) in r.model.outputs[0].terms.iter().zip(TRUE) {
+        let se = t.std_error.expect("a refined term has a standard error");
+        let z = (t.coefficient - b).abs() / se;
+        assert!(
+            se > 0.0 && z < 6.0,
+            "{} +- {se} vs true {b} ({z:.1} standard errors)",
+            t.coefficient
+        );
+    }
     let before = free_run_nrmse(&start, &val).unwrap()[0];
     let after = free_run_nrmse(&r.model, &val).unwrap()[0];
     eprintln!("validation free-run NRMSE {before:.4} -> {after:.4}");

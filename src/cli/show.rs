@@ -66,7 +66,7 @@ pub fn run(a: ShowArgs) -> Result<()> {
         }
     }
     if unknown {
-        outln!("\n'-': no standard error was estimated for that term (identify does not estimate them yet; discover does for the effects it adds).")?;
+        outln!("\n'-': no standard error was estimated for that term (identify estimates them when its refinement on simulation error is kept; discover for the effects it adds).")?;
     }
     Ok(())
 }
