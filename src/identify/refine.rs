@@ -502,27 +502,7 @@ pub fn refine_holding(
     };
 
     let (segs, seg_x0) = segments(&compiled, runs, opts.segment_len, &sim_opts);
-    let state_scale: Vec<f64> = (0..n)
-        .map(|j| {
-            let s = match runs[0].states {
-                Some(_) => spread(
-                    runs.iter()
-                        .flat_map(|r| r.states.as_ref().map_or([].iter(), |s| s[j].iter())),
-                ),
-                None => spread(seg_x0.iter().map(|x| &x[j])),
-            };
-            // An output's own spread when its derivative guesses do not vary.
-            let i = (0..n_out)
-                .rev()
-                .find(|&i| compiled.offset(i) <= j)
-                .unwrap_or(0);
-            if s > 0.0 {
-                s
-            } else {
-                out_scale[i]
-            }
-        })
-        .collect();
+    let state_scale = state_scales(&compiled, runs, &seg_x0, &out_scale);
     // A trial whose states leave the data's range by orders of magnitude has diverged: stopping
     // it there saves the time of integrating a blow-up up to the simulator's default bound.
     let largest = state_scale
@@ -616,17 +596,7 @@ pub fn refine_holding(
     // Keep whichever of start and result simulates better on the training runs (a multiple-
     // shooting optimum whose joined trajectory diverges is no refinement).
     if c_after < stats.cost_before {
-        let mut coef = all_coef.clone();
-        for (k, &j) in free.iter().enumerate() {
-            coef[j] = theta[k];
-        }
-        let mut m = model.clone();
-        let mut it = coef.iter();
-        for o in &mut m.outputs {
-            for t in &mut o.terms {
-                t.coefficient = *it.next().expect("same number of terms");
-            }
-        }
+        let mut m = with_free_coefficients(model, &all_coef, &free, &theta[..nc]);
         set_std_errors(&mut m, &problem, &theta, &free);
         stats.model = m;
         stats.initial_states = (0..runs.len())
@@ -638,6 +608,58 @@ pub fn refine_holding(
     }
     stats.seconds = t_start.elapsed().as_secs_f64();
     Ok(stats)
+}
+
+/// Per state, the spread that scales its initial-state unknown: of the runs' state guesses
+/// where they have them, else of the shooting segments' starting states; an output's own spread
+/// when its derivative guesses do not vary.
+fn state_scales(
+    compiled: &CompiledModel,
+    runs: &[RunData],
+    seg_x0: &[Vec<f64>],
+    out_scale: &[f64],
+) -> Vec<f64> {
+    let (n, n_out) = (compiled.n_state(), compiled.n_outputs());
+    (0..n)
+        .map(|j| {
+            let s = match runs[0].states {
+                Some(_) => spread(
+                    runs.iter()
+                        .flat_map(|r| r.states.as_ref().map_or([].iter(), |s| s[j].iter())),
+                ),
+                None => spread(seg_x0.iter().map(|x| &x[j])),
+            };
+            let i = (0..n_out)
+                .rev()
+                .find(|&i| compiled.offset(i) <= j)
+                .unwrap_or(0);
+            if s > 0.0 {
+                s
+            } else {
+                out_scale[i]
+            }
+        })
+        .collect()
+}
+
+/// `model` with the coefficients `all_coef`, where those at positions `free` (in file order)
+/// are replaced by `values`.
+fn with_free_coefficients(
+    model: &Model,
+    all_coef: &[f64],
+    free: &[usize],
+    values: &[f64],
+) -> Model {
+    let mut coef = all_coef.to_vec();
+    for (&j, &v) in free.iter().zip(values) {
+        coef[j] = v;
+    }
+    let mut m = model.clone();
+    let terms = m.outputs.iter_mut().flat_map(|o| o.terms.iter_mut());
+    for (t, c) in terms.zip(coef) {
+        t.coefficient = c;
+    }
+    m
 }
 
 /// Standard errors of the refined coefficients from the free-run problem's Jacobian at its
