@@ -52,7 +52,8 @@ fn discover_cli_uses_the_given_split() {
         dir.join("report").to_str().unwrap(),
     ]);
     assert!(ok, "{err}");
-    // The report: evidence, a before/after plot per test run, the residual along each coordinate.
+    // The report: evidence, a before/after plot and the residual analysis per test run, the
+    // derivative residual along each coordinate.
     let rep = dir.join("report");
     for f in ["discovery.json", "summary.md"] {
         assert!(rep.join(f).is_file(), "{f} missing");
@@ -61,9 +62,13 @@ fn discover_cli_uses_the_given_split() {
         let svg =
             std::fs::read_to_string(rep.join(format!("test_run_{}.svg", rs.runs[*r].id))).unwrap();
         assert!(
-            svg.starts_with("<svg") && svg.contains("nominal (free run)"),
+            svg.starts_with("<svg")
+                && svg.contains("nominal fit")
+                && svg.contains("added model fit"),
             "{svg}"
         );
+        let resid = rep.join(format!("resid_{}.svg", rs.runs[*r].id));
+        assert!(resid.is_file(), "residual analysis of the test run missing");
     }
     assert!(rep.join("residual_along_y.svg").is_file());
     let lib = discover(rs, &case.nominal, &Options::new(train, val, test)).unwrap();

@@ -4,7 +4,8 @@ use clap::Args;
 use ctsid::identify::split::parse_list;
 use ctsid::identify::{identify, Orders, Settings, Split};
 use ctsid::regression::EngineChoice;
-use ctsid::report::{svg, write_file, Table};
+use ctsid::report::compare::write_record_report;
+use ctsid::report::{write_file, Table};
 use ctsid::{Error, Result};
 use std::path::PathBuf;
 
@@ -237,39 +238,23 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         eprintln!("model written to {}", path.display());
     }
     if let Some(dir) = &a.report {
+        let runs: Vec<(usize, &[Vec<f64>])> = id
+            .simulations
+            .iter()
+            .filter(|s| s.error.is_none())
+            .filter_map(|s| Some((ids.iter().position(|i| *i == s.run)?, &s.simulated[..])))
+            .collect();
+        let outputs: Vec<&str> = a.output.iter().map(String::as_str).collect();
+        let inputs: Vec<&str> = a.input.iter().map(String::as_str).collect();
+        let table = if runs.is_empty() {
+            "No test run was simulated (none given with --test, or each diverged); for test data in a separate file, `ctsid simulate MODEL DATA --report DIR` writes these figures.\n".to_string()
+        } else {
+            write_record_report(dir, &rs, &outputs, &inputs, "model", &runs)?
+        };
+        let text = format!(
+            "{text}\n## Free runs on the test runs\n\nFit = 100 (1 - NRMSE); residual tests at 99 % (see `ctsid simulate --report`).\n\n{table}"
+        );
         write_file(dir, "report.md", &text)?;
-        if let Some(sim) = id.simulations.iter().find(|s| s.error.is_none()) {
-            let r = ids.iter().position(|i| *i == sim.run).unwrap();
-            let run = &rs.runs[r];
-            let t: Vec<f64> = (0..run.len()).map(|k| run.t0 + k as f64 * rs.tau).collect();
-            for (o, name) in a.output.iter().enumerate() {
-                let c = rs.channel_index(name)?;
-                let plot = svg::line_plot(
-                    &format!("{name}: free-run simulation, run {}", sim.run),
-                    "t (s)",
-                    name,
-                    &[
-                        svg::Series {
-                            label: "measured",
-                            x: &t,
-                            y: &run.channels[c],
-                            color: "gray",
-                            band: None,
-                            dashed: false,
-                        },
-                        svg::Series {
-                            label: "simulated",
-                            x: &t,
-                            y: &sim.simulated[o],
-                            color: "red",
-                            band: None,
-                            dashed: true,
-                        },
-                    ],
-                );
-                write_file(dir, &format!("simulation_{name}.svg"), &plot)?;
-            }
-        }
         eprintln!("report written to {}", dir.display());
     }
     Ok(())

@@ -1,4 +1,4 @@
-//! `ctsid simulate MODEL.json DATA.csv [--run-column R] [--tau T] [--time-column C] [--segment S] [-o SIM.csv]`
+//! `ctsid simulate MODEL.json DATA.csv [--run-column R] [--tau T] [--time-column C] [--segment S] [-o SIM.csv] [--report DIR]`
 //!
 //! Simulates every run of a record from an initial state estimated from its first samples, with
 //! the inputs interpolated linearly between samples, by the library's one convention
@@ -8,13 +8,16 @@
 //! over windows that double up to the first `--init-window` samples (default 200), which
 //! corrects the fast modes and the noise that a local fit cannot. Prints RMS and NRMSE (RMS error over the
 //! standard deviation of the measured output) per run and output, and over all runs (pooled
-//! samples); `-o` writes the data with one `<output>_sim` column per output beside it.
+//! samples); `-o` writes the data with one `<output>_sim` column per output beside it;
+//! `--report` writes the figures of [`ctsid::report::compare`] and their summary.
 //! The data are read by the shared record loader ([`RecordSet`]): runs, uniform time, one-line
 //! errors naming row and column.
 
 use clap::Args;
 use ctsid::metrics::rms_nrmse;
 use ctsid::model::Model;
+use ctsid::report::compare::write_record_report;
+use ctsid::report::write_file;
 use ctsid::simulate::{free_run, run_data, SimOptions, INIT_WINDOW};
 use ctsid::util::num4;
 use ctsid::Result;
@@ -41,6 +44,10 @@ pub struct SimulateArgs {
     /// Where to write the data with the simulated outputs.
     #[arg(short = 'o', long)]
     pub output: Option<String>,
+    /// Folder for the report: per run and output, measured against simulated with the fit and
+    /// the error (`sim_*.svg`), the residual analysis (`resid_*.svg`), and `report.md`.
+    #[arg(long)]
+    pub report: Option<std::path::PathBuf>,
 }
 
 pub fn run(args: SimulateArgs) -> Result<()> {
@@ -54,6 +61,9 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         )?;
     }
     args.segment.check()?;
+    if let Some(d) = &args.report {
+        super::check_output_dir(d)?;
+    }
     let model = Model::read(&args.model)?;
     let compiled = model.compile()?;
     let mut columns: Vec<String> = model.outputs.iter().map(|o| o.name.clone()).collect();
@@ -171,7 +181,34 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         )?;
         eprintln!("wrote {path}");
     }
+    if let Some(dir) = &args.report {
+        write_report(dir, &args, &model, &rs, &simulated)?;
+        eprintln!("report written to {}", dir.display());
+    }
     Ok(())
+}
+
+/// `report.md` (the scores and residual tests of every run) and the figures of the first runs.
+fn write_report(
+    dir: &std::path::Path,
+    args: &SimulateArgs,
+    model: &Model,
+    rs: &ctsid::RecordSet,
+    simulated: &[Vec<Vec<f64>>],
+) -> Result<()> {
+    let outputs: Vec<&str> = model.outputs.iter().map(|o| o.name.as_str()).collect();
+    let inputs: Vec<&str> = model.inputs.iter().map(String::as_str).collect();
+    let runs: Vec<(usize, &[Vec<f64>])> = simulated
+        .iter()
+        .enumerate()
+        .map(|(r, s)| (r, &s[..]))
+        .collect();
+    let table = write_record_report(dir, rs, &outputs, &inputs, "model", &runs)?;
+    let text = format!(
+        "# Free-run simulation of {} on {}\n\nEach run starts from the initial state fitted on its first {} samples. Fit = 100 (1 - NRMSE). Residual tests at 99 %: lags of the simulation error's autocorrelation (whiteness) and of its cross-correlation with each input (independence from past inputs, the test that matters for a simulation model) outside the band.\n\n{table}",
+        args.model, args.data, args.init_window
+    );
+    write_file(dir, "report.md", &text)
 }
 
 /// NRMSE in percent for the table: '-' where it is undefined (a constant measurement that the

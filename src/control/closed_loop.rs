@@ -112,7 +112,9 @@ fn check(d: &Design) -> Result<()> {
 }
 
 /// SVG of a step under feedback: the measured and true output (`output_label`), the designed
-/// response and the setpoint over the trace's time.
+/// response and the setpoint over the trace's time; below, the output minus the designed
+/// response (how far the loop is from its design), the observer's error on the output, and the
+/// input.
 pub fn step_plot(
     d: &Design,
     tr: &Trace,
@@ -121,10 +123,15 @@ pub fn step_plot(
     y_label: &str,
     output_label: &str,
 ) -> Result<String> {
-    use crate::report::svg;
+    use crate::report::svg::{figure, Panel, Series};
     let designed = designed_response(d, from, tr.t.len())?;
     let setpoint = vec![d.setpoint; tr.t.len()];
-    let series = |label, y, color, dashed| svg::Series {
+    let deviation: Vec<f64> = tr.y.iter().zip(&designed).map(|(y, r)| y - r).collect();
+    let observer: Vec<f64> = match tr.estimate.first() {
+        Some(est) => est.iter().zip(&tr.y).map(|(e, y)| e - y).collect(),
+        None => vec![f64::NAN; tr.t.len()],
+    };
+    let series = |label, y, color, dashed| Series {
         label,
         x: &tr.t,
         y,
@@ -132,17 +139,41 @@ pub fn step_plot(
         band: None,
         dashed,
     };
-    Ok(svg::line_plot(
-        title,
-        "t (s)",
-        y_label,
-        &[
-            series("measured", &tr.y_measured, "lightgray", false),
-            series(output_label, &tr.y, "black", false),
-            series("designed response", &designed, "blue", true),
-            series("setpoint", &setpoint, "green", true),
-        ],
-    ))
+    let panels = vec![
+        Panel::lines(
+            "step",
+            "t (s)",
+            y_label,
+            vec![
+                series("measured", &tr.y_measured, "#bbbbbb", false),
+                series(output_label, &tr.y, "black", false),
+                series("designed response", &designed, "#1f77b4", true),
+                series("setpoint", &setpoint, "#2ca02c", true),
+            ],
+        ),
+        Panel::lines(
+            "output minus designed response",
+            "t (s)",
+            y_label,
+            vec![series("deviation", &deviation, "#d62728", false)],
+        )
+        .height(180.0),
+        Panel::lines(
+            "observer: estimated minus true output",
+            "t (s)",
+            y_label,
+            vec![series("estimation error", &observer, "#9467bd", false)],
+        )
+        .height(180.0),
+        Panel::lines(
+            "input",
+            "t (s)",
+            &d.input,
+            vec![series("input", &tr.u, "#ff7f0e", false)],
+        )
+        .height(200.0),
+    ];
+    Ok(figure(title, &panels))
 }
 
 /// The designed step response at the loop's sample times `k tau`, k < `samples`: the model

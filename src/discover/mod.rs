@@ -1429,9 +1429,12 @@ fn coordinate_shares(p: &Prepared, train: &[usize]) -> Vec<Share> {
 
 impl Discovery {
     /// The report's plots as `(file name, SVG)`: each test run's measurement against the free
-    /// runs of the nominal and the final model (both from the one initial-state convention),
-    /// and the conditional mean of the derivative-space residual along each coordinate.
+    /// runs of the nominal and the final model (both from the one initial-state convention)
+    /// with their fits, errors and a zoom on long runs, the residual analysis of the final
+    /// model ([`crate::report::compare`]), and the conditional mean of the derivative-space
+    /// residual along each coordinate.
     pub fn plots(&self) -> Vec<(String, String)> {
+        use crate::report::compare::{comparison_figure, residual_figure, Comparison};
         use crate::report::svg::{line_plot, Series};
         let mut out = Vec::new();
         if let (Some(nom), Some(fin)) = (&self.nominal_model, &self.final_model) {
@@ -1440,46 +1443,22 @@ impl Discovery {
                 let (Some(a), Some(b)) = (sim_of(nom), sim_of(fin)) else {
                     continue;
                 };
-                let series = [
-                    Series {
-                        label: "measured",
-                        x: &r.t,
-                        y: &r.y[0],
-                        color: "#999999",
-                        band: None,
-                        dashed: false,
-                    },
-                    Series {
-                        label: "nominal (free run)",
-                        x: &r.t,
-                        y: &a,
-                        color: "#d62728",
-                        band: None,
-                        dashed: true,
-                    },
-                    Series {
-                        label: &format!("{} model (free run)", self.verdict),
-                        x: &r.t,
-                        y: &b,
-                        color: "#1f77b4",
-                        band: None,
-                        dashed: false,
-                    },
-                ];
-                out.push((
-                    format!("test_run_{}.svg", r.id),
-                    line_plot(
-                        &format!(
-                            "test run {}: NRMSE {} before, {} after",
-                            r.id,
-                            num(nrmse(&a, &r.y[0])),
-                            num(nrmse(&b, &r.y[0]))
-                        ),
-                        "t (s)",
-                        "y",
-                        &series,
-                    ),
-                ));
+                let final_label = format!("{} model", self.verdict);
+                let c = Comparison {
+                    run: &r.id,
+                    t: &r.t,
+                    output: &nom.outputs[0].name,
+                    measured: &r.y[0],
+                    simulated: vec![("nominal", &a), (&final_label, &b)],
+                    inputs: nom
+                        .inputs
+                        .iter()
+                        .zip(&r.u)
+                        .map(|(n, u)| (n.as_str(), &u[..]))
+                        .collect(),
+                };
+                out.push((format!("test_run_{}.svg", r.id), comparison_figure(&c)));
+                out.push((format!("resid_{}.svg", r.id), residual_figure(&c).1));
             }
         }
         for sh in &self.shares {

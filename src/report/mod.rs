@@ -1,5 +1,9 @@
-//! Report output: Markdown and CSV tables and SVG plots written by `--out` / `--report` folders.
+//! Report output: Markdown and CSV tables and SVG figures written by `--out` / `--report`
+//! folders: [`compare`] (measured against simulated, with the residual analysis of [`resid`])
+//! for every command that simulates, drawn by [`svg`].
 
+pub mod compare;
+pub mod resid;
 pub mod svg;
 
 use crate::error::{Error, Result};
