@@ -98,3 +98,50 @@ fn identify_and_simulate_a_csv_record_through_the_entry_point() {
         .is_err());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Without the refinement the coefficients are the derivative fit's, and so are the standard
+/// errors written with them: every term has one, and the truth lies within a few of them.
+#[test]
+fn an_unrefined_model_carries_the_derivative_fits_standard_errors() {
+    let dir = std::env::temp_dir().join(format!("ctsid-entry-se-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("osc.csv");
+    std::fs::write(&path, record()).unwrap();
+    let records = RecordSet::read_csv(&path, &["y", "u"], Some("run"), 0.01).unwrap();
+    let split = Split::from_lists(&records, "0-3", Some("4"), "5").unwrap();
+    let mut id = Identifier::new()
+        .outputs(["y"])
+        .inputs(["u"])
+        .degree(3)
+        .order(2);
+    id.settings_mut().refine = false;
+    let fit = id.fit(&records, &split).unwrap();
+    assert!(fit.refinement.is_none());
+    let truth = [
+        ("y", 1, -4.0),
+        ("y_d1", 1, -0.8),
+        ("u", 1, 2.0),
+        ("y", 3, -0.5),
+    ];
+    for t in &fit.model.outputs[0].terms {
+        let se = t
+            .std_error
+            .unwrap_or_else(|| panic!("no standard error in {}", fit.model));
+        let want = truth
+            .iter()
+            .find(|(v, p, _)| t.exponents.len() == 1 && t.exponents.get(*v) == Some(p))
+            .map_or(0.0, |w| w.2);
+        let z = (t.coefficient - want) / se;
+        eprintln!(
+            "{:?}: {} +- {se} (truth {want}, {z:.1} se)",
+            t.exponents, t.coefficient
+        );
+        assert!(
+            se > 0.0 && z.abs() < 4.0,
+            "{:?}: {} +- {se}, truth {want}",
+            t.exponents,
+            t.coefficient
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}

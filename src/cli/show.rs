@@ -66,7 +66,7 @@ pub fn run(a: ShowArgs) -> Result<()> {
         }
     }
     if unknown {
-        outln!("\n'-': no standard error was estimated for that term (identify estimates them when its refinement on simulation error is kept; discover for the effects it adds).")?;
+        outln!("\n'-': no standard error was estimated for that term (identify writes one for every term it fits; discover for the effects it adds; a hand-written or older file may have none).")?;
     }
     Ok(())
 }

@@ -551,15 +551,13 @@ fn plots(
             band: None,
             dashed: true,
         };
+        // The true derivatives spike at the run's start (the plant leaves rest under a step):
+        // the y window follows the bulk, or the estimate is a flat line under the spike.
+        let panel = svg::Panel::lines("", "t (s)", &format!("y_d{k}"), vec![est, tru]).bulk_y();
         write_file(
             dir,
             &format!("derivative_{k}.svg"),
-            &svg::line_plot(
-                &format!("y_d{k}, test run {r}"),
-                "t (s)",
-                &format!("y_d{k}"),
-                &[est, tru],
-            ),
+            &svg::figure(&format!("y_d{k}, test run {r}"), &[panel.height(384.0)]),
         )?;
     }
     if let Some(sim) = id
@@ -567,23 +565,40 @@ fn plots(
         .iter()
         .find(|x| x.run == r.to_string() && x.error.is_none())
     {
-        let plot = svg::line_plot(
-            &format!("Free-run simulation, test run {r}"),
-            "t (s)",
-            "y (rad)",
-            &[
-                s("measured", &run.y[0], "gray"),
-                s("true", &run.y_true[0], "black"),
-                svg::Series {
-                    label: "simulated model",
-                    x: t,
-                    y: &sim.simulated[0],
-                    color: "red",
-                    band: None,
-                    dashed: true,
-                },
-            ],
+        let model = &sim.simulated[0];
+        let error: Vec<f64> = model
+            .iter()
+            .zip(&run.y_true[0])
+            .map(|(a, b)| a - b)
+            .collect();
+        let title = format!(
+            "Free-run simulation, test run {r}: fit {:.1} % against the measurement, {:.2} % against the truth",
+            crate::metrics::fit_percent(model, &run.y[0]),
+            crate::metrics::fit_percent(model, &run.y_true[0])
         );
+        let traces = vec![
+            s("measured", &run.y[0], "#aaaaaa"),
+            s("true", &run.y_true[0], "black"),
+            svg::Series {
+                label: "simulated model",
+                x: t,
+                y: model,
+                color: "#d62728",
+                band: None,
+                dashed: true,
+            },
+        ];
+        let panels = [
+            svg::Panel::lines("free run", "t (s)", "y (rad)", traces),
+            svg::Panel::lines(
+                "simulated minus true output",
+                "t (s)",
+                "y error (rad)",
+                vec![s("error", &error, "#d62728")],
+            )
+            .height(200.0),
+        ];
+        let plot = svg::figure(&title, &panels);
         write_file(dir, "simulation.svg", &plot)?;
     }
     Ok(())

@@ -44,6 +44,7 @@ mod identifier;
 pub mod profile;
 pub mod refine;
 pub mod split;
+mod uncertainty;
 
 use crate::derivatives::{differentiate_runs, DerivativeOptions, Derivatives};
 use crate::engine::Features;
@@ -937,6 +938,20 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     };
     if let Some(report) = refinement.as_mut() {
         model = complete_selected(&model, report, &prep, &outputs, split, &fits)?;
+    }
+    // Without a kept refinement the coefficients are the derivative fit's: so are their errors.
+    let mut terms = model.outputs.iter().flat_map(|o| &o.terms);
+    if !terms.any(|t| t.std_error.is_some()) {
+        let lengths: Vec<usize> = split.train.iter().map(|&r| rs.runs[r].len()).collect();
+        for i in 0..ny {
+            let (z, label, weights, _) = prep.design(i, &ord, &split.train);
+            let d = uncertainty::Design {
+                z: &z,
+                label: &label,
+                weights: &weights,
+            };
+            uncertainty::set_derivative_std_errors(&mut model, i, &d, &lengths)?;
+        }
     }
 
     let simulations = simulate_runs(&model, rs, &outputs, &prep.inputs, &split.test)?;

@@ -48,6 +48,8 @@ pub struct Panel<'a> {
     pub height: f64,
     /// Only this window of x is drawn (a zoom); `None`: all of it.
     pub x_range: Option<(f64, f64)>,
+    /// The y window covers the bulk of the values (see [`Panel::bulk_y`]), not every one.
+    pub bulk_y: bool,
 }
 
 impl<'a> Panel<'a> {
@@ -61,6 +63,7 @@ impl<'a> Panel<'a> {
             style: Style::Lines,
             height: 320.0,
             x_range: None,
+            bulk_y: false,
         }
     }
 
@@ -76,6 +79,17 @@ impl<'a> Panel<'a> {
     /// The same panel with another height.
     pub fn height(self, height: f64) -> Panel<'a> {
         Panel { height, ..self }
+    }
+
+    /// The same panel with its y window set by the bulk of the values: the 1st to 99th
+    /// percentile, widened by half that span each side; values beyond are drawn at the edge.
+    /// For signals with an isolated spike (a third derivative at a run's start is 1000 times
+    /// its typical size) that would otherwise flatten everything else to a line.
+    pub fn bulk_y(self) -> Panel<'a> {
+        Panel {
+            bulk_y: true,
+            ..self
+        }
     }
 
     /// The same panel showing x in `[lo, hi]` only.
@@ -199,7 +213,17 @@ fn y_window(p: &Panel, f: &Frame) -> (f64, f64) {
         }
         v
     };
-    let (mut lo, mut hi) = finite_range(p.series.iter().flat_map(shown));
+    let (mut lo, mut hi) = if p.bulk_y {
+        bulk_range(
+            p.series
+                .iter()
+                .flat_map(shown)
+                .filter(|v| v.is_finite())
+                .collect(),
+        )
+    } else {
+        finite_range(p.series.iter().flat_map(shown))
+    };
     if p.style == Style::Stems {
         lo = lo.min(0.0);
         hi = hi.max(0.0);
@@ -212,6 +236,19 @@ fn y_window(p: &Panel, f: &Frame) -> (f64, f64) {
     }
     let pad = 0.05 * (hi - lo);
     (lo - pad, hi + pad)
+}
+
+/// The 1st to 99th percentile of `v`, widened by half their distance each side (never beyond
+/// the values' own range).
+fn bulk_range(mut v: Vec<f64>) -> (f64, f64) {
+    if v.is_empty() {
+        return (f64::INFINITY, f64::NEG_INFINITY);
+    }
+    v.sort_unstable_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    let (lo, hi) = (at(0.01), at(0.99));
+    let pad = 0.5 * (hi - lo);
+    ((lo - pad).max(v[0]), (hi + pad).min(v[v.len() - 1]))
 }
 
 fn finite_range(v: impl Iterator<Item = f64>) -> (f64, f64) {
@@ -517,6 +554,32 @@ mod tests {
             y: (-0.45, 9.45),
         };
         assert!(svg.contains(&format!(",{:.1} ", f.py(9.0))));
+    }
+
+    #[test]
+    fn a_bulk_window_ignores_an_isolated_spike() {
+        let x: Vec<f64> = (0..1000).map(|i| i as f64).collect();
+        let mut y: Vec<f64> = x.iter().map(|v| (v * 0.05).sin()).collect();
+        y[0] = 2e6;
+        let panel = Panel::lines("", "t", "y", vec![series(&x, &y, false)]).bulk_y();
+        let f = Frame {
+            left: 0.0,
+            top: 0.0,
+            width: 800.0,
+            height: 100.0,
+            x: (0.0, 999.0),
+            y: (0.0, 1.0),
+        };
+        let (lo, hi) = y_window(&panel, &f);
+        assert!(lo > -3.0 && hi < 3.0, "{lo}..{hi}");
+        let (_, hi) = y_window(
+            &Panel {
+                bulk_y: false,
+                ..panel
+            },
+            &f,
+        );
+        assert!(hi > 1e6);
     }
 
     #[test]
