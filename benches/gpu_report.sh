@@ -21,14 +21,15 @@ if [[ "${1:-}" == "--stage" ]]; then mode=stage; shift; fi
 if [[ "${1:-}" == "--small" ]]; then mode=small; shift; fi
 
 if command -v cargo >/dev/null 2>&1; then
-    cargo build --release --example gpu_report
+    # The report is a research program (benches/research/gpu_report.rs, run directly here).
+    report=$(cargo bench --bench gpu_report --no-run 2>&1 \
+        | sed -n 's/.*Executable benches\/research\/gpu_report.rs (\(.*\))$/\1/p' | tail -1)
+    [[ -x "$report" ]] || { echo "gpu_report.sh: cannot find the gpu_report binary" >&2; exit 2; }
     # The test binary's path as cargo prints it: a bench of the same name (benches/gpu_sweep.rs,
     # a criterion harness) also builds deps/gpu_sweep-*, so the newest file is not always the test.
     gputest=$(cargo test --release --test gpu_sweep --no-run 2>&1 \
         | sed -n 's/.*Executable tests\/gpu_sweep.rs (\(.*\))$/\1/p' | tail -1)
     [[ -x "$gputest" ]] || { echo "gpu_report.sh: cannot find the gpu_sweep test binary" >&2; exit 2; }
-    tdir=${CARGO_TARGET_DIR:-target}
-    report="$tdir/release/examples/gpu_report"
     if [[ $mode == stage ]]; then
         mkdir -p "$BIN_DIR"
         cp "$report" "$BIN_DIR/gpu_report"

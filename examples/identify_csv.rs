@@ -1,8 +1,7 @@
-//! Identify a model from a CSV record through the library's entry point, then simulate it.
-//!
-//! `cargo run --release --example identify_csv -- DATA.csv OUTPUT INPUT TAU`: DATA has a `run`
-//! column and the two named ones, sampled every TAU seconds; runs 0-3 train, 4 validates the
-//! order, 5 is the test run. `tests/library_entry.rs` runs the same calls on a record it makes.
+//! Identify a model from a CSV record through the library's entry point, then simulate it:
+//! `cargo run --release --example identify_csv -- DATA.csv OUTPUT INPUT TAU`; DATA has a `run`
+//! column and the two named ones, sampled every TAU s; runs 0-3 train, 4 validates, 5 tests
+//! (`tests/library_entry.rs` runs the same calls on a record it makes).
 use ctsid::{Identifier, RecordSet, Split};
 
 fn main() -> ctsid::Result<()> {
@@ -13,9 +12,8 @@ fn main() -> ctsid::Result<()> {
             "give DATA.csv OUTPUT INPUT TAU",
         ));
     };
-    let tau: f64 = tau
-        .parse()
-        .map_err(|_| ctsid::Error::param("TAU", "not a number"))?;
+    let bad_tau = |_| ctsid::Error::param("TAU", "not a number");
+    let tau: f64 = tau.parse().map_err(bad_tau)?;
     let records = RecordSet::read_csv(data, &[y, u], Some("run"), tau)?;
     let split = Split::from_lists(&records, "0-3", Some("4"), "5")?;
     let fit = Identifier::new()

@@ -1,5 +1,5 @@
 //! `discover` on generated cases (one seed each, to keep CI time modest; the 10-seed matrix is
-//! `cargo run --release --example discover_acceptance`).
+//! `cargo bench --bench discover_acceptance`).
 
 use ctsid::discover::cases::{generate, generate_scaled, judge, options, split, Judgement};
 use ctsid::discover::{discover, Discovery, Options};

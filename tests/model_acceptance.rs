@@ -1,7 +1,7 @@
 //! One model for every term, judged through the CLI as a user would: hidden-effect cases of
 //! `discover::cases` (nominal y'' = -c y' - k y + u, one hidden effect, 3 % noise; 4 training,
 //! 2 validation, 2 test runs), with seeds 101-104 that no setting was tuned on (the acceptance
-//! matrix of `examples/discover_acceptance` draws seeds 0-24).
+//! matrix of `benches/research/discover_acceptance` draws seeds 0-24).
 //!
 //! - `discover -o aug.json` writes the augmented model, and `ctsid simulate aug.json` on the
 //!   noise-free test outputs is at least 5x better than the nominal's; nothing is added where

@@ -56,7 +56,7 @@ const Z_999: f64 = 3.090;
 /// Largest residual variance, relative to the smoother's noise variance.
 const RESID_RATIO: f64 = 1.15;
 
-/// Agreement with the smoother (module docs, step 3). `cargo run --release --example
+/// Agreement with the smoother (module docs, step 3). `cargo bench --bench
 /// derive_holdout` prints the statistics: right models (sums of sinusoids) means 0.56-1.40,
 /// shares 0.93-0.99; sinusoids plus a small transient or bump the model leaves out 2.6-3.3,
 /// 0.75-0.76.

@@ -56,7 +56,7 @@ const LADDER: [f64; 6] = [0.0, 0.5, 1.0, 2.0, 3.0, -0.5];
 
 /// Local evidence for the smoother level is gathered over this many times the window of the
 /// rougher ones: over-smoothing costs little likelihood per sample, so short windows take it by
-/// chance. `cargo run --release --example derivative_windows` compares 0 (no smoother level),
+/// chance. `cargo bench --bench derivative_windows` compares 0 (no smoother level),
 /// 2 and 6 on the shared signals: at 2 sines and sys3 get worse at nearly every order (up to 2x);
 /// at 6 only the chirp's slow start takes it, and the chirp's error drops 7-43 %.
 const SMOOTH_WINDOW: f64 = 6.0;

@@ -698,13 +698,13 @@ fn refit(m: &Model, runs: &[RunData], fixed: &[bool], iterations: usize) -> Mode
 /// has to notice it at all. Each named effect's report prints its share ("in simulation"), and a
 /// dropped one's reason: a bump near the empty tank (`SCALE=1.667`, seed 3 of the acceptance
 /// example) removes 0.0 %; Silverbox's small even stiffness y^2, a known second-order effect of
-/// that circuit, removes 1.9 % (`examples/silverbox_discover.rs`).
+/// that circuit, removes 1.9 % (`benches/research/silverbox_discover.rs`).
 const MARGINAL_GAIN: f64 = 0.01;
 
 /// An effect is not constant in time when its coefficients on the first and the second half of
 /// the training runs differ by more than DRIFT_Z standard deviations of that difference and by
 /// more than DRIFT_REL of the larger. Each named effect's report prints both ("over time"), and
-/// a refusal for drift its reason, and `cargo run --release --example discover_acceptance -- 25`
+/// a refusal for drift its reason, and `cargo bench --bench discover_acceptance -- 25`
 /// prints the largest z per case: the effects named in the 275 case-seeds at 3 % noise reach 2.9 (as
 /// many draws of a standard normal would); the tank driven near empty (`SCALE=1.667`) 3.8, its
 /// outflow law 16 % apart (biased by the smoother where it is steepest); an offset fitted to the

@@ -73,7 +73,7 @@ pub const ROBUST_ITERATIONS: usize = 3;
 /// `Prepared::label_floor`): a residual sum of squares below `sum w sigma^2` counts as exact, so
 /// no term is bought with less than what the reconstructed label is known to within.
 ///
-/// The trade-off is measured by `cargo run --release --example label_floor` (floors 0, 0.5, 0.7,
+/// The trade-off is measured by `cargo bench --bench label_floor` (floors 0, 0.5, 0.7,
 /// 1): the noise-free throttle's n = 3 fit and the noise-free MIMO plant at d = 4 on 12 runs need
 /// the floor to come out as their true terms; on noisy data it also withholds terms whose effect
 /// is below one sample's uncertainty but significant over many samples (MIMO plant at 1 % noise,

@@ -2,7 +2,7 @@
 //! the arithmetic limit (pairs / (single-core f32 multiply-add throughput x cores), the
 //! throughput measured here by a register-resident AVX2 FMA loop) and the targets.
 //!
-//! Run: `benches/cpu_report.sh` (or `cargo run --release --example cpu_report`).
+//! Run: `benches/cpu_report.sh` (or `cargo bench --bench cpu_report`).
 use ctsid::basis::{Basis, BasisLimits};
 use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
 use ctsid::regression::{lars_path, Method, PathOptions, Regression};

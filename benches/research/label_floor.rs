@@ -5,7 +5,7 @@
 //!   found, extra terms, pooled free-run NRMSE against the truth per output;
 //! - the MIMO plant at 1 % noise (demo mimo's data: 40 runs, 25 train), d = 3: the same.
 //!
-//! `cargo run --release --example label_floor [-- FLOOR,...]`
+//! `cargo bench --bench label_floor [-- FLOOR,...]`
 use ctsid::demo::{coefficient_errors, nrmse_vs_truth, records};
 use ctsid::identify::{identify, Orders, Settings, Split};
 use ctsid::model::Model;
@@ -64,6 +64,7 @@ fn against_truth(id: &ctsid::identify::Identification, truth: &Model, runs: &[Ru
 
 fn main() {
     let floors: Vec<f64> = std::env::args()
+        .filter(|a| a != "--bench")
         .nth(1)
         .map(|a| a.split(',').map(|v| v.parse().unwrap()).collect())
         .unwrap_or_else(|| vec![0.0, 0.5, 0.7, 1.0]);

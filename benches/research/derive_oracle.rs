@@ -5,7 +5,7 @@
 //! fresh draws are printed beside the gates: a gate below the oracle is out of reach of
 //! any method that does not also know the plant's initial state and input.
 //!
-//! `cargo run --release --example derive_oracle`
+//! `cargo bench --bench derive_oracle`
 use ctsid::derivatives::benchmark::{gates, load_signal};
 use ctsid::derivatives::score::{normalised_percentile, percentile, trimmed_range};
 use ctsid::plants::noise::add_noise;

@@ -14,7 +14,7 @@
 //! whiteness checks, its agreement statistics with the smoother (taken or not). Noise levels
 //! 1/3/5 % and, last, 0.3 %.
 //!
-//! `cargo run --release --example derive_holdout`
+//! `cargo bench --bench derive_holdout`
 use ctsid::derivatives::score::{normalised_percentile, trimmed_range};
 use ctsid::derivatives::{differentiate_with, expsum, DerivativeOptions};
 use ctsid::plants::noise::add_noise;

@@ -5,7 +5,7 @@
 //! error in the first (last) 5 % of samples, in units of the derivative's RMS over the run,
 //! orders 1-4, without -> with the check.
 //!
-//! `cargo run --release --example derive_ends`
+//! `cargo bench --bench derive_ends`
 use ctsid::derivatives::{differentiate_with, DerivativeOptions, Derivatives};
 use ctsid::plants::noise::add_noise;
 use ctsid::plants::rng::Rng;

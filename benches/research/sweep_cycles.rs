@@ -1,10 +1,11 @@
 //! Runs sweeps only, for `perf stat` cycle counts (robust to other load on the machine):
-//! `perf stat -e cycles:u target/release/examples/sweep_cycles NZ D REPS`.
+//! `perf stat -e cycles:u target/release/deps/sweep_cycles-* NZ D REPS` (built by `cargo bench --bench sweep_cycles --no-run`).
 use ctsid::basis::{Basis, BasisLimits};
 use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
 
 fn main() {
     let a: Vec<usize> = std::env::args()
+        .filter(|a| a != "--bench")
         .skip(1)
         .map(|s| s.parse().unwrap())
         .collect();

@@ -6,7 +6,7 @@
 //! model is `y_d2`; so the run adds the user effect `sign(y_d1)` and prints what the workflow
 //! finds.
 //!
-//! `cargo run --release --example etc_friction_discover [-- FC_OVER_J]` (default 20 rad/s^2)
+//! `cargo bench --bench etc_friction_discover [-- FC_OVER_J]` (default 20 rad/s^2)
 
 use ctsid::discover::{discover, Options};
 use ctsid::plants::noise::add_noise;
@@ -36,6 +36,7 @@ impl System for WithFriction {
 
 fn main() {
     let fc_over_j: f64 = std::env::args()
+        .filter(|a| a != "--bench")
         .nth(1)
         .and_then(|s| s.parse().ok())
         .unwrap_or(20.0);

@@ -5,6 +5,7 @@ use ctsid::identify::{identify, Orders, Settings, Split};
 use ctsid::plants::{dataset, Plant, ThrottlePreset};
 fn main() {
     let eta: f64 = std::env::args()
+        .filter(|a| a != "--bench")
         .nth(1)
         .map(|s| s.parse().unwrap())
         .unwrap_or(0.0);

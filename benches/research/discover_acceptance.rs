@@ -2,14 +2,17 @@
 //! 0..N (default 10) at 3 % noise, printing each verdict and the pass counts. The free-run
 //! shrink is judged against the plant's noise-free output and printed against the measurement too.
 //!
-//! `cargo run --release --example discover_acceptance -- [SEEDS] [ETA] [CASE ...]`; `SCALE=s`
+//! `cargo bench --bench discover_acceptance -- [SEEDS] [ETA] [CASE ...]`; `SCALE=s`
 //! multiplies every case's excitation amplitude (default 1).
 
 use ctsid::discover::cases::{generate_scaled, judge, options, CASES};
 use ctsid::discover::discover;
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let args: Vec<String> = std::env::args()
+        .filter(|a| a != "--bench")
+        .skip(1)
+        .collect();
     let seeds: u64 = args.first().and_then(|s| s.parse().ok()).unwrap_or(10);
     let eta: f64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(0.03);
     let chosen: Vec<String> = if args.len() > 2 {

@@ -74,7 +74,7 @@ fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
 }
 
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
+    let args: Vec<String> = std::env::args().filter(|a| a != "--bench").collect();
     let n_s: usize = arg(&args, "--samples", 25_000);
     let sizes: String = arg(&args, "--sizes", "11:6,17:6,13:9".to_string());
     let reps: usize = arg(&args, "--reps", 20);

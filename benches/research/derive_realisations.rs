@@ -9,7 +9,7 @@
 //! sigma over all draws (a model's error is a few parameters' error, coherent over a run, so
 //! its coverage is judged over draws rather than within one).
 //!
-//! `cargo run --release --example derive_realisations -- [R]` (default R = 50);
+//! `cargo bench --bench derive_realisations -- [R]` (default R = 50);
 //! `... -- swap` instead scores each smooth signal at each level with each shared noise vector's
 //! shape (rescaled to that level): order 1, trimmed p95. The signals are the repository's copy
 //! (tests/data/signals, identical to ../shared/signals).
@@ -21,7 +21,7 @@ use ctsid::plants::rng::Rng;
 use std::path::Path;
 
 fn main() {
-    let arg = std::env::args().nth(1);
+    let arg = std::env::args().filter(|a| a != "--bench").nth(1);
     let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/signals"));
     if arg.as_deref() == Some("swap") {
         return swap(dir);

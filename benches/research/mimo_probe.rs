@@ -3,7 +3,7 @@ use ctsid::demo::records;
 use ctsid::identify::{identify, Orders, Settings, Split};
 use ctsid::plants::{dataset, Plant};
 fn main() {
-    let a: Vec<String> = std::env::args().collect();
+    let a: Vec<String> = std::env::args().filter(|a| a != "--bench").collect();
     let d: usize = a[1].parse().unwrap();
     let mt: usize = a[2].parse().unwrap();
     let eta: f64 = a.get(3).map(|s| s.parse().unwrap()).unwrap_or(0.0);

@@ -3,13 +3,14 @@
 //! Prints the verdict, the Coulomb force read from the coefficient and the nominal mass
 //! (published: 20.4 N), and the free-run RMS error on the pulses record in mm before and after.
 //!
-//! `cargo run --release --example emps_discover [-- DIR]`
+//! `cargo bench --bench emps_discover [-- DIR]`
 
 use ctsid::discover::benchmarks::{emps, rms_after};
 use ctsid::discover::discover;
 
 fn main() {
     let dir = std::env::args()
+        .filter(|a| a != "--bench")
         .nth(1)
         .unwrap_or_else(|| "../shared/data/emps".into());
     let s = match emps(&dir) {

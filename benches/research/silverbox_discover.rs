@@ -3,13 +3,14 @@
 //! [`ctsid::discover::benchmarks::silverbox`]). Prints the verdict and the arrow's free-run RMS
 //! error in mV before and after (initial state from the first 50 samples, scored on the rest).
 //!
-//! `cargo run --release --example silverbox_discover [-- PATH/SNLS80mV.csv]`
+//! `cargo bench --bench silverbox_discover [-- PATH/SNLS80mV.csv]`
 
 use ctsid::discover::benchmarks::{rms_after, silverbox};
 use ctsid::discover::discover;
 
 fn main() {
     let path = std::env::args()
+        .filter(|a| a != "--bench")
         .nth(1)
         .unwrap_or_else(|| "../shared/data/silverbox/SNLS80mV.csv".into());
     let s = match silverbox(&path) {

@@ -2,7 +2,7 @@
 //! (`DerivativeOptions::smooth_window`, default 6): trimmed p95 on the shared signals at 0 (no
 //! smoother level), 2 and 6, and the rows that meet every gate of the derivative issue.
 //!
-//! `cargo run --release --example derivative_windows [-- SIGNALS_DIR]` (default: the repository's
+//! `cargo bench --bench derivative_windows [-- SIGNALS_DIR]` (default: the repository's
 //! copy, tests/data/signals, identical to ../shared/signals)
 use ctsid::derivatives::benchmark::{gates_pass, run_with};
 use ctsid::derivatives::DerivativeOptions;
@@ -10,6 +10,7 @@ use std::path::PathBuf;
 
 fn main() {
     let dir = std::env::args()
+        .filter(|a| a != "--bench")
         .nth(1)
         .map(PathBuf::from)
         .unwrap_or_else(|| {

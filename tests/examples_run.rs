@@ -1,0 +1,94 @@
+//! The user examples run as their docs say: `identify_csv` on a record of a known oscillator
+//! and `discover_csv` on a generated case with a hidden Coulomb friction. `cargo test` builds
+//! the examples before it runs the tests; a run of this file alone (`--test examples_run`)
+//! does not, and the tests then skip with a notice.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+/// The example's binary beside this test's (`target/<profile>/examples/NAME`).
+fn example(name: &str) -> Option<PathBuf> {
+    let exe = std::env::current_exe().ok()?;
+    let p = exe.parent()?.parent()?.join("examples").join(name);
+    if p.is_file() {
+        Some(p)
+    } else {
+        eprintln!("NOTICE: example {name} not built (run the whole `cargo test`); skipped");
+        None
+    }
+}
+
+fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("ctsid-examples-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn the_examples_identify_and_discover_on_a_csv_record() {
+    let Some(bin) = example("discover_csv") else {
+        return;
+    };
+    let case = ctsid::discover::cases::generate("coulomb", 106, 0.03).unwrap();
+    let dir = temp_dir("discover");
+    let rs = &case.records;
+    let mut csv = format!("run,{}\n", rs.channel_names.join(","));
+    for (r, run) in rs.runs.iter().enumerate() {
+        for i in 0..run.len() {
+            let v: Vec<String> = run.channels.iter().map(|c| format!("{:e}", c[i])).collect();
+            csv += &format!("{r},{}\n", v.join(","));
+        }
+    }
+    std::fs::write(dir.join("data.csv"), &csv).unwrap();
+    case.nominal
+        .write(dir.join("nominal.json").to_str().unwrap())
+        .unwrap();
+    let out = Command::new(bin)
+        .current_dir(&dir)
+        .args(["data.csv", "nominal.json", &rs.tau.to_string()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.starts_with("verdict: added"), "{text}");
+    let augmented = ctsid::Model::read(dir.join("augmented.json").to_str().unwrap()).unwrap();
+    let named: Vec<&String> = augmented.outputs[0]
+        .terms
+        .iter()
+        .filter_map(|t| t.expression.as_ref())
+        .collect();
+    assert!(!named.is_empty(), "no named term added: {augmented}");
+    std::fs::remove_dir_all(&dir).ok();
+
+    // identify_csv on the same record: a model, its file, and a fit per run.
+    let Some(bin) = example("identify_csv") else {
+        return;
+    };
+    let dir = temp_dir("identify");
+    std::fs::write(dir.join("data.csv"), csv).unwrap();
+    let out = Command::new(bin)
+        .current_dir(&dir)
+        .args(["data.csv", "y", "u", &rs.tau.to_string()])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(text.starts_with("y_d2 = "), "{text}");
+    assert_eq!(
+        text.lines()
+            .filter(|l| l.starts_with("run ") && l.contains("fit"))
+            .count(),
+        rs.runs.len(),
+        "{text}"
+    );
+    assert!(ctsid::Model::read(dir.join("identified.json").to_str().unwrap()).is_ok());
+    std::fs::remove_dir_all(&dir).ok();
+}
