@@ -156,6 +156,19 @@ pub fn check_degree(degree: usize) -> Result<()> {
 
 impl Basis {
     /// Enumerates the basis, refusing sizes beyond `limits` before allocating.
+    ///
+    /// ```
+    /// use ctsid::basis::{Basis, BasisLimits};
+    /// let names = ["y".to_string(), "y_d1".into(), "u".into()];
+    /// let b = Basis::new(&names, 2, BasisLimits::default())?;
+    /// // 1, three linear and six quadratic monomials.
+    /// assert_eq!(b.len(), 10);
+    /// assert!((0..b.len()).any(|j| b.name(j) == "y*u"));
+    /// // The paper's size: 11 variables at degree 6 is 12,376 candidates.
+    /// let eleven: Vec<String> = (0..11).map(|k| format!("z{k}")).collect();
+    /// assert_eq!(Basis::new(&eleven, 6, BasisLimits::default())?.len(), 12_376);
+    /// # Ok::<(), ctsid::Error>(())
+    /// ```
     pub fn new(names: &[String], degree: usize, limits: BasisLimits) -> Result<Basis> {
         let n = names.len();
         if n == 0 {

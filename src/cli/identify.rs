@@ -170,7 +170,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             );
         }
         if rep.candidates.iter().any(|c| c.simulation.is_some()) {
-            text += "The eta-rule chose on the free-run profiles (simulation on held-out runs); the derivative-domain validation profiles are shown beside them.\n\n";
+            text += &format!("The eta-rule chose on the free-run profiles (simulation on held-out runs; errors below {} count as equal, and the lowest order wins); the derivative-domain validation profiles are shown beside them.\n\n", ctsid::identify::FREE_RUN_RESOLUTION);
         }
         if rep
             .candidates

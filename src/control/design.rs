@@ -341,6 +341,18 @@ fn ackermann(a: &DMatrix<f64>, b: &DVector<f64>, poles: &[(f64, f64)]) -> Result
 }
 
 /// The design: linearisation at the setpoint, state feedback with integral action, observer.
+///
+/// ```
+/// use ctsid::control::{design, DesignOptions};
+/// let plant = ctsid::Model::from_json_str(r#"{"format": "ctsid-model/2", "inputs": ["u"],
+///   "outputs": [{"name": "y", "order": 1, "terms": [
+///     {"exponents": {"y": 1}, "coefficient": -1}, {"exponents": {"u": 1}, "coefficient": 2}]}]}"#, "lag")?;
+/// let d = design(&plant, &DesignOptions::new(0.5, 0.01))?;
+/// // Holding y = 0.5 needs u = 0.25; the closed loop is stable.
+/// assert!((d.u_star - 0.25).abs() < 1e-12);
+/// assert!(d.closed_loop.iter().all(|&(re, _)| re < 0.0));
+/// # Ok::<(), ctsid::Error>(())
+/// ```
 pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
     o.validate()?;
     let n = siso_order(model)?;

@@ -818,6 +818,19 @@ fn hot_windows(sim: &[f64], y: &[f64], m: usize, level: f64) -> Vec<(usize, usiz
 }
 
 /// Runs the workflow.
+///
+/// ```no_run
+/// use ctsid::discover::{discover, Options};
+/// use ctsid::{Model, RecordSet, Split};
+/// let nominal = Model::read("linear.json")?;
+/// let records = RecordSet::read_csv("emps.csv", &["q_m", "force_N"], Some("run"), 1e-3)?;
+/// let split = Split::from_lists(&records, "est0,est1,est2,est3", Some("est4,est5"), "pulses")?;
+/// let options = Options::new(split.train, split.validation.unwrap_or_default(), split.test);
+/// let found = discover(&records, &nominal, &options)?;
+/// println!("{}", found.text()); // verdict, evidence, before/after table
+/// found.augmented_model(&nominal)?.write("augmented.json")?;
+/// # Ok::<(), ctsid::Error>(())
+/// ```
 pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discovery> {
     let p = prepare(rs, nominal, o)?;
     let n_nom = p.free.len();

@@ -94,6 +94,17 @@ pub const AUTO_MIN_PAIRS: u64 = 50_000_000;
 
 /// Decides which engine runs a problem of `n_samples x n_candidates`, given the adapters present
 /// (best first, as [`probe`] returns them). Pure.
+///
+/// ```
+/// use ctsid::engine::select::{decide, probe, EngineChoice, EngineKind};
+/// // With no adapter, auto keeps the CPU engine and a GPU asked for is a clear error.
+/// let auto = decide(EngineChoice::Auto, 25_000, 12_376, &[])?;
+/// assert_eq!(auto.kind, EngineKind::Cpu);
+/// assert!(decide(EngineChoice::Gpu, 25_000, 12_376, &[]).is_err());
+/// // On this machine: whatever `probe` finds.
+/// println!("{}", decide(EngineChoice::Auto, 25_000, 12_376, &probe())?.reason);
+/// # Ok::<(), ctsid::Error>(())
+/// ```
 pub fn decide(
     choice: EngineChoice,
     n_samples: usize,

@@ -114,6 +114,32 @@ impl Identifier {
 
     /// Checks the settings against the record set and identifies. Training, validation and
     /// test runs come from `split` (see [`Split::from_lists`]).
+    ///
+    /// ```
+    /// use ctsid::records::{RecordSet, Run};
+    /// use ctsid::{Identifier, Split};
+    /// // Six runs of y' = -2 y + 3 u under different sines, integrated finely.
+    /// let run = |r: usize| {
+    ///     let (mut y, mut ys, mut us) = (0.0, Vec::new(), Vec::new());
+    ///     for k in 0..400 {
+    ///         let u = |t: f64| (t * (1.0 + 0.4 * r as f64)).sin() + 0.3 * r as f64;
+    ///         ys.push(y);
+    ///         us.push(u(k as f64 * 0.01));
+    ///         for j in 0..50 {
+    ///             y += 2e-4 * (-2.0 * y + 3.0 * u(k as f64 * 0.01 + j as f64 * 2e-4));
+    ///         }
+    ///     }
+    ///     Run { id: r.to_string(), channels: vec![ys, us], t0: 0.0, rows: (2..402).collect() }
+    /// };
+    /// let records = RecordSet::new(0.01, vec!["y".into(), "u".into()], (0..6).map(run).collect())?;
+    /// let split = Split::from_lists(&records, "0-3", Some("4"), "5")?;
+    /// let fit = Identifier::new().outputs(["y"]).inputs(["u"]).degree(1).fit(&records, &split)?;
+    /// let eq = &fit.model.outputs[0];
+    /// assert_eq!(eq.order, 1, "{}", fit.model);
+    /// let coef = |v: &str| eq.terms.iter().find(|t| t.exponents.get(v) == Some(&1)).map(|t| t.coefficient);
+    /// assert!((coef("y").unwrap() + 2.0).abs() < 0.02 && (coef("u").unwrap() - 3.0).abs() < 0.03, "{}", fit.model);
+    /// # Ok::<(), ctsid::Error>(())
+    /// ```
     pub fn fit(&self, records: &RecordSet, split: &Split) -> Result<Identification> {
         let s = self.settings();
         s.validate()?;

@@ -28,6 +28,13 @@ impl Profile {
         Profile(p)
     }
 
+    /// The profile with every value below `floor` raised to it: differences below a
+    /// resolution carry no information, and the eta-rule then takes the first (lowest) order
+    /// among equals instead of an order that is better by rounding.
+    pub fn floored(&self, floor: f64) -> Profile {
+        Profile(self.0.map(|v| if v < floor { floor } else { v }))
+    }
+
     pub fn p50(&self) -> f64 {
         self.0[0]
     }
@@ -48,7 +55,8 @@ impl Profile {
     }
 }
 
-/// The eta-rule: index of the chosen candidate among `profiles` (None if empty or all NaN).
+/// The eta-rule: index of the chosen candidate among `profiles` (None if empty or all NaN): the
+/// smallest p95 among candidates whose p100 is within `eta` times the best, the first of equals.
 pub fn eta_rule(profiles: &[Profile], eta: f64) -> Option<usize> {
     let best100 = profiles
         .iter()
@@ -84,6 +92,12 @@ mod tests {
             Some(1)
         );
         assert_eq!(eta_rule(&[], 1.2), None);
+        // Equals: the first (lowest order) wins.
+        let floored: Vec<Profile> = [p(1.5e-4, 1.6e-4), p(2.6e-5, 2.7e-5), p(2.5e-5, 2.6e-5)]
+            .iter()
+            .map(|q| q.floored(1e-3))
+            .collect();
+        assert_eq!(eta_rule(&floored, 1.2), Some(0));
     }
 
     #[test]

@@ -114,6 +114,23 @@ pub struct Split {
 impl Split {
     /// The split named by run lists as the CLI takes them (`"0-3"`, `"4,5"`, ids of the record
     /// set, ranges over numeric ids); refuses unknown runs, empty lists and overlaps.
+    ///
+    /// ```
+    /// use ctsid::records::{RecordSet, Run};
+    /// use ctsid::Split;
+    /// let run = |id: usize| Run {
+    ///     id: id.to_string(),
+    ///     channels: vec![(0..50).map(|k| ((k * (id + 1)) as f64).sin()).collect()],
+    ///     t0: 0.0,
+    ///     rows: (2..52).collect(),
+    /// };
+    /// let records = RecordSet::new(0.1, vec!["y".into()], (0..6).map(run).collect())?;
+    /// let split = Split::from_lists(&records, "0-3", Some("4"), "5")?;
+    /// assert_eq!((split.train, split.validation, split.test), (vec![0, 1, 2, 3], Some(vec![4]), vec![5]));
+    /// assert!(Split::from_lists(&records, "0-3", None, "3").is_err(), "run 3 in two lists");
+    /// assert!(Split::from_lists(&records, "0-3", None, "9").is_err(), "no run 9");
+    /// # Ok::<(), ctsid::Error>(())
+    /// ```
     pub fn from_lists(
         records: &crate::records::RecordSet,
         train: &str,

@@ -515,6 +515,26 @@ impl Model {
     }
 
     /// Parses and validates a model from JSON text; `path` only labels the error messages.
+    ///
+    /// ```
+    /// use ctsid::Model;
+    /// let text = r#"{"format": "ctsid-model/2", "inputs": ["u"], "outputs": [{"name": "y",
+    ///   "order": 1, "terms": [{"exponents": {"y": 1}, "coefficient": -2},
+    ///                         {"exponents": {"u": 1}, "coefficient": 3}]}]}"#;
+    /// let model = Model::from_json_str(text, "lag.json")?;
+    /// assert_eq!(model.to_string().trim(), "y_d1 = -2*y + 3*u");
+    /// // The compiled right-hand side: y' at y = 1, u = 1.
+    /// let mut dx = [0.0];
+    /// model.compile()?.rhs(&[1.0], &[1.0], &mut dx)?;
+    /// assert_eq!(dx[0], 1.0);
+    /// // Misspelt keys are refused, not read as defaults.
+    /// assert!(Model::from_json_str(&text.replace("exponents", "exponent"), "bad.json").is_err());
+    /// // Written whole (to a temporary file, then renamed) and read back the same.
+    /// let path = std::env::temp_dir().join("ctsid-doc-lag.json");
+    /// model.write(path.to_str().unwrap())?;
+    /// assert_eq!(Model::read(path.to_str().unwrap())?.to_string(), model.to_string());
+    /// # Ok::<(), ctsid::Error>(())
+    /// ```
     pub fn from_json_str(text: &str, path: &str) -> Result<Model> {
         let err = |message: String| Error::Model {
             path: path.into(),

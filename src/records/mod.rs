@@ -269,10 +269,19 @@ impl RecordSet {
             })
     }
 
-    /// Samples of one channel in one run.
+    /// Samples of one channel in run `run` (an index into `runs`).
     pub fn channel(&self, run: usize, name: &str) -> Result<&[f64]> {
         let c = self.channel_index(name)?;
-        Ok(&self.runs[run].channels[c])
+        let r = self.runs.get(run).ok_or_else(|| {
+            Error::param(
+                "run",
+                format!(
+                    "index {run} with {} runs in the record set",
+                    self.runs.len()
+                ),
+            )
+        })?;
+        Ok(&r.channels[c])
     }
 
     /// Refuses a channel that is constant over `runs`: as an output there is nothing to explain,
@@ -384,6 +393,20 @@ impl RecordSet {
     /// Loads `columns` of a CSV file whose runs are told apart by `run_column` (the whole file
     /// is one run without it), sampled every `tau` seconds. [`RecordSet::from_csv`] takes a
     /// time column instead.
+    ///
+    /// ```
+    /// use ctsid::RecordSet;
+    /// let path = std::env::temp_dir().join("ctsid-doc-read-csv.csv");
+    /// let rows: String = (0..40).map(|k| format!("{},{},{}\n", k / 20, k % 20, (k % 7) as f64)).collect();
+    /// std::fs::write(&path, format!("run,y,u\n{rows}"))?;
+    /// let records = RecordSet::read_csv(&path, &["y", "u"], Some("run"), 0.01)?;
+    /// assert_eq!((records.runs.len(), records.runs[1].id.as_str()), (2, "1"));
+    /// assert_eq!(records.channel(1, "u")?.len(), 20);
+    /// // A column the file lacks is a one-line error naming it.
+    /// let err = RecordSet::read_csv(&path, &["y", "w"], Some("run"), 0.01).unwrap_err();
+    /// assert!(err.to_string().contains("'w'"), "{err}");
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
     pub fn read_csv(
         path: impl AsRef<Path>,
         columns: &[&str],
