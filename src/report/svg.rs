@@ -191,8 +191,17 @@ fn x_window(p: &Panel) -> (f64, f64) {
         .unwrap_or_else(|| finite_range(p.series.iter().flat_map(|s| s.x.iter().copied())));
     if hi > lo {
         (lo, hi)
-    } else if lo.is_finite() {
-        (lo - 0.5, lo + 0.5)
+    } else {
+        widened(lo)
+    }
+}
+
+/// A window around a single value `v`: wide enough to be a window at v's magnitude (at 1.7e18,
+/// nanosecond time stamps, v +- 0.5 is v itself), (0, 1) for a non-finite v.
+fn widened(v: f64) -> (f64, f64) {
+    let pad = 0.5f64.max(v.abs() * 1e-9);
+    if v.is_finite() && v + pad > v - pad {
+        (v - pad, v + pad)
     } else {
         (0.0, 1.0)
     }
@@ -232,7 +241,7 @@ fn y_window(p: &Panel, f: &Frame) -> (f64, f64) {
         return (-1.0, 1.0);
     }
     if hi - lo < 1e-300 {
-        return (lo - 1.0, hi + 1.0);
+        return widened(lo);
     }
     let pad = 0.05 * (hi - lo);
     (lo - pad, hi + pad)
