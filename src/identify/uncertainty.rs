@@ -45,7 +45,7 @@ pub fn set_derivative_std_errors(
     let mut z = vec![0.0; d.z.n_vars()];
     for s in 0..n {
         let w = d.weights[s];
-        if !(w > 0.0) {
+        if w.is_nan() || w <= 0.0 {
             continue;
         }
         for (k, v) in z.iter_mut().enumerate() {
@@ -84,7 +84,7 @@ pub fn set_derivative_std_errors(
 
 /// Lag-one autocorrelation of `r` within runs, clamped to [0, 0.9999].
 fn lag_one(r: &[f64], run_lengths: &[usize], rss: f64) -> f64 {
-    if !(rss > 0.0) {
+    if rss.is_nan() || rss <= 0.0 {
         return 0.0;
     }
     let mut start = 0;
