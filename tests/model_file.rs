@@ -327,3 +327,52 @@ fn typos_huge_orders_and_foreign_files_are_named() {
     let text = format!("\u{feff}{}", siso().to_json_string().unwrap());
     Model::from_json_str(&text, "bom.json").unwrap();
 }
+
+/// A written model reads back to the last bit: serde_json's default float parser was one ulp off
+/// on -25.55346732693508 (the Python package's model and the CLI's file then differed).
+#[test]
+fn coefficients_round_trip_to_the_last_bit() {
+    let mut state = 0x2545_F491_4F6C_DD1Du64;
+    let mut values: Vec<f64> = vec![-25.55346732693508, 33.46124586447356, 1e-300, -7.5e300];
+    for _ in 0..2000 {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        // Finite doubles of every magnitude.
+        let v = f64::from_bits(state & !(0x7FFu64 << 52) | ((state % 2000 + 24) << 52));
+        values.push(v);
+    }
+    let terms: Vec<String> = values
+        .iter()
+        .enumerate()
+        .map(|(k, v)| {
+            let (a, b) = (1 + k % 64, k / 64);
+            format!(r#"{{"exponents": {{"y": {a}, "u": {b}}}, "coefficient": {v:e}}}"#)
+        })
+        .collect();
+    let text = format!(
+        r#"{{"format": "ctsid-model/2", "inputs": ["u"], "outputs": [{{"name": "y", "order": 1, "terms": [{}]}}]}}"#,
+        terms.join(",").replace(r#", "u": 0"#, "")
+    );
+    let m = ctsid::Model::from_json_str(&text, "t").unwrap();
+    let again = ctsid::Model::from_json_str(&m.to_json_string().unwrap(), "t").unwrap();
+    for (k, (a, b)) in m.outputs[0]
+        .terms
+        .iter()
+        .zip(&again.outputs[0].terms)
+        .enumerate()
+    {
+        assert_eq!(
+            a.coefficient.to_bits(),
+            values[k].to_bits(),
+            "parse of {:e}",
+            values[k]
+        );
+        assert_eq!(
+            a.coefficient.to_bits(),
+            b.coefficient.to_bits(),
+            "write and read of {:e}",
+            values[k]
+        );
+    }
+}

@@ -1,0 +1,374 @@
+"""ctsid: continuous-time sparse identification of machines from short, noisy records.
+
+From a few short runs of measured inputs ``u`` and outputs ``y`` sampled every ``tau`` seconds,
+ctsid finds models ``y^(n) = P(y, y', ..., y^(n-1), u)``: sparse polynomials plus named terms
+(``sign(y_d1)`` for Coulomb friction, ``abs(y_d1)*y_d1`` for drag, ...) that simulate from the
+inputs alone. It implements M. Alamir, "On continuous-time sparse identification of nonlinear
+polynomial systems", in Rust; this package is a thin layer over the same library the ``ctsid``
+command line uses, and reads and writes the same model files.
+
+Quick start::
+
+    import pandas as pd, ctsid
+    data = pd.read_csv("throttle.csv")          # columns run, t, u, y
+    model = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=0.003, run_column="run",
+                           train="0-24", validation="25-29", test="30-39", degree=3)
+    model.print()                               # y_d3 = ...
+    sims = model.simulate(data, tau=0.003, run_column="run")   # {run id: array (samples, outputs)}
+    model.save("throttle.json")                 # `ctsid simulate throttle.json ...` reads it
+
+Data are a pandas DataFrame (one run, or several told apart by ``run_column``), a list of
+DataFrames (one per run), a dict ``{run id: DataFrame}``, or the same with 2-D numpy arrays
+(samples x columns) and ``columns=[...]`` naming their columns. Errors in the data or settings
+raise :class:`CtsidError` (a ``ValueError``) with the one-line message the command line
+prints. Long calls release the GIL; progress goes to the ``logging`` logger ``"ctsid"`` at INFO.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _ctsid
+from ._ctsid import CtsidError
+
+__all__ = [
+    "CtsidError",
+    "Model",
+    "Discovery",
+    "identify",
+    "simulate",
+    "derive",
+    "discover",
+    "load",
+    "throttle_dataset",
+]
+
+RunList = Union[str, Sequence[Any], None]
+
+
+def _frames(data: Any, run_column: Optional[str], columns: Optional[Sequence[str]]):
+    """(run id, table) pairs, each table a mapping column name -> 1-D float array."""
+    if isinstance(data, Mapping) and not _is_frame(data):
+        return [(str(k), _table(v, columns)) for k, v in data.items()]
+    if isinstance(data, (list, tuple)):
+        if len(data) and all(_is_frame(d) or isinstance(d, np.ndarray) for d in data):
+            return [(str(i), _table(d, columns)) for i, d in enumerate(data)]
+        raise ValueError(
+            "data: a list must hold one DataFrame or 2-D array per run; "
+            "for one run give the DataFrame or array itself"
+        )
+    table = _table(data, columns)
+    if run_column is None:
+        return [("0", table)]
+    if run_column not in table:
+        raise CtsidError(f"run column '{run_column}' not found (columns: {', '.join(table)})")
+    ids = [_run_id(v) for v in np.asarray(table[run_column]).tolist()]
+    rows: Dict[str, List[int]] = {}
+    for i, key in enumerate(ids):
+        rows.setdefault(key, []).append(i)
+    return [
+        (key, {c: np.asarray(v)[idx] for c, v in table.items() if c != run_column})
+        for key, idx in rows.items()
+    ]
+
+
+def _run_id(v: Any) -> str:
+    if isinstance(v, (float, np.floating)) and float(v).is_integer():
+        return str(int(v))
+    return str(v)
+
+
+def _is_frame(d: Any) -> bool:
+    return hasattr(d, "columns") and hasattr(d, "to_numpy")
+
+
+def _table(d: Any, columns: Optional[Sequence[str]]) -> Dict[str, np.ndarray]:
+    """A DataFrame or 2-D array as column name -> 1-D array."""
+    if _is_frame(d):
+        return {str(c): d[c].to_numpy() for c in d.columns}
+    a = np.asarray(d)
+    if a.ndim != 2:
+        raise ValueError(
+            f"data: a {a.ndim}-D array; give a 2-D array (samples x columns) with "
+            "columns=[...] naming its columns, or a DataFrame"
+        )
+    if columns is None:
+        raise ValueError("data: a numpy array needs columns=[...] naming its columns")
+    if len(columns) != a.shape[1]:
+        raise ValueError(
+            f"data: {a.shape[1]} columns in the array but {len(columns)} names in columns=[...]"
+        )
+    return {str(c): a[:, k] for k, c in enumerate(columns)}
+
+
+def _records(
+    data: Any,
+    names: Sequence[str],
+    run_column: Optional[str],
+    columns: Optional[Sequence[str]],
+):
+    """The (names, runs) the extension takes: the named channels of every run as float lists."""
+    runs = []
+    for rid, table in _frames(data, run_column, columns):
+        missing = [n for n in names if n not in table]
+        if missing:
+            raise CtsidError(
+                f"column '{missing[0]}' not found in run {rid} (columns: {', '.join(table)})"
+            )
+        cols = []
+        for n in names:
+            v = np.asarray(table[n])
+            if v.dtype.kind not in "biuf":
+                raise CtsidError(f"run {rid}, column '{n}': values are not numbers ({v.dtype})")
+            cols.append(v.astype(float).tolist())
+        runs.append((rid, cols))
+    return list(names), runs
+
+
+def _run_list(v: RunList) -> Optional[str]:
+    if v is None:
+        return None
+    if isinstance(v, str):
+        return v
+    return ",".join(_run_id(x) for x in v)
+
+
+def _tau(tau: Optional[float], model: Optional["Model"] = None) -> float:
+    if tau is not None:
+        return float(tau)
+    if model is not None and model.tau is not None:
+        return model.tau
+    raise ValueError("tau: give the sampling period in seconds")
+
+
+class Model:
+    """An identified (or hand-written) model: equations per output, simulation, the model file.
+
+    ``str(model)`` and :meth:`print` show the equations; :meth:`save` writes the same
+    ``ctsid-model/2`` file as the command line, :func:`load` reads one.
+    """
+
+    def __init__(self, inner: "_ctsid.Model", summary: Optional[dict] = None):
+        self._m = inner
+        #: What the identification reported (orders, test NRMSE per output, engine,
+        #: refinement), for a model from :func:`identify`; else ``None``.
+        self.summary = summary
+
+    @staticmethod
+    def load(path: str) -> "Model":
+        """Reads a model file."""
+        return Model(_ctsid.Model.load(str(path)))
+
+    @staticmethod
+    def from_json(text: str) -> "Model":
+        """The model of a JSON text (``ctsid-model/2``), checked strictly."""
+        return Model(_ctsid.Model.from_json(text))
+
+    def to_json(self) -> str:
+        return self._m.to_json()
+
+    def save(self, path: str) -> None:
+        """Writes the model file (whole or not at all)."""
+        self._m.save(str(path))
+
+    def equations(self) -> List[str]:
+        """One equation per output, ``y_d2 = ...``."""
+        return self._m.equations()
+
+    def print(self) -> None:
+        print(str(self))
+
+    def coefficients(self) -> List[dict]:
+        """Every term: output, term, coefficient, standard error (``None`` where not estimated)."""
+        return [
+            {"output": o, "term": t, "coefficient": c, "std_error": s}
+            for o, t, c, s in self._m.coefficients()
+        ]
+
+    @property
+    def outputs(self) -> List[str]:
+        return self._m.outputs
+
+    @property
+    def inputs(self) -> List[str]:
+        return self._m.inputs
+
+    @property
+    def orders(self) -> List[int]:
+        return self._m.orders
+
+    @property
+    def tau(self) -> Optional[float]:
+        return self._m.tau
+
+    def _run(self, data, tau, run_column, columns):
+        names, runs = _records(data, self.outputs + self.inputs, run_column, columns)
+        return self._m.simulate(_tau(tau, self), names, runs)
+
+    def simulate(
+        self,
+        data: Any,
+        tau: Optional[float] = None,
+        run_column: Optional[str] = None,
+        columns: Optional[Sequence[str]] = None,
+    ) -> Union[np.ndarray, Dict[str, np.ndarray]]:
+        """Free runs from the measured inputs, each from the initial state fitted on the run's
+        first 200 samples (the convention of every score ctsid prints).
+
+        Returns an array (samples x outputs) for one run, else ``{run id: array}``. ``tau``
+        defaults to the model's own.
+        """
+        out = {rid: np.asarray(sim).T for rid, sim, _, _ in self._run(data, tau, run_column, columns)}
+        return next(iter(out.values())) if len(out) == 1 else out
+
+    def score(
+        self,
+        data: Any,
+        tau: Optional[float] = None,
+        run_column: Optional[str] = None,
+        columns: Optional[Sequence[str]] = None,
+    ) -> List[dict]:
+        """Per run and output: RMS, NRMSE (RMS over the measured output's standard deviation)
+        and fit in percent, ``100 (1 - NRMSE)``, as ``ctsid simulate`` prints them."""
+        rows = []
+        for rid, _, rms, nrmse in self._run(data, tau, run_column, columns):
+            for o, r, e in zip(self.outputs, rms, nrmse):
+                rows.append(
+                    {"run": rid, "output": o, "rms": r, "nrmse": e, "fit_percent": 100.0 * (1.0 - e)}
+                )
+        return rows
+
+    def __str__(self) -> str:
+        return str(self._m)
+
+    def __repr__(self) -> str:
+        return repr(self._m)
+
+
+def identify(
+    data: Any,
+    outputs: Sequence[str],
+    inputs: Sequence[str] = (),
+    tau: Optional[float] = None,
+    run_column: Optional[str] = None,
+    columns: Optional[Sequence[str]] = None,
+    train: RunList = None,
+    validation: RunList = None,
+    test: RunList = None,
+    degree: int = 3,
+    order: Union[int, Sequence[int], None] = None,
+    orders: Optional[Sequence[int]] = None,
+    terms: Sequence[str] = (),
+    engine: str = "auto",
+    refine: bool = True,
+) -> Model:
+    """Identifies a model, with the command line's defaults (``ctsid identify``).
+
+    Runs are named by lists as the command line takes them (``"0-3"``, ``"a,b"``) or as Python
+    lists of run ids; training defaults to every run not named for validation or test.
+    ``order`` fixes the order (an int for every output, or one per output); otherwise each
+    output's order is searched over ``orders`` (default 1 to 4) by the eta-rule. ``terms`` adds
+    named terms to the dictionary (``"sign(y_d1)"``). ``engine`` is ``"auto"``, ``"cpu"`` or
+    ``"gpu"``. The returned model's ``summary`` holds the orders and test NRMSE.
+    """
+    if tau is None:
+        raise ValueError("tau: give the sampling period in seconds")
+    outputs, inputs = list(outputs), list(inputs)
+    names, runs = _records(data, outputs + inputs, run_column, columns)
+    if isinstance(order, int):
+        order = [order] * len(outputs)
+    inner, summary = _ctsid.identify(
+        float(tau),
+        names,
+        runs,
+        outputs,
+        inputs,
+        int(degree),
+        train=_run_list(train),
+        validation=_run_list(validation),
+        test=_run_list(test),
+        order=None if order is None else [int(o) for o in order],
+        orders=None if orders is None else [int(o) for o in orders],
+        terms=list(terms),
+        engine=str(engine),
+        refine=bool(refine),
+    )
+    return Model(inner, json.loads(summary))
+
+
+def simulate(model: Model, data: Any, **kwargs: Any):
+    """``model.simulate(data, ...)``."""
+    return model.simulate(data, **kwargs)
+
+
+def load(path: str) -> Model:
+    """Reads a model file written by ctsid (Python or command line)."""
+    return Model.load(path)
+
+
+def derive(y: Any, tau: float, order: int) -> Tuple[np.ndarray, np.ndarray]:
+    """Derivatives y, y', ..., y^(order) of one uniformly sampled signal by the self-tuning
+    smoother: ``(values, sigmas)``, each an array (order + 1) x samples; row 0 is the smoothed
+    signal, ``sigmas`` the per-sample standard deviations."""
+    a = np.asarray(y, dtype=float)
+    if a.ndim != 1:
+        raise ValueError(f"y: a {a.ndim}-D array; give one signal as a 1-D array")
+    values, sigmas = _ctsid.derive(a.tolist(), float(tau), int(order))
+    return np.asarray(values), np.asarray(sigmas)
+
+
+class Discovery:
+    """What :func:`discover` found: ``verdict`` ("added", "nothing", ...), ``text`` (the
+    evidence and the before/after table, as the command line prints it), ``model`` (the
+    augmented model), ``nrmse_before`` / ``nrmse_after`` on the test runs."""
+
+    def __init__(self, verdict: str, text: str, model: Model, before: float, after: float):
+        self.verdict, self.text, self.model = verdict, text, model
+        self.nrmse_before, self.nrmse_after = before, after
+
+    def __str__(self) -> str:
+        return self.text
+
+
+def discover(
+    data: Any,
+    nominal: Model,
+    tau: Optional[float] = None,
+    run_column: Optional[str] = None,
+    columns: Optional[Sequence[str]] = None,
+    train: RunList = None,
+    validation: RunList = None,
+    test: RunList = None,
+    seed: int = 0,
+) -> Discovery:
+    """Compares a nominal model with the data, names the effect it misses (friction, drag,
+    stiffness, ...), adds it and refits (``ctsid discover``)."""
+    names, runs = _records(data, nominal.outputs + nominal.inputs, run_column, columns)
+    verdict, text, inner, before, after = _ctsid.discover(
+        _tau(tau, nominal),
+        names,
+        runs,
+        nominal._m,
+        train=_run_list(train),
+        validation=_run_list(validation),
+        test=_run_list(test),
+        seed=int(seed),
+    )
+    return Discovery(verdict, text, Model(inner), before, after)
+
+
+def throttle_dataset(
+    path: str,
+    runs: int = 100,
+    samples: int = 1000,
+    tau: float = 0.003,
+    noise: float = 0.03,
+    seed: int = 1,
+    truth: bool = False,
+) -> None:
+    """Writes the source paper's throttle experiment as CSV (``run,t,u,y``; with ``truth``
+    also ``y_true`` and its exact derivatives): the data of ``ctsid demo etc``."""
+    _ctsid.throttle_dataset(str(path), runs, samples, tau, noise, seed, truth)

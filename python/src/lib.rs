@@ -1,0 +1,347 @@
+//! Python bindings of ctsid: a thin layer over the library's entry points, used by the Python
+//! package `ctsid` (`python/ctsid/__init__.py`), which turns numpy arrays and pandas frames into
+//! the plain lists these functions take and wraps what they return.
+//!
+//! Conventions: records cross as `(tau, names, runs)`, each run `(id, columns)` with one list of
+//! floats per name; every error of the library is raised as `CtsidError` (a `ValueError`) with
+//! the one-line message the command line prints; long calls release the GIL; progress lines go
+//! to the `logging` logger "ctsid" at INFO level, never to standard output.
+
+use ctsid::discover::{discover as discover_rs, Options};
+use ctsid::engine::select::EngineChoice;
+use ctsid::identify::split::{parse_list_at_most, resolve};
+use ctsid::identify::{identify as identify_rs, Orders, Settings};
+use ctsid::records::{RecordSet, Run};
+use ctsid::Split;
+use pyo3::create_exception;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+
+create_exception!(
+    _ctsid,
+    CtsidError,
+    PyValueError,
+    "An error from ctsid: bad data or settings, with the one-line message the command line prints."
+);
+
+fn err(e: ctsid::Error) -> PyErr {
+    CtsidError::new_err(e.to_string())
+}
+
+/// A run as it crosses from Python: its id and one column of samples per channel name.
+type PyRun = (String, Vec<Vec<f64>>);
+
+/// The record set of `runs`, checked as the CSV reader checks a file (non-finite values, too few
+/// samples, columns of different lengths). Sample `k` of a run is "row k" in messages.
+fn record_set(tau: f64, names: Vec<String>, runs: Vec<PyRun>) -> ctsid::Result<RecordSet> {
+    let runs = runs
+        .into_iter()
+        .map(|(id, channels)| {
+            let n = channels.first().map_or(0, Vec::len);
+            Run {
+                id,
+                channels,
+                t0: 0.0,
+                rows: (0..n).collect(),
+            }
+        })
+        .collect();
+    RecordSet::new(tau, names, runs)
+}
+
+/// Train, validation and test runs from the run lists the CLI takes (`"0-3"`, `"a,b"`): training
+/// defaults to every run not named elsewhere, test to none.
+fn split(
+    rs: &RecordSet,
+    train: Option<&str>,
+    validation: Option<&str>,
+    test: Option<&str>,
+) -> ctsid::Result<Split> {
+    let ids: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
+    let list = |text: &str, what: &str| -> ctsid::Result<Vec<usize>> {
+        resolve(
+            &parse_list_at_most(text, what, ids.len().max(1))?,
+            &ids,
+            what,
+        )
+    };
+    let validation = validation.map(|v| list(v, "validation")).transpose()?;
+    let test = test
+        .map(|t| list(t, "test"))
+        .transpose()?
+        .unwrap_or_default();
+    let train = match train {
+        Some(t) => list(t, "train")?,
+        None => (0..ids.len())
+            .filter(|r| !test.contains(r) && !validation.iter().flatten().any(|v| v == r))
+            .collect(),
+    };
+    Split::new(train, validation, test, &ids)
+}
+
+/// Progress lines of the long stages, to the `logging` logger "ctsid" (a plain function: the
+/// library's callback is a `fn`, so it cannot hold a Python object).
+fn log_progress(line: &str) {
+    Python::attach(|py| {
+        let logged = py
+            .import("logging")
+            .and_then(|m| m.call_method1("getLogger", ("ctsid",)))
+            .and_then(|l| l.call_method1("info", (line,)));
+        if let Err(e) = logged {
+            e.restore(py);
+        }
+    });
+}
+
+/// A model file: polynomial and named terms per output, as `ctsid` writes and reads it.
+#[pyclass(name = "Model", module = "ctsid._ctsid", frozen, skip_from_py_object)]
+#[derive(Clone)]
+pub struct PyModel {
+    inner: ctsid::Model,
+}
+
+#[pymethods]
+impl PyModel {
+    /// The model of a JSON text (`ctsid-model/2`), checked strictly.
+    #[staticmethod]
+    fn from_json(text: &str) -> PyResult<PyModel> {
+        let inner = ctsid::Model::from_json_str(text, "<json>").map_err(err)?;
+        Ok(PyModel { inner })
+    }
+
+    /// Reads a model file.
+    #[staticmethod]
+    fn load(path: &str) -> PyResult<PyModel> {
+        let inner = ctsid::Model::read(path).map_err(err)?;
+        Ok(PyModel { inner })
+    }
+
+    /// The model as the JSON text of its file.
+    fn to_json(&self) -> PyResult<String> {
+        self.inner.to_json_string().map_err(err)
+    }
+
+    /// Writes the model file (whole or not at all).
+    fn save(&self, path: &str) -> PyResult<()> {
+        self.inner.write(path).map_err(err)
+    }
+
+    /// One equation per output, `y_d2 = ...`.
+    fn equations(&self) -> Vec<String> {
+        self.inner.outputs.iter().map(|o| o.to_string()).collect()
+    }
+
+    #[getter]
+    fn outputs(&self) -> Vec<String> {
+        self.inner.outputs.iter().map(|o| o.name.clone()).collect()
+    }
+
+    #[getter]
+    fn inputs(&self) -> Vec<String> {
+        self.inner.inputs.clone()
+    }
+
+    #[getter]
+    fn orders(&self) -> Vec<usize> {
+        self.inner.outputs.iter().map(|o| o.order).collect()
+    }
+
+    #[getter]
+    fn tau(&self) -> Option<f64> {
+        self.inner.tau
+    }
+
+    /// Per term: (output, term, coefficient, standard error or None).
+    fn coefficients(&self) -> Vec<(String, String, f64, Option<f64>)> {
+        let mut out = Vec::new();
+        for o in &self.inner.outputs {
+            for t in &o.terms {
+                let name = t.expression.clone().unwrap_or_else(|| t.monomial());
+                out.push((o.name.clone(), name, t.coefficient, t.std_error));
+            }
+        }
+        out
+    }
+
+    /// Free runs on every run of the records, each from the initial state fitted on its first
+    /// samples: per run (id, simulated outputs, RMS per output, NRMSE per output).
+    fn simulate(
+        &self,
+        py: Python<'_>,
+        tau: f64,
+        names: Vec<String>,
+        runs: Vec<PyRun>,
+    ) -> PyResult<Vec<(String, Vec<Vec<f64>>, Vec<f64>, Vec<f64>)>> {
+        let sim = py
+            .detach(|| {
+                let rs = record_set(tau, names, runs)?;
+                self.inner.simulate(&rs)
+            })
+            .map_err(err)?;
+        Ok(sim
+            .runs
+            .into_iter()
+            .map(|r| (r.id, r.simulated, r.rms, r.nrmse))
+            .collect())
+    }
+
+    fn __str__(&self) -> String {
+        self.inner.to_string()
+    }
+
+    fn __repr__(&self) -> String {
+        format!("<ctsid.Model {}>", self.equations().join("; "))
+    }
+}
+
+/// Identifies a model: the library's `Identifier` with the CLI's defaults. Returns the model
+/// and a JSON summary (orders, test NRMSE per output, engine, refinement).
+#[pyfunction]
+#[pyo3(signature = (tau, names, runs, outputs, inputs, degree, train=None, validation=None,
+    test=None, order=None, orders=None, terms=Vec::new(), engine="auto", refine=true, eta=None))]
+#[allow(clippy::too_many_arguments)]
+fn identify(
+    py: Python<'_>,
+    tau: f64,
+    names: Vec<String>,
+    runs: Vec<PyRun>,
+    outputs: Vec<String>,
+    inputs: Vec<String>,
+    degree: usize,
+    train: Option<String>,
+    validation: Option<String>,
+    test: Option<String>,
+    order: Option<Vec<usize>>,
+    orders: Option<Vec<usize>>,
+    terms: Vec<String>,
+    engine: &str,
+    refine: bool,
+    eta: Option<f64>,
+) -> PyResult<(PyModel, String)> {
+    let mut s = Settings::new(outputs, inputs, degree);
+    if let Some(o) = order {
+        s.orders = Orders::Fixed(o);
+    } else if let Some(o) = orders {
+        s.orders = Orders::Search(o);
+    }
+    if let Some(e) = eta {
+        s.eta = e;
+    }
+    s.engine = engine.parse::<EngineChoice>().map_err(err)?;
+    s.terms = terms;
+    s.refine = refine;
+    s.progress = Some(log_progress);
+    let id = py
+        .detach(|| {
+            s.validate()?;
+            let rs = record_set(tau, names, runs)?;
+            let sp = split(
+                &rs,
+                train.as_deref(),
+                validation.as_deref(),
+                test.as_deref(),
+            )?;
+            identify_rs(&rs, &sp, &s)
+        })
+        .map_err(err)?;
+    let summary = serde_json::json!({
+        "orders": id.model.outputs.iter().map(|o| o.order).collect::<Vec<_>>(),
+        "test_nrmse": id.test_nrmse(),
+        "engines": id.outputs.iter().map(|o| o.engine.clone()).collect::<Vec<_>>(),
+        "refinement": id.refinement.as_ref().map(|r| r.message.clone()),
+    });
+    Ok((PyModel { inner: id.model }, summary.to_string()))
+}
+
+/// Self-tuning derivatives of one uniformly sampled signal: (values, sigmas), each a list of
+/// `order + 1` lists (k = 0 is the smoothed signal).
+#[pyfunction]
+fn derive(
+    py: Python<'_>,
+    y: Vec<f64>,
+    tau: f64,
+    order: usize,
+) -> PyResult<(Vec<Vec<f64>>, Vec<Vec<f64>>)> {
+    let d = py
+        .detach(|| ctsid::derivatives::differentiate(&y, tau, order))
+        .map_err(err)?;
+    Ok((d.values, d.sigma))
+}
+
+/// Names what `nominal` misses on the records: (verdict, report text, augmented model,
+/// test NRMSE before, after).
+#[pyfunction]
+#[pyo3(signature = (tau, names, runs, nominal, train=None, validation=None, test=None, seed=0))]
+#[allow(clippy::too_many_arguments)]
+fn discover(
+    py: Python<'_>,
+    tau: f64,
+    names: Vec<String>,
+    runs: Vec<PyRun>,
+    nominal: &PyModel,
+    train: Option<String>,
+    validation: Option<String>,
+    test: Option<String>,
+    seed: u64,
+) -> PyResult<(String, String, PyModel, f64, f64)> {
+    let nominal = &nominal.inner;
+    let (d, augmented) = py
+        .detach(|| {
+            let rs = record_set(tau, names, runs)?;
+            let sp = split(
+                &rs,
+                train.as_deref(),
+                validation.as_deref(),
+                test.as_deref(),
+            )?;
+            let mut o = Options::new(sp.train, sp.validation.unwrap_or_default(), sp.test);
+            o.seed = seed;
+            let d = discover_rs(&rs, nominal, &o)?;
+            let augmented = d.augmented_model(nominal)?;
+            Ok::<_, ctsid::Error>((d, augmented))
+        })
+        .map_err(err)?;
+    Ok((
+        d.verdict.clone(),
+        d.text(),
+        PyModel { inner: augmented },
+        d.nrmse_before,
+        d.nrmse_after,
+    ))
+}
+
+/// Writes the source paper's throttle experiment as CSV (`run,t,u,y` and, with `truth`, the
+/// noise-free output and its derivatives): `runs` runs of `samples` samples every `tau` s,
+/// noise `noise` (the paper's eta), from `seed`.
+#[pyfunction]
+#[pyo3(signature = (path, runs=100, samples=1000, tau=0.003, noise=0.03, seed=1, truth=false))]
+#[allow(clippy::too_many_arguments)]
+fn throttle_dataset(
+    py: Python<'_>,
+    path: &str,
+    runs: usize,
+    samples: usize,
+    tau: f64,
+    noise: f64,
+    seed: u64,
+    truth: bool,
+) -> PyResult<()> {
+    use ctsid::plants::{dataset, write_csv, Plant, ThrottlePreset};
+    py.detach(|| {
+        let plant = Plant::throttle(ThrottlePreset::Paper { patm: 0.0 });
+        let data = dataset(&plant, runs, samples, tau, noise, seed)?;
+        write_csv(&plant, &data, path, truth)
+    })
+    .map_err(err)
+}
+
+#[pymodule]
+fn _ctsid(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("CtsidError", m.py().get_type::<CtsidError>())?;
+    m.add_class::<PyModel>()?;
+    m.add_function(wrap_pyfunction!(identify, m)?)?;
+    m.add_function(wrap_pyfunction!(derive, m)?)?;
+    m.add_function(wrap_pyfunction!(discover, m)?)?;
+    m.add_function(wrap_pyfunction!(throttle_dataset, m)?)?;
+    Ok(())
+}

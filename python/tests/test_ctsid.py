@@ -1,0 +1,150 @@
+"""The Python package against the command line and against truth.
+
+Needs the package installed (`pip install ./python`) and, for the comparisons with the command
+line, its binary: `CTSID_BIN`, else `target/release/ctsid` of this repository (built by `cargo
+test --release`); without it those tests skip with a notice.
+"""
+
+import os
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import ctsid
+
+ROOT = Path(__file__).resolve().parents[2]
+TAU = 0.003
+
+
+def cli():
+    exe = os.environ.get("CTSID_BIN", str(ROOT / "target" / "release" / "ctsid"))
+    if not Path(exe).is_file():
+        pytest.skip(f"NOTICE: no ctsid binary at {exe} (build it with cargo build --release)")
+    return exe
+
+
+def run_cli(*args):
+    out = subprocess.run([cli(), *args], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
+@pytest.fixture(scope="module")
+def throttle(tmp_path_factory):
+    """Twelve runs of the paper's throttle at 3 % noise, written as the CLI reads it."""
+    path = tmp_path_factory.mktemp("throttle") / "throttle.csv"
+    ctsid.throttle_dataset(str(path), runs=12, samples=1000, tau=TAU, noise=0.03, seed=7)
+    return path
+
+
+SETTINGS = dict(train="0-7", validation="8-9", test="10-11", degree=2, order=3)
+
+
+@pytest.fixture(scope="module")
+def fitted(throttle):
+    data = pd.read_csv(throttle)
+    model = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", **SETTINGS)
+    return data, model
+
+
+def test_python_and_cli_identify_the_same_model(throttle, fitted, tmp_path):
+    _, model = fitted
+    out = tmp_path / "cli.json"
+    run_cli(
+        "identify", str(throttle), "--output", "y", "--input", "u", "--run-column", "run",
+        "--tau", str(TAU), "--train", "0-7", "--validation", "8-9", "--test", "10-11",
+        "--degree", "2", "--order", "3", "--quiet", "-o", str(out),
+    )
+    from_cli = ctsid.load(str(out))
+    assert from_cli.equations() == model.equations()
+    a = [(c["term"], c["coefficient"]) for c in model.coefficients()]
+    b = [(c["term"], c["coefficient"]) for c in from_cli.coefficients()]
+    assert a == b
+
+
+def test_identify_reports_its_fit_and_simulates_every_run(fitted):
+    data, model = fitted
+    assert model.orders == [3]
+    nrmse = model.summary["test_nrmse"][0]
+    assert 0 < nrmse < 1, model.summary
+    assert all(c["std_error"] is not None for c in model.coefficients())
+    sims = model.simulate(data, run_column="run")
+    assert set(sims) == {str(r) for r in range(12)}
+    assert sims["10"].shape == (1000, 1)
+
+
+def test_a_model_round_trips_between_python_and_the_cli(throttle, fitted, tmp_path):
+    data, model = fitted
+    path = tmp_path / "py.json"
+    model.save(str(path))
+    # The CLI reads what Python wrote and scores it as Python does.
+    printed = run_cli("simulate", str(path), str(throttle), "--run-column", "run", "--tau", str(TAU))
+    rows = {l.split()[0]: float(l.split()[2]) for l in printed.splitlines()[1:] if l.split()[1] == "y"}
+    scores = {s["run"]: s["rms"] for s in model.score(data, run_column="run")}
+    for run, rms in scores.items():
+        assert rms == pytest.approx(rows[run], rel=1e-6), run
+    # And `show` prints the same equations.
+    assert run_cli("show", str(path)).splitlines()[0] == model.equations()[0]
+    again = ctsid.load(str(path))
+    assert again.to_json() == model.to_json()
+
+
+def test_derive_estimates_derivatives_with_sigmas():
+    t = np.arange(800) * 0.01
+    y = np.sin(2 * t) + 1e-3 * np.random.default_rng(0).standard_normal(800)
+    values, sigmas = ctsid.derive(y, 0.01, 2)
+    assert values.shape == sigmas.shape == (3, 800)
+    inner = slice(100, 700)
+    assert np.max(np.abs(values[2][inner] + 4 * np.sin(2 * t[inner]))) < 0.2
+    assert np.all(sigmas[2][inner] > 0)
+
+
+def test_frames_arrays_and_lists_of_runs_are_the_same_data(fitted):
+    data, model = fitted
+    one = data[data.run == 10]
+    as_frame = model.simulate(one)
+    as_array = model.simulate(one[["y", "u"]].to_numpy(), columns=["y", "u"])
+    as_list = model.simulate([one, one])
+    np.testing.assert_array_equal(as_frame, as_array)
+    np.testing.assert_array_equal(as_list["1"], as_frame)
+
+
+def test_discover_runs_and_returns_a_model_that_simulates(throttle, fitted):
+    data, model = fitted
+    found = ctsid.discover(data, model, tau=TAU, run_column="run", **{k: SETTINGS[k] for k in ("train", "validation", "test")})
+    assert found.verdict in found.text
+    assert found.model.simulate(data[data.run == 11]).shape == (1000, 1)
+
+
+@pytest.mark.parametrize(
+    "make, needle",
+    [
+        (lambda d: d.assign(y=d.y.where(d.index != 5, np.nan)), "not a finite number"),
+        (lambda d: d.drop(columns=["u"]), "column 'u' not found"),
+        (lambda d: d.assign(u=0.5), "constant"),
+    ],
+)
+def test_bad_data_raise_the_cli_one_line_messages(fitted, make, needle):
+    data, _ = fitted
+    with pytest.raises(ctsid.CtsidError, match=needle) as e:
+        ctsid.identify(make(data), outputs=["y"], inputs=["u"], tau=TAU, run_column="run", degree=1)
+    assert "\n" not in str(e.value)
+
+
+def test_wrong_shapes_and_settings_raise_clear_errors(fitted):
+    data, model = fitted
+    with pytest.raises(ValueError, match="1-D array"):
+        ctsid.identify(np.zeros(100), outputs=["y"], tau=TAU)
+    with pytest.raises(ValueError, match="columns"):
+        model.simulate(np.zeros((100, 3)), columns=["y", "u"])
+    with pytest.raises(ValueError, match="1-D"):
+        ctsid.derive(np.zeros((10, 2)), 0.01, 1)
+    with pytest.raises(ctsid.CtsidError, match="engine"):
+        ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", engine="tpu")
+    with pytest.raises(ctsid.CtsidError, match="99"):
+        ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", test="99")
+    with pytest.raises(ctsid.CtsidError):
+        ctsid.Model.from_json('{"format": "ctsid-model/2", "inputs": [], "outputs": [{"name": "y", "order": 1, "terms": [{"exponent": {"y": 1}, "coefficient": 1}]}]}')
