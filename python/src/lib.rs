@@ -31,6 +31,12 @@ fn err(e: ctsid::Error) -> PyErr {
 /// A run as it crosses from Python: its id and one column of samples per channel name.
 type PyRun = (String, Vec<Vec<f64>>);
 
+/// One simulated run back to Python: id, simulated outputs, RMS and NRMSE per output.
+type SimulatedRun = (String, Vec<Vec<f64>>, Vec<f64>, Vec<f64>);
+
+/// Per derivative order k, one value per sample.
+type Rows = Vec<Vec<f64>>;
+
 /// The record set of `runs`, checked as the CSV reader checks a file (non-finite values, too few
 /// samples, columns of different lengths). Sample `k` of a run is "row k" in messages.
 fn record_set(tau: f64, names: Vec<String>, runs: Vec<PyRun>) -> ctsid::Result<RecordSet> {
@@ -171,7 +177,7 @@ impl PyModel {
         tau: f64,
         names: Vec<String>,
         runs: Vec<PyRun>,
-    ) -> PyResult<Vec<(String, Vec<Vec<f64>>, Vec<f64>, Vec<f64>)>> {
+    ) -> PyResult<Vec<SimulatedRun>> {
         let sim = py
             .detach(|| {
                 let rs = record_set(tau, names, runs)?;
@@ -256,12 +262,7 @@ fn identify(
 /// Self-tuning derivatives of one uniformly sampled signal: (values, sigmas), each a list of
 /// `order + 1` lists (k = 0 is the smoothed signal).
 #[pyfunction]
-fn derive(
-    py: Python<'_>,
-    y: Vec<f64>,
-    tau: f64,
-    order: usize,
-) -> PyResult<(Vec<Vec<f64>>, Vec<Vec<f64>>)> {
+fn derive(py: Python<'_>, y: Vec<f64>, tau: f64, order: usize) -> PyResult<(Rows, Rows)> {
     let d = py
         .detach(|| ctsid::derivatives::differentiate(&y, tau, order))
         .map_err(err)?;
