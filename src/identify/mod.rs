@@ -834,16 +834,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
                             say(format!("output '{}' order {}: free-run p50/p95/p100 = {}/{}/{} on the gate runs", settings.outputs[i], c.order, num4(p.p50()), num4(p.p95()), num4(p.p100())));
                         }
                     }
-                    // Free-run errors below FREE_RUN_RESOLUTION are all "exact": on noise-free
-                    // data a first-order plant got order 3 (p95 2.64e-5 against order 1's
-                    // 1.5e-4), with two poles at -7,500 rad/s that change nothing.
-                    let profiles: Vec<Profile> = list
-                        .iter()
-                        .map(|c| {
-                            c.simulation
-                                .map_or(c.validation, |p| p.floored(FREE_RUN_RESOLUTION))
-                        })
-                        .collect();
+                    let profiles: Vec<Profile> = list.iter().map(Candidate::chosen_on).collect();
                     let pick = eta_rule(&profiles, settings.eta).ok_or_else(|| {
                         Error::Numerical(format!(
                             "no candidate order of '{}' could be scored",
@@ -950,20 +941,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     if let Some(report) = refinement.as_mut() {
         model = complete_selected(&model, report, &prep, &outputs, split, &fits)?;
     }
-    // Without a kept refinement the coefficients are the derivative fit's: so are their errors.
-    let mut terms = model.outputs.iter().flat_map(|o| &o.terms);
-    if !terms.any(|t| t.std_error.is_some()) {
-        let lengths: Vec<usize> = split.train.iter().map(|&r| rs.runs[r].len()).collect();
-        for i in 0..ny {
-            let (z, label, weights, _) = prep.design(i, &ord, &split.train);
-            let d = uncertainty::Design {
-                z: &z,
-                label: &label,
-                weights: &weights,
-            };
-            uncertainty::set_derivative_std_errors(&mut model, i, &d, &lengths)?;
-        }
-    }
+    derivative_std_errors(&mut model, &prep, &ord, split)?;
 
     let simulations = simulate_runs(&model, rs, &outputs, &prep.inputs, &split.test)?;
     say(format!("identified in {:.2} s", t.elapsed().as_secs_f64()));
@@ -980,6 +958,31 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         weighting,
         refinement,
     })
+}
+
+/// Without a kept refinement the coefficients are the derivative fit's, and so are their
+/// standard errors ([`uncertainty`]); a model that has some (from the refinement) keeps them.
+fn derivative_std_errors(
+    model: &mut ModelFile,
+    prep: &Prepared,
+    ord: &[usize],
+    split: &Split,
+) -> Result<()> {
+    let mut terms = model.outputs.iter().flat_map(|o| &o.terms);
+    if terms.any(|t| t.std_error.is_some()) {
+        return Ok(());
+    }
+    let lengths: Vec<usize> = split.train.iter().map(|&r| prep.rs.runs[r].len()).collect();
+    for i in 0..model.outputs.len() {
+        let (z, label, weights, _) = prep.design(i, ord, &split.train);
+        let d = uncertainty::Design {
+            z: &z,
+            label: &label,
+            weights: &weights,
+        };
+        uncertainty::set_derivative_std_errors(model, i, &d, &lengths)?;
+    }
+    Ok(())
 }
 
 /// The data of run `r` for the refinement, with the smoothed derivatives as state guesses.
@@ -1126,6 +1129,17 @@ fn refine_selected(
         completion: Vec::new(),
     };
     Ok((g.model, report))
+}
+
+impl Candidate {
+    /// The profile the eta-rule compares: the free-run one where the candidate was simulated,
+    /// floored at [`FREE_RUN_RESOLUTION`] (on noise-free data a first-order plant got order 3,
+    /// p95 2.64e-5 against order 1's 1.5e-4, with two poles at -7,500 rad/s that change
+    /// nothing), else the derivative-domain validation profile.
+    fn chosen_on(&self) -> Profile {
+        self.simulation
+            .map_or(self.validation, |p| p.floored(FREE_RUN_RESOLUTION))
+    }
 }
 
 fn candidate(prep: &Prepared, i: usize, ord: &[usize], split: &Split) -> Result<Candidate> {
