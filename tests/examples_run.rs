@@ -3,7 +3,7 @@
 //! the examples before it runs the tests; a run of this file alone (`--test examples_run`)
 //! does not, and the tests then skip with a notice.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// The example's binary beside this test's (`target/<profile>/examples/NAME`).
@@ -16,6 +16,18 @@ fn example(name: &str) -> Option<PathBuf> {
         eprintln!("NOTICE: example {name} not built (run the whole `cargo test`); skipped");
         None
     }
+}
+
+/// Runs an example in `dir`; its standard output, after asserting that it succeeded.
+fn run_in(bin: &Path, dir: &Path, args: &[&str]) -> String {
+    let out = Command::new(bin)
+        .current_dir(dir)
+        .args(args)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{}: {err}", bin.display());
+    String::from_utf8_lossy(&out.stdout).into_owned()
 }
 
 fn temp_dir(tag: &str) -> PathBuf {
@@ -43,16 +55,10 @@ fn the_examples_identify_and_discover_on_a_csv_record() {
     case.nominal
         .write(dir.join("nominal.json").to_str().unwrap())
         .unwrap();
-    let out = Command::new(bin)
-        .current_dir(&dir)
-        .args(["data.csv", "nominal.json", &rs.tau.to_string()])
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let text = run_in(
+        &bin,
+        &dir,
+        &["data.csv", "nominal.json", &rs.tau.to_string()],
     );
     assert!(text.starts_with("verdict: added"), "{text}");
     let augmented = ctsid::Model::read(dir.join("augmented.json").to_str().unwrap()).unwrap();
@@ -70,17 +76,7 @@ fn the_examples_identify_and_discover_on_a_csv_record() {
     };
     let dir = temp_dir("identify");
     std::fs::write(dir.join("data.csv"), csv).unwrap();
-    let out = Command::new(bin)
-        .current_dir(&dir)
-        .args(["data.csv", "y", "u", &rs.tau.to_string()])
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = run_in(&bin, &dir, &["data.csv", "y", "u", &rs.tau.to_string()]);
     assert!(text.starts_with("y_d2 = "), "{text}");
     assert_eq!(
         text.lines()

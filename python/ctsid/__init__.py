@@ -274,8 +274,7 @@ def identify(
     named terms to the dictionary (``"sign(y_d1)"``). ``engine`` is ``"auto"``, ``"cpu"`` or
     ``"gpu"``. The returned model's ``summary`` holds the orders and test NRMSE.
     """
-    if tau is None:
-        raise ValueError("tau: give the sampling period in seconds")
+    tau = _tau(tau)
     outputs, inputs = list(outputs), list(inputs)
     names, runs = _records(data, outputs + inputs, run_column, columns)
     if isinstance(order, int):

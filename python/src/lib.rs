@@ -85,6 +85,23 @@ fn split(
     Split::new(train, validation, test, &ids)
 }
 
+/// The record set of `runs` and its split by the run lists `[train, validation, test]`.
+fn records_and_split(
+    tau: f64,
+    names: Vec<String>,
+    runs: Vec<PyRun>,
+    [train, validation, test]: [Option<String>; 3],
+) -> ctsid::Result<(RecordSet, Split)> {
+    let rs = record_set(tau, names, runs)?;
+    let sp = split(
+        &rs,
+        train.as_deref(),
+        validation.as_deref(),
+        test.as_deref(),
+    )?;
+    Ok((rs, sp))
+}
+
 /// Progress lines of the long stages, to the `logging` logger "ctsid" (a plain function: the
 /// library's callback is a `fn`, so it cannot hold a Python object).
 fn log_progress(line: &str) {
@@ -240,13 +257,7 @@ fn identify(
     let id = py
         .detach(|| {
             s.validate()?;
-            let rs = record_set(tau, names, runs)?;
-            let sp = split(
-                &rs,
-                train.as_deref(),
-                validation.as_deref(),
-                test.as_deref(),
-            )?;
+            let (rs, sp) = records_and_split(tau, names, runs, [train, validation, test])?;
             identify_rs(&rs, &sp, &s)
         })
         .map_err(err)?;
@@ -288,13 +299,7 @@ fn discover(
     let nominal = &nominal.inner;
     let (d, augmented) = py
         .detach(|| {
-            let rs = record_set(tau, names, runs)?;
-            let sp = split(
-                &rs,
-                train.as_deref(),
-                validation.as_deref(),
-                test.as_deref(),
-            )?;
+            let (rs, sp) = records_and_split(tau, names, runs, [train, validation, test])?;
             let mut o = Options::new(sp.train, sp.validation.unwrap_or_default(), sp.test);
             o.seed = seed;
             let d = discover_rs(&rs, nominal, &o)?;
