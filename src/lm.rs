@@ -11,8 +11,9 @@
 //! well-posed (its step is then zero). A trial that cannot be solved, cannot be evaluated (a
 //! simulation that diverges) or does not lower the cost is rejected and lambda raised tenfold;
 //! an accepted one lowers lambda by [`LmOptions::shrink`]. The fit stops after
-//! [`LmOptions::max_iter`] Jacobians, when no trial is accepted, or when an accepted step lowers
-//! the cost by at most [`LmOptions::tol`] of it.
+//! [`LmOptions::max_iter`] Jacobians, when no trial is accepted, when an accepted step lowers
+//! the cost by at most [`LmOptions::tol`] of it, or when the cost is at most
+//! [`LmOptions::cost_floor`].
 
 use nalgebra::{DMatrix, DVector};
 
@@ -36,6 +37,9 @@ pub struct LmOptions {
     pub max_tries: usize,
     pub lambda_max: f64,
     pub tol: f64,
+    /// The fit also stops once the cost is at most this (0: never): residuals already at the
+    /// resolution the caller needs gain nothing from more simulations.
+    pub cost_floor: f64,
 }
 
 impl Default for LmOptions {
@@ -48,6 +52,7 @@ impl Default for LmOptions {
             max_tries: usize::MAX,
             lambda_max: 1e10,
             tol: 1e-4,
+            cost_floor: 0.0,
         }
     }
 }
@@ -91,6 +96,9 @@ pub fn minimize(
     let mut c = cost(&p.residuals(&theta)?);
     let mut lambda = o.lambda0;
     for _ in 0..o.max_iter {
+        if c <= o.cost_floor {
+            break;
+        }
         stats.iterations += 1;
         let Some((jtj, jtr)) = p.normal_equations(&theta) else {
             break;

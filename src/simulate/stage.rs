@@ -1,0 +1,440 @@
+//! The linear algebra of the Radau stage equations: factors of `I - h (a_ij J_j)` (3n x 3n,
+//! block (i, j) for stages i and j) and solves with them, for the simplified Newton iterations
+//! and the forward sensitivities.
+//!
+//! Two forms. [`DenseLu`] factors the whole 3n x 3n matrix: O(n^3) per factorisation and
+//! O(n^2) per solve, for any system. [`ChainLu`] is for systems made of chains of integrators
+//! (`x_k' = x_{k+1}` up to one free row per chain), which every identified model is: the stage
+//! values of a chain's lower states follow from those of its top state by back-substitution
+//! (`dZ_k = R_k + B dZ_{k+1}`, `B = h A`), so only 3 unknowns per chain remain and a factorisation
+//! costs O(chains^3 + chains n), a solve O(chains^2 + chains n). 40 outputs of order 8 is a
+//! 120 x 120 system instead of 960 x 960. Both forms give the same solution up to rounding
+//! (`chain_and_dense_solves_agree`).
+
+/// LU factors with partial pivoting of the small dense Newton matrix (row-major, at most a few
+/// dozen rows): hand-written because the generic dynamic-size factorisation and its allocations
+/// were a third of a simulation's time.
+pub(super) struct DenseLu {
+    n: usize,
+    a: Vec<f64>,
+    /// Row i of the factored matrix is row `perm[i]` of the original.
+    perm: Vec<usize>,
+}
+
+impl DenseLu {
+    /// Factors `a` (n x n, row-major) in place; `None` when a pivot is zero or not finite.
+    pub(super) fn factor(n: usize, mut a: Vec<f64>) -> Option<DenseLu> {
+        let mut perm: Vec<usize> = (0..n).collect();
+        for k in 0..n {
+            let mut p = k;
+            for i in k + 1..n {
+                if a[i * n + k].abs() > a[p * n + k].abs() {
+                    p = i;
+                }
+            }
+            let d = a[p * n + k];
+            if d == 0.0 || !d.is_finite() {
+                return None;
+            }
+            if p != k {
+                for j in 0..n {
+                    a.swap(k * n + j, p * n + j);
+                }
+                perm.swap(k, p);
+            }
+            for i in k + 1..n {
+                let f = a[i * n + k] / d;
+                a[i * n + k] = f;
+                if f != 0.0 {
+                    for j in k + 1..n {
+                        a[i * n + j] -= f * a[k * n + j];
+                    }
+                }
+            }
+        }
+        Some(DenseLu { n, a, perm })
+    }
+
+    /// Solves `A x = b`.
+    pub(super) fn solve(&self, b: &[f64], x: &mut [f64]) {
+        let n = self.n;
+        for i in 0..n {
+            x[i] = b[self.perm[i]];
+        }
+        for i in 0..n {
+            let row = &self.a[i * n..i * n + i];
+            let s: f64 = row.iter().zip(&x[..i]).map(|(a, b)| a * b).sum();
+            x[i] -= s;
+        }
+        for i in (0..n).rev() {
+            let row = &self.a[i * n + i + 1..(i + 1) * n];
+            let s: f64 = row.iter().zip(&x[i + 1..n]).map(|(a, b)| a * b).sum();
+            x[i] = (x[i] - s) / self.a[i * n + i];
+        }
+    }
+}
+
+impl DenseLu {
+    /// Solves `A X = B` for `q` right-hand sides at once, `b` row-major `n x q`, in place: the
+    /// inner loops run along the contiguous right-hand sides.
+    pub(super) fn solve_many(&self, b: &mut [f64], q: usize, scratch: &mut Vec<f64>) {
+        let n = self.n;
+        scratch.clear();
+        for i in 0..n {
+            let p = self.perm[i];
+            scratch.extend_from_slice(&b[p * q..(p + 1) * q]);
+        }
+        let x = scratch.as_mut_slice();
+        for i in 0..n {
+            let (done, rest) = x.split_at_mut(i * q);
+            let xi = &mut rest[..q];
+            for j in 0..i {
+                let l = self.a[i * n + j];
+                if l != 0.0 {
+                    let xj = &done[j * q..(j + 1) * q];
+                    xi.iter_mut().zip(xj).for_each(|(a, b)| *a -= l * b);
+                }
+            }
+        }
+        for i in (0..n).rev() {
+            let (head, tail) = x.split_at_mut((i + 1) * q);
+            let xi = &mut head[i * q..];
+            for j in i + 1..n {
+                let u = self.a[i * n + j];
+                if u != 0.0 {
+                    let xj = &tail[(j - i - 1) * q..(j - i) * q];
+                    xi.iter_mut().zip(xj).for_each(|(a, b)| *a -= u * b);
+                }
+            }
+            let d = 1.0 / self.a[i * n + i];
+            xi.iter_mut().for_each(|v| *v *= d);
+        }
+        b.copy_from_slice(x);
+    }
+}
+
+/// Factors of the Radau stage matrix `I - h (a_ij J_j)`, in the cheapest form the Jacobians'
+/// structure allows.
+pub(super) enum StageLu {
+    Dense(DenseLu),
+    Chain(ChainLu),
+}
+
+impl StageLu {
+    /// Factors of `I - h (a_ij J_j)` for the row-major `n x n` stage Jacobians `jacs`
+    /// (simplified Newton passes one Jacobian three times), or `None` when the matrix is
+    /// singular. `chains` (first state, length) is the system's chain structure; it is used
+    /// only when the Jacobians have it (unit shifts on every row but the chains' last).
+    pub(super) fn factor(
+        a: &[[f64; 3]; 3],
+        n: usize,
+        h: f64,
+        jacs: [&[f64]; 3],
+        chains: Option<&[(usize, usize)]>,
+    ) -> Option<StageLu> {
+        match chains {
+            Some(c) if has_chains(n, c, &jacs) => {
+                ChainLu::factor(a, n, h, jacs, c).map(StageLu::Chain)
+            }
+            _ => dense_stage_matrix(a, n, h, jacs).map(StageLu::Dense),
+        }
+    }
+
+    /// Solves for one right-hand side `b` (stage-major, 3n) into `x`.
+    pub(super) fn solve(&self, b: &[f64], x: &mut [f64]) {
+        match self {
+            StageLu::Dense(lu) => lu.solve(b, x),
+            StageLu::Chain(lu) => lu.solve(b, x),
+        }
+    }
+
+    /// Solves for `q` right-hand sides at once, `b` row-major `3n x q`, in place.
+    pub(super) fn solve_many(&self, b: &mut [f64], q: usize, scratch: &mut Vec<f64>) {
+        match self {
+            StageLu::Dense(lu) => lu.solve_many(b, q, scratch),
+            StageLu::Chain(lu) => lu.solve_many(b, q, scratch),
+        }
+    }
+}
+
+/// Whether `chains` tile the `n` states in order and every Jacobian row but a chain's last is
+/// the unit shift `e_{k+1}` (so the chain solve is exact, not an approximation).
+fn has_chains(n: usize, chains: &[(usize, usize)], jacs: &[&[f64]; 3]) -> bool {
+    let mut next = 0;
+    for &(off, len) in chains {
+        if off != next || len == 0 {
+            return false;
+        }
+        next = off + len;
+    }
+    if next != n {
+        return false;
+    }
+    jacs.iter().all(|jac| {
+        chains.iter().all(|&(off, len)| {
+            (off..off + len - 1).all(|r| {
+                let row = &jac[r * n..(r + 1) * n];
+                row.iter()
+                    .enumerate()
+                    .all(|(k, &v)| v == if k == r + 1 { 1.0 } else { 0.0 })
+            })
+        })
+    })
+}
+
+/// The whole 3n x 3n stage matrix, factored.
+fn dense_stage_matrix(a: &[[f64; 3]; 3], n: usize, h: f64, jacs: [&[f64]; 3]) -> Option<DenseLu> {
+    let m = 3 * n;
+    let mut mat = vec![0.0; m * m];
+    for d in 0..m {
+        mat[d * m + d] = 1.0;
+    }
+    for i in 0..3 {
+        for (j, jac) in jacs.iter().enumerate() {
+            let hij = h * a[i][j];
+            for r in 0..n {
+                for q in 0..n {
+                    mat[(i * n + r) * m + j * n + q] -= hij * jac[r * n + q];
+                }
+            }
+        }
+    }
+    DenseLu::factor(m, mat)
+}
+
+type M3 = [[f64; 3]; 3];
+
+fn mat_mul(x: &M3, y: &M3) -> M3 {
+    let mut r = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for l in 0..3 {
+            r[i][l] = (0..3).map(|j| x[i][j] * y[j][l]).sum();
+        }
+    }
+    r
+}
+
+/// Stage factors of a system of chains of integrators, reduced to the chains' top states.
+///
+/// With `W_o` the stage increments of chain `o`'s top state and `B = h A`, a lower state `k` of
+/// a chain of length `L` has `dZ_k = c_k + B^(L-1-k) W_o`, where `c_{L-1} = 0` and
+/// `c_k = R_k + B c_{k+1}`. The top rows `g_o^j` (row `o`'s Jacobian at stage `j`) then give
+/// `(I - M) W = r` with `M[o, o'][i, l] = sum_j B_ij sum_k g_o^j[o', k] (B^(L'-1-k))_jl` and
+/// `r_o = R_top + B (sum_s g_o^j[s] c_j(s))_j`.
+pub(super) struct ChainLu {
+    n: usize,
+    chains: Vec<(usize, usize)>,
+    /// `B^p` for p = 0 ..= the longest chain.
+    bp: Vec<M3>,
+    /// The chains' top rows of the stage Jacobians: `[stage][chain][state]`.
+    g: Vec<f64>,
+    /// Factors of `I - M`, unknowns ordered chain-major (`3 o + i`).
+    lu: DenseLu,
+}
+
+impl ChainLu {
+    fn factor(
+        a: &[[f64; 3]; 3],
+        n: usize,
+        h: f64,
+        jacs: [&[f64]; 3],
+        chains: &[(usize, usize)],
+    ) -> Option<ChainLu> {
+        let nc = chains.len();
+        let longest = chains.iter().map(|c| c.1).max().unwrap_or(0);
+        let b: M3 = std::array::from_fn(|i| std::array::from_fn(|j| h * a[i][j]));
+        let mut bp = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]];
+        for p in 1..=longest {
+            bp.push(mat_mul(&bp[p - 1], &b));
+        }
+        let mut g = vec![0.0; 3 * nc * n];
+        for (j, jac) in jacs.iter().enumerate() {
+            for (o, &(off, len)) in chains.iter().enumerate() {
+                let top = off + len - 1;
+                g[(j * nc + o) * n..(j * nc + o + 1) * n]
+                    .copy_from_slice(&jac[top * n..(top + 1) * n]);
+            }
+        }
+        let m = 3 * nc;
+        let mut mat = vec![0.0; m * m];
+        for o in 0..nc {
+            for (o2, &(off, len)) in chains.iter().enumerate() {
+                // v[j][l] = sum_k g_o^j[off + k] (B^(len-1-k))_jl
+                let mut v = [[0.0; 3]; 3];
+                for (j, vj) in v.iter_mut().enumerate() {
+                    let row = &g[(j * nc + o) * n..(j * nc + o + 1) * n];
+                    for k in 0..len {
+                        let gk = row[off + k];
+                        if gk != 0.0 {
+                            let p = &bp[len - 1 - k];
+                            for l in 0..3 {
+                                vj[l] += gk * p[j][l];
+                            }
+                        }
+                    }
+                }
+                let bv = mat_mul(&b, &v);
+                for i in 0..3 {
+                    for l in 0..3 {
+                        let d = if o == o2 && i == l { 1.0 } else { 0.0 };
+                        mat[(3 * o + i) * m + 3 * o2 + l] = d - bv[i][l];
+                    }
+                }
+            }
+        }
+        let lu = DenseLu::factor(m, mat)?;
+        Some(ChainLu {
+            n,
+            chains: chains.to_vec(),
+            bp,
+            g,
+            lu,
+        })
+    }
+
+    fn solve(&self, b: &[f64], x: &mut [f64]) {
+        x.copy_from_slice(b);
+        self.solve_many(x, 1, &mut Vec::new());
+    }
+
+    /// Solves for `q` right-hand sides, `b` row-major `3n x q` (row `i n + s`: stage i, state
+    /// s), in place; every inner loop runs along the q contiguous right-hand sides.
+    fn solve_many(&self, b: &mut [f64], q: usize, scratch: &mut Vec<f64>) {
+        let (n, nc) = (self.n, self.chains.len());
+        let bm = self.bp[1.min(self.bp.len() - 1)];
+        let row = |i: usize, s: usize| (i * n + s) * q;
+        // r_o starts as the top rows; the top's c is zero; c_k = R_k + B c_{k+1} down the chain.
+        let mut r = vec![0.0; 3 * nc * q];
+        for (o, &(off, len)) in self.chains.iter().enumerate() {
+            let top = off + len - 1;
+            for i in 0..3 {
+                let src = row(i, top);
+                r[(3 * o + i) * q..(3 * o + i + 1) * q].copy_from_slice(&b[src..src + q]);
+                b[src..src + q].iter_mut().for_each(|v| *v = 0.0);
+            }
+            for s in (off..top).rev() {
+                for i in 0..3 {
+                    for l in 0..3 {
+                        let f = bm[i][l];
+                        let (dst, src) = (row(i, s), row(l, s + 1));
+                        for c in 0..q {
+                            b[dst + c] += f * b[src + c];
+                        }
+                    }
+                }
+            }
+        }
+        // r_o += B t, t_j = sum_s g_o^j[s] c_j(s).
+        let mut t = vec![0.0; 3 * q];
+        for o in 0..nc {
+            t.iter_mut().for_each(|v| *v = 0.0);
+            for j in 0..3 {
+                let g = &self.g[(j * nc + o) * n..(j * nc + o + 1) * n];
+                let tj = &mut t[j * q..(j + 1) * q];
+                for (s, &gs) in g.iter().enumerate() {
+                    if gs != 0.0 {
+                        let cs = &b[row(j, s)..row(j, s) + q];
+                        tj.iter_mut().zip(cs).for_each(|(a, c)| *a += gs * c);
+                    }
+                }
+            }
+            for i in 0..3 {
+                let ro = &mut r[(3 * o + i) * q..(3 * o + i + 1) * q];
+                for j in 0..3 {
+                    let f = bm[i][j];
+                    ro.iter_mut()
+                        .zip(&t[j * q..(j + 1) * q])
+                        .for_each(|(a, v)| *a += f * v);
+                }
+            }
+        }
+        self.lu.solve_many(&mut r, q, scratch);
+        // dZ_k = c_k + B^(L-1-k) W_o.
+        for (o, &(off, len)) in self.chains.iter().enumerate() {
+            for k in 0..len {
+                let p = &self.bp[len - 1 - k];
+                for i in 0..3 {
+                    let dst = row(i, off + k);
+                    for l in 0..3 {
+                        let f = p[i][l];
+                        let w = &r[(3 * o + l) * q..(3 * o + l + 1) * q];
+                        b[dst..dst + q]
+                            .iter_mut()
+                            .zip(w)
+                            .for_each(|(a, v)| *a += f * v);
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic pseudo-random value in [-1, 1).
+    fn rnd(seed: &mut u64) -> f64 {
+        *seed = seed
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+
+    #[test]
+    fn dense_lu_solves_with_pivoting_and_refuses_singular_matrices() {
+        // A zero leading entry forces a row swap.
+        let a = vec![0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
+        let lu = DenseLu::factor(3, a.clone()).unwrap();
+        let x_true = [1.0, -2.0, 0.5];
+        let b: Vec<f64> = (0..3)
+            .map(|i| (0..3).map(|j| a[i * 3 + j] * x_true[j]).sum())
+            .collect();
+        let mut x = [0.0; 3];
+        lu.solve(&b, &mut x);
+        for k in 0..3 {
+            assert!((x[k] - x_true[k]).abs() < 1e-14, "{x:?}");
+        }
+        assert!(DenseLu::factor(2, vec![1.0, 2.0, 2.0, 4.0]).is_none());
+    }
+
+    #[test]
+    fn chain_and_dense_solves_agree() {
+        // Chains of lengths 1, 3 and 2 (6 states), a different top row at each stage, as the
+        // sensitivities have; simplified Newton's equal stages are the special case.
+        let chains = [(0, 1), (1, 3), (4, 2)];
+        let n = 6;
+        let mut seed = 7u64;
+        let mut jacs = vec![vec![0.0; n * n]; 3];
+        for jac in jacs.iter_mut() {
+            for &(off, len) in &chains {
+                for k in off..off + len - 1 {
+                    jac[k * n + k + 1] = 1.0;
+                }
+                let top = off + len - 1;
+                for c in 0..n {
+                    jac[top * n + c] = 3.0 * rnd(&mut seed);
+                }
+            }
+        }
+        let a = [[0.2, -0.05, 0.02], [0.4, 0.2, -0.03], [0.38, 0.5, 0.11]];
+        let stages = [&jacs[0][..], &jacs[1][..], &jacs[2][..]];
+        let chain = StageLu::factor(&a, n, 0.7, stages, Some(&chains)).unwrap();
+        assert!(matches!(chain, StageLu::Chain(_)));
+        let dense = StageLu::factor(&a, n, 0.7, stages, None).unwrap();
+        let q = 4;
+        let b: Vec<f64> = (0..3 * n * q).map(|_| rnd(&mut seed)).collect();
+        let (mut bc, mut bd) = (b.clone(), b.clone());
+        let mut scratch = Vec::new();
+        chain.solve_many(&mut bc, q, &mut scratch);
+        dense.solve_many(&mut bd, q, &mut scratch);
+        for (c, d) in bc.iter().zip(&bd) {
+            assert!((c - d).abs() < 1e-10 * (1.0 + d.abs()), "{c} vs {d}");
+        }
+        // A Jacobian that breaks a chain (an entry off the shift) is factored densely.
+        let mut broken = jacs[0].clone();
+        broken[n + 3] = 0.5;
+        let f = StageLu::factor(&a, n, 0.7, [&broken, &broken, &broken], Some(&chains)).unwrap();
+        assert!(matches!(f, StageLu::Dense(_)));
+    }
+}
