@@ -6,7 +6,8 @@ use nalgebra::DMatrix;
 use crate::error::{Error, Result};
 
 /// Eigenvalues (re, im) of a square matrix, sorted by real part then imaginary part; an error
-/// when the matrix is not finite or the Schur iteration does not converge.
+/// when the matrix is not finite or the Schur iteration does not converge. Panics when `m` is
+/// not square.
 pub fn eigenvalues(m: &DMatrix<f64>) -> Result<Vec<(f64, f64)>> {
     if m.iter().any(|v| !v.is_finite()) {
         return Err(Error::InvalidData(

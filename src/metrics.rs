@@ -27,7 +27,8 @@ pub fn rms(sim: &[f64], meas: &[f64]) -> f64 {
         .sqrt()
 }
 
-/// RMS of `sim - meas` and NRMSE = RMS / standard deviation of `meas` (see the module docs).
+/// RMS of `sim - meas` and NRMSE = RMS / standard deviation of `meas` (see the module docs). Slices
+/// of different lengths are compared over the shorter one; empty slices give (0, 0).
 pub fn rms_nrmse(sim: &[f64], meas: &[f64]) -> (f64, f64) {
     let n = sim.len().min(meas.len());
     let rms = rms(sim, meas);
@@ -42,12 +43,14 @@ pub fn rms_nrmse(sim: &[f64], meas: &[f64]) -> (f64, f64) {
     (rms, nrmse)
 }
 
-/// NRMSE alone.
+/// NRMSE alone. Compared over the shorter slice; empty slices give 0.
 pub fn nrmse(sim: &[f64], meas: &[f64]) -> f64 {
     rms_nrmse(sim, meas).1
 }
 
-/// Fit in percent, `100 (1 - NRMSE)` (negative for a model worse than the mean).
+/// Fit in percent, `100 (1 - NRMSE)` (negative for a model worse than the mean). Compared over the
+/// shorter slice; empty slices give 100, and a constant `meas` that `sim` misses gives minus
+/// infinity.
 pub fn fit_percent(sim: &[f64], meas: &[f64]) -> f64 {
     100.0 * (1.0 - nrmse(sim, meas))
 }

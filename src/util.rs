@@ -53,7 +53,9 @@ pub struct AtomicFile {
 }
 
 impl AtomicFile {
-    /// Creates the temporary file beside `target`.
+    /// Creates the temporary file beside `target`. Refuses a target with no file name (`/`, a path
+    /// ending in `..`) and errors when the temporary file cannot be created (a missing folder, no
+    /// write permission).
     pub fn create(target: &std::path::Path) -> crate::Result<AtomicFile> {
         let io = |e: std::io::Error| crate::Error::file(target.display().to_string(), e);
         let name = target.file_name().ok_or_else(|| crate::Error::Io {
@@ -72,7 +74,8 @@ impl AtomicFile {
         })
     }
 
-    /// Flushes and renames the temporary file over the target.
+    /// Flushes and renames the temporary file over the target. Errors when the flush, the sync to
+    /// disk or the rename fails; the target is then left as it was.
     pub fn commit(mut self) -> crate::Result<()> {
         let io = |e: std::io::Error| crate::Error::file(self.target.display().to_string(), e);
         let file = self.file.take().expect("committed once");
@@ -100,7 +103,8 @@ impl Drop for AtomicFile {
     }
 }
 
-/// Writes `bytes` to `path` whole or not at all ([`AtomicFile`]).
+/// Writes `bytes` to `path` whole or not at all ([`AtomicFile`]). Errors as [`AtomicFile::create`]
+/// and [`AtomicFile::commit`] do, and when the write fails.
 pub fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> crate::Result<()> {
     use std::io::Write;
     let mut f = AtomicFile::create(path)?;
@@ -137,7 +141,8 @@ mod atomic_tests {
 
 /// Opens `path` for reading when it is a regular file of at most `max_bytes` (if given): a
 /// folder, a pipe or a device (`/dev/zero` never ends, a FIFO without a writer never answers)
-/// is refused before it is opened, with a message that says which it is.
+/// is refused before it is opened, with a message that says which it is. A missing or unreadable
+/// path and a file larger than `max_bytes` are refused too.
 pub fn open_regular(
     path: &std::path::Path,
     max_bytes: Option<u64>,

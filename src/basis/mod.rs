@@ -46,7 +46,8 @@ impl Code {
         (0..self.degree()).map(move |k| self.var(k))
     }
 
-    /// Exponent of every variable (length n_vars).
+    /// Exponent of every variable (length n_vars). Panics when a variable of the code is not
+    /// below `n_vars`.
     pub fn exponents(self, n_vars: usize) -> Vec<u32> {
         let mut e = vec![0u32; n_vars];
         for v in self.vars() {
@@ -55,7 +56,9 @@ impl Code {
         e
     }
 
-    /// Appends variable `v` (which must be >= the current last one).
+    /// Appends variable `v` (which must be >= the current last one). When `self` already has
+    /// degree [`MAX_DEGREE`] or `v` is [`MAX_VARS`] or more, debug builds panic and release
+    /// builds return a wrong code; [`Code::from_exponents`] checks both limits.
     pub fn times(self, v: usize) -> Code {
         let d = self.degree();
         debug_assert!(d < MAX_DEGREE && v < MAX_VARS);
@@ -63,7 +66,8 @@ impl Code {
         Code(((d as u64 + 1) << 60) | body | ((v as u64) << (5 * d)))
     }
 
-    /// Builds a code from exponents (length n_vars).
+    /// Builds a code from exponents (length n_vars). Refuses a total degree above [`MAX_DEGREE`]
+    /// and a positive exponent at an index of [`MAX_VARS`] or more.
     pub fn from_exponents(exps: &[u32]) -> Result<Code> {
         let mut c = Code::ONE;
         for (v, &e) in exps.iter().enumerate() {
@@ -80,7 +84,8 @@ impl Code {
         Ok(c)
     }
 
-    /// Value of the monomial at one point `z`.
+    /// Value of the monomial at one point `z`. Panics when one of the code's variables is not
+    /// below `z.len()`.
     pub fn eval(self, z: &[f64]) -> f64 {
         self.vars().fold(1.0, |acc, v| acc * z[v])
     }
@@ -143,6 +148,7 @@ pub struct Basis {
 }
 
 /// A model or basis degree a user may ask for: 1..=[`MAX_DEGREE`] (0 leaves only the constant).
+/// Refuses 0 and degrees above [`MAX_DEGREE`].
 pub fn check_degree(degree: usize) -> Result<()> {
     if (1..=MAX_DEGREE).contains(&degree) {
         Ok(())
@@ -155,7 +161,9 @@ pub fn check_degree(degree: usize) -> Result<()> {
 }
 
 impl Basis {
-    /// Enumerates the basis, refusing sizes beyond `limits` before allocating.
+    /// Enumerates the basis, refusing sizes beyond `limits` before allocating. Refuses an empty
+    /// name list, more than [`MAX_VARS`] names, a name given twice, a degree above [`MAX_DEGREE`]
+    /// and more candidates than `limits.max_candidates`.
     ///
     /// ```
     /// use ctsid::basis::{Basis, BasisLimits};
@@ -261,6 +269,7 @@ impl Basis {
         &self.names
     }
 
+    /// Code of monomial `j`. Panics when `j` is not below [`Basis::len`].
     pub fn code(&self, j: usize) -> Code {
         self.codes[j]
     }
@@ -269,19 +278,21 @@ impl Basis {
         &self.codes
     }
 
-    /// Index of the parent monomial (`None` for the constant).
+    /// Index of the parent monomial (`None` for the constant). Panics when `j` is not below
+    /// [`Basis::len`].
     pub fn parent(&self, j: usize) -> Option<usize> {
         let p = self.parents[j];
         (p != u32::MAX).then_some(p as usize)
     }
 
-    /// Variable that multiplies the parent to give monomial j (`None` for the constant).
+    /// Variable that multiplies the parent to give monomial j (`None` for the constant). Panics
+    /// when `j` is not below [`Basis::len`].
     pub fn last_var(&self, j: usize) -> Option<usize> {
         let c = self.codes[j];
         (c.degree() > 0).then(|| c.var(c.degree() - 1))
     }
 
-    /// Index of a monomial given by its code, if it is in the basis.
+    /// Index of a monomial given by its code, if it is in the basis. `None` otherwise.
     pub fn index_of(&self, code: Code) -> Option<usize> {
         // Graded-lex order: codes of one degree are sorted by variable list; search by degree block.
         let d = code.degree();
@@ -300,13 +311,15 @@ impl Basis {
             .map(|i| start + i)
     }
 
-    /// The monomial as people write it: `y_d1^2*u`, `1` for the constant.
+    /// The monomial as people write it: `y_d1^2*u`, `1` for the constant. Panics when `j` is
+    /// not below [`Basis::len`].
     pub fn name(&self, j: usize) -> String {
         monomial_name(self.codes[j], &self.names)
     }
 }
 
-/// Writes a monomial with variable names: `a^2*b`, `1` for the constant.
+/// Writes a monomial with variable names: `a^2*b`, `1` for the constant. Panics when a
+/// variable of `code` is not below `names.len()`.
 pub fn monomial_name(code: Code, names: &[String]) -> String {
     if code.degree() == 0 {
         return "1".to_string();

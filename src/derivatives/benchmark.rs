@@ -15,7 +15,8 @@ pub const NOISES: [u32; 3] = [1, 3, 5];
 /// p95, the Kalman smoother's trimmed p95, ml-derivatives' full p100 (where meaningful).
 pub type Anchors = ([f64; 4], [f64; 4], Option<[f64; 4]>);
 
-/// (signal, noise %) -> (ml-derivatives trimmed p95, Kalman trimmed p95, ml-derivatives full p100), orders 1..4.
+/// (signal, noise %) -> (ml-derivatives trimmed p95, Kalman trimmed p95, ml-derivatives full p100),
+/// orders 1..4. `None` for a pair the issue gives no figures for.
 pub fn anchors(signal: &str, noise: u32) -> Option<Anchors> {
     let t = match (signal, noise) {
         ("sys3_multisine", 1) => (
@@ -83,6 +84,9 @@ pub struct Signal {
     pub noisy: Vec<(u32, Vec<f64>)>,
 }
 
+/// Loads `NAME.csv` from `dir`: columns `t`, `y0`..`y4` and `ym_1pct`, `ym_3pct`, `ym_5pct`.
+/// Refuses a file that [`crate::records::RecordSet::from_csv`] refuses, a missing one or one that
+/// lacks these columns among them.
 pub fn load_signal(dir: &Path, name: &str) -> Result<Signal> {
     let mut columns: Vec<String> = (0..5).map(|k| format!("y{k}")).collect();
     columns.extend(NOISES.iter().map(|n| format!("ym_{n}pct")));
@@ -121,6 +125,9 @@ pub struct Row {
     pub rank_corr: [f64; 4],
 }
 
+/// Scores one estimate `d` of `sig` at noise level `noise` (percent), orders 1 to 4. Panics
+/// when `sig.truth`, `d.values` or `d.sigma` lacks an order 0..=4, or when one of their series
+/// is shorter than `sig.truth[0]` (or, in `d.sigma`, longer).
 pub fn score_one(sig: &Signal, d: &Derivatives, noise: u32) -> Row {
     let n = sig.truth[0].len();
     let (a, b) = trimmed_range(n);
@@ -144,12 +151,14 @@ pub fn score_one(sig: &Signal, d: &Derivatives, noise: u32) -> Row {
     row
 }
 
-/// Runs the method on every signal and noise level in `dir`.
+/// Runs the method on every signal and noise level in `dir`. Refuses a signal file that
+/// [`load_signal`] refuses and a measurement that [`differentiate_with`] refuses.
 pub fn run(dir: &Path) -> Result<Vec<Row>> {
     run_with(dir, &DerivativeOptions::default())
 }
 
-/// As [`run`], with overrides (for experiments).
+/// As [`run`], with overrides (for experiments). Refuses what [`run`] refuses, and options that
+/// [`differentiate_with`] refuses.
 pub fn run_with(dir: &Path, opts: &DerivativeOptions) -> Result<Vec<Row>> {
     let mut rows = Vec::new();
     for name in SIGNALS {
@@ -206,7 +215,7 @@ pub fn table(rows: &[Row]) -> String {
 /// The issue's gates for one (signal, noise %): per order 1..4, the largest trimmed p95 and, where
 /// it applies, the largest full p100. Smooth signals: half of ml-derivatives' and the Kalman
 /// smoother's trimmed p95, ml-derivatives' p100; etc_s1: either anchor at 1 %, half of
-/// ml-derivatives' above.
+/// ml-derivatives' above. `None` where [`anchors`] has no figures.
 pub fn gates(signal: &str, noise: u32) -> Option<([f64; 4], Option<[f64; 4]>)> {
     let (ml, kal, mlfull) = anchors(signal, noise)?;
     let p95 = std::array::from_fn(|k| match (signal, noise) {
@@ -217,7 +226,7 @@ pub fn gates(signal: &str, noise: u32) -> Option<([f64; 4], Option<[f64; 4]>)> {
     Some((p95, mlfull.filter(|_| signal != "etc_s1")))
 }
 
-/// The issue's accuracy gates for one row.
+/// The issue's accuracy gates for one row. A row with no gates ([`gates`] gives `None`) passes.
 pub fn gates_pass(r: &Row) -> bool {
     let Some((p95, p100)) = gates(&r.signal, r.noise) else {
         return true;

@@ -223,7 +223,10 @@ impl ExpSum {
 }
 
 /// Fits an exponential sum to one run (`y` centred or not) if one explains it to the noise
-/// level `sigma2`; `h` is the smoother's tuned scaled step.
+/// level `sigma2`; `h` is the smoother's tuned scaled step. `None` for a run shorter than 50 or
+/// longer than [`MAX_LEN`] samples, an `h` that is NaN or not positive, a noise-free run (`sigma2`
+/// NaN or below 1e-12 of the run's mean square), and wherever no model passes the pole and
+/// whiteness checks or a decomposition does not converge.
 pub fn fit(y: &[f64], tau: f64, sigma2: f64, h: f64) -> Option<ExpSum> {
     let n = y.len();
     if !(50..=MAX_LEN).contains(&n) || h.is_nan() || h <= 0.0 {
@@ -515,7 +518,7 @@ fn chi2_999(nu: f64) -> f64 {
 }
 
 /// Whether the model's derivatives (`model`, `model_sd`) agree with the smoother's (`mean`,
-/// `sd`, same centring) at every order (module docs, step 3).
+/// `sd`, same centring) at every order (module docs, step 3). Panics as [`agreement`] does.
 pub fn agrees(
     model: &[Vec<f64>],
     model_sd: &[Vec<f64>],
@@ -529,6 +532,8 @@ pub fn agrees(
 /// The agreement statistics behind [`agrees`]: the largest mean squared difference over its
 /// variance, and the smallest share of samples within two of its standard deviations, over the
 /// orders (infinity and 0 where a difference is not finite or has no variance to be judged by).
+/// Panics when `model`, `model_sd` or `sd` has fewer orders than `mean`, or at some order fewer
+/// samples than `mean`.
 pub fn agreement(
     model: &[Vec<f64>],
     model_sd: &[Vec<f64>],

@@ -152,7 +152,7 @@ pub fn min_samples(max_order: usize) -> usize {
     2 * (max_order + 3) + 4
 }
 
-/// Self-tuning derivatives of one run.
+/// Self-tuning derivatives of one run. Refuses what [`differentiate_runs`] refuses.
 ///
 /// ```
 /// // y = sin(2 t) sampled every 10 ms with noise of 1e-3 (a fixed sequence).
@@ -174,7 +174,7 @@ pub fn differentiate(y: &[f64], tau: f64, max_order: usize) -> Result<Derivative
     differentiate_with(y, tau, max_order, &DerivativeOptions::default())
 }
 
-/// One run, with overrides.
+/// One run, with overrides. Refuses what [`differentiate_runs`] refuses.
 pub fn differentiate_with(
     y: &[f64],
     tau: f64,
@@ -184,7 +184,11 @@ pub fn differentiate_with(
     Ok(differentiate_runs(&[y], tau, max_order, opts)?.remove(0))
 }
 
-/// Several runs of one record set, tuned jointly and smoothed separately.
+/// Several runs of one record set, tuned jointly and smoothed separately. Refuses a tau that
+/// [`crate::records::check_tau`] refuses, a `max_order` above [`MAX_ORDER`], a number of states not
+/// above `max_order` or outside 2..=11, an empty run list, a run shorter than [`min_samples`], a
+/// NaN, infinite or too large sample, an `h` outside (0, 1e3], an `end_lambda` outside [1e-3, 1e3]
+/// when `end_blend` is on, and a `smooth_window` that is negative or not finite.
 pub fn differentiate_runs(
     runs: &[&[f64]],
     tau: f64,

@@ -6,7 +6,8 @@
 
 pub use crate::metrics::percentile;
 
-/// Normalised error percentile p_q on samples [from, to).
+/// Normalised error percentile p_q on samples [from, to). Panics when `from > to` or when `est`
+/// or `truth` is shorter than `to`.
 pub fn normalised_percentile(est: &[f64], truth: &[f64], q: f64, from: usize, to: usize) -> f64 {
     let err: Vec<f64> = (from..to).map(|i| (est[i] - truth[i]).abs()).collect();
     let med = percentile(
@@ -22,7 +23,8 @@ pub fn trimmed_range(n: usize) -> (usize, usize) {
     (cut, n - cut)
 }
 
-/// Share of samples whose error is within `k` sigma.
+/// Share of samples whose error is within `k` sigma. Counts over the shortest of the three slices
+/// but divides by `est.len()`; an empty `est` gives NaN.
 pub fn coverage(est: &[f64], truth: &[f64], sigma: &[f64], k: f64) -> f64 {
     let inside = est
         .iter()
@@ -52,7 +54,8 @@ fn ranks(v: &[f64]) -> Vec<f64> {
     r
 }
 
-/// Spearman rank correlation.
+/// Spearman rank correlation. Empty slices and a constant one give 0. Panics when `b` is shorter
+/// than `a`.
 pub fn spearman(a: &[f64], b: &[f64]) -> f64 {
     let (ra, rb) = (ranks(a), ranks(b));
     let n = a.len() as f64;

@@ -51,6 +51,9 @@ fn run(id: &str, y: &[f64], u: &[f64], first_row: usize) -> Run {
 /// Silverbox (`SNLS80mV.csv`): the training multisine (samples 40650..105712) in 6 runs (train
 /// 4, validation 2), the full arrow (100..40575) as the test run; the nominal
 /// `y'' = a0 y + a1 y' + b u + c` by least squares on smoothed derivatives of the training runs.
+/// Refuses a file that [`RecordSet::from_csv`] refuses (missing, or without the `u_V` and `y_V`
+/// columns) or that has fewer than 105,712 rows, and errs when the derivatives or the nominal's
+/// least squares fail.
 pub fn silverbox(path: &str) -> Result<Setup> {
     let tau = 1.0 / 610.3515625;
     let c = columns(path, &["u_V", "y_V"], tau)?;
@@ -115,7 +118,9 @@ pub fn silverbox(path: &str) -> Result<Setup> {
 
 /// EMPS: the estimation record in 6 runs (train 4, validation 2), the pulses record as the test
 /// run; input the motor force `force_N`, output the position `q_m`; nominal
-/// `q'' = -(Fv / M) q' + force / M` with the published M = 95.1089 kg, Fv = 203.5034 N s/m.
+/// `q'' = -(Fv / M) q' + force / M` with the published M = 95.1089 kg, Fv = 203.5034 N s/m. Refuses
+/// files that [`RecordSet::from_csv`] refuses (missing, or without the `q_m` and `force_N` columns)
+/// and runs that [`RecordSet::new`] refuses.
 pub fn emps(dir: &str) -> Result<Setup> {
     let cols = ["q_m", "force_N"];
     let tr = columns(&format!("{dir}/EMPS_train_DATA_EMPS.csv"), &cols, 1e-3)?;

@@ -139,13 +139,16 @@ struct Spec {
     single: bool,
 }
 
-/// Generates case `name` for `seed` at noise level `eta` (0.03 in the acceptance).
+/// Generates case `name` for `seed` at noise level `eta` (0.03 in the acceptance). Refuses what
+/// [`generate_scaled`] refuses.
 pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
     generate_scaled(name, seed, eta, 1.0)
 }
 
 /// As [`generate`], with the excitation amplitude multiplied by `scale` (the input offset is
-/// kept): a tank driven harder swings closer to empty, where the outflow law is steepest.
+/// kept): a tank driven harder swings closer to empty, where the outflow law is steepest. Refuses
+/// an unknown case name, and errs when the plant's simulation fails or [`RecordSet::new`] refuses
+/// the noisy samples (as a NaN `eta` or `scale` makes them).
 pub fn generate_scaled(name: &str, seed: u64, eta: f64, scale: f64) -> Result<Case> {
     let spec = match name {
         "coulomb" => Spec {
@@ -406,7 +409,8 @@ pub fn split() -> (Vec<usize>, Vec<usize>, Vec<usize>) {
 
 /// Mean free-run NRMSE of `m` on `runs` against the plant's noise-free output, each run started
 /// from the initial state fitted on the measurement ([`crate::simulate::initial_state`]), as
-/// every report does.
+/// every report does. NaN when `m` does not compile or a run is not one of the case's; a run whose
+/// simulation fails counts as infinite; no runs give 0.
 pub fn nrmse_vs_truth(case: &Case, m: &Model, runs: &[RunData]) -> f64 {
     let Ok(c) = m.compile() else { return f64::NAN };
     let v: Vec<f64> = runs
@@ -429,7 +433,8 @@ pub fn nrmse_vs_truth(case: &Case, m: &Model, runs: &[RunData]) -> f64 {
 /// floor: with the paper's noise (3 % of the 99th percentile of |y|) on a tank level that never
 /// goes negative, a perfect model still shows NRMSE ~0.1 against the measurement, so a nominal
 /// at 0.2-0.35 cannot shrink 3x however right the added effect is. Against the truth the ratio
-/// measures the model, which is what the acceptance asks about.
+/// measures the model, which is what the acceptance asks about. NaN when the discovery has no
+/// nominal or no final model.
 pub fn truth_ratio(case: &Case, d: &super::Discovery) -> f64 {
     match (&d.nominal_model, &d.final_model) {
         (Some(nom), Some(fin)) => {

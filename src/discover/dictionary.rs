@@ -48,7 +48,7 @@ pub fn num(x: f64) -> String {
 }
 
 /// User effects need a name each, and a name once (checked before any data are read by the CLI,
-/// and again by [`build`]).
+/// and again by [`build`]). Refuses an empty name and a name given twice.
 pub fn check_user_names(user: &[(String, String)]) -> Result<()> {
     let names: Vec<&str> = user.iter().map(|(n, _)| n.trim()).collect();
     if let Some(i) = names.iter().position(|n| n.is_empty()) {
@@ -68,7 +68,11 @@ pub fn check_user_names(user: &[(String, String)]) -> Result<()> {
 
 /// Builds the dictionary for an output of order `order` over `vars` (the `order` state names
 /// first, then the inputs), leaving out monomials already in the nominal model
-/// (`nominal_monomials`, as exponent lists over `vars`).
+/// (`nominal_monomials`, as exponent lists over `vars`). Refuses user effects that
+/// [`check_user_names`] refuses, one named like a built-in family, one whose expression does not
+/// parse over `vars`, and one already in the dictionary (or a term of the nominal model). Panics
+/// when `order` is 0 or above `vars.len()`, or when `scales.sd` has fewer than `order` entries,
+/// `scales.median` none, or `scales.p99` fewer than `vars.len()` (with inputs in `vars`).
 pub fn build(
     vars: &[String],
     order: usize,

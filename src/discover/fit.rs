@@ -37,7 +37,8 @@ impl Gram {
             rows: 0,
         }
     }
-    /// Adds rows `cols[j][i]` with labels `r[i]` for `i` in `range`.
+    /// Adds rows `cols[j][i]` with labels `r[i]` for `i` in `range`. Panics when `cols` has more
+    /// columns than the Gram, or (`range` not empty) `r` or a column is shorter than `range.end`.
     pub fn add_rows(&mut self, cols: &[Vec<f64>], r: &[f64], range: std::ops::Range<usize>) {
         let p = cols.len();
         for i in range {
@@ -57,6 +58,7 @@ impl Gram {
             }
         }
     }
+    /// Adds the rows of `o`. Panics when `o` has another number of columns.
     pub fn add(&mut self, o: &Gram) {
         self.g += &o.g;
         self.b += &o.b;
@@ -119,7 +121,9 @@ pub struct Problem {
 }
 
 impl Problem {
-    /// Fits the nominal changes and the effects `set` (indices among the effects).
+    /// Fits the nominal changes and the effects `set` (indices among the effects). `None` when a
+    /// normal system is not positive definite (its Cholesky factorisation fails). Panics when
+    /// `prior_sd` is shorter than `n_nom`, or `gram` lacks column `n_nom + k` for a `k` in `set`.
     pub fn fit(&self, gram: &Gram, set: &[usize]) -> Option<Solution> {
         let idx: Vec<usize> = (0..self.n_nom)
             .chain(set.iter().map(|&k| self.n_nom + k))
@@ -150,7 +154,8 @@ impl Problem {
     /// the penalised objective most, while the Bayesian information criterion (with the number of
     /// independent windows) improves. Once an effect is in, its aliases (partial correlation
     /// above [`ALIAS`] after the nominal columns) are never tried: two names for one signal are
-    /// one effect, not two.
+    /// one effect, not two. Panics when `gram` has fewer than `n_nom + n_eff` columns (with
+    /// `max_effects` above 0), and as [`Problem::fit`] does.
     pub fn forward(&self, gram: &Gram, n_eff: usize, max_effects: usize) -> Vec<usize> {
         let n_ind = (gram.rows as f64 / OVERLAP).max(2.0);
         let mut set: Vec<usize> = Vec::new();
@@ -192,7 +197,8 @@ impl Problem {
 }
 
 /// Correlation of columns `a` and `b` after projecting out the first `n_nom` columns, from a Gram
-/// matrix of centred-or-not columns (the projection uses the Gram algebra directly).
+/// matrix of centred-or-not columns (the projection uses the Gram algebra directly). Panics when
+/// `a` or `b` is not below the Gram's number of columns, or `n_nom` above it.
 pub fn partial_correlation(gram: &Gram, n_nom: usize, a: usize, b: usize) -> f64 {
     // Residual Gram of [a, b] after regressing on the nominal columns: G_xy - G_xN G_NN^-1 G_Ny.
     let g = &gram.g;

@@ -817,7 +817,14 @@ fn hot_windows(sim: &[f64], y: &[f64], m: usize, level: f64) -> Vec<(usize, usiz
     out
 }
 
-/// Runs the workflow.
+/// Runs the workflow. Refuses a nominal model that [`Model::validate`] refuses or that has more
+/// than one output, an empty train, validation or test list, lists that
+/// [`crate::identify::Split::new`] refuses, a channel the record set lacks, an output or input that
+/// is constant over the training runs, a confidence for a term the nominal lacks, runs too short
+/// for the derivatives or for the weak-form windows, a half width below 2, user effects that
+/// [`dictionary::build`] refuses or that repeat another on the data (or are not finite there); errs
+/// ([`Error::Numerical`]) when the weak-form normal equations are singular, and passes on errors of
+/// the derivatives and the simulations.
 ///
 /// ```no_run
 /// use ctsid::discover::{discover, Options};
@@ -1632,7 +1639,9 @@ impl Discovery {
 
     /// The augmented model file: the final model (the nominal's terms re-tuned or refined,
     /// each added effect as a term with its family as origin and its bootstrap interval) and
-    /// the `discovery` section. `nominal` must be the model the discovery was run with.
+    /// the `discovery` section. `nominal` must be the model the discovery was run with. Refuses a
+    /// discovery without a final model, a `nominal` other than the one it was run with, and an
+    /// augmented model that [`Model::validate`] refuses.
     pub fn augmented_model(&self, nominal: &Model) -> Result<Model> {
         let fm = self.final_model.as_ref().ok_or_else(|| {
             Error::param(

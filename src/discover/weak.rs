@@ -50,7 +50,9 @@ pub struct Windows {
 }
 
 impl Windows {
-    /// Windows of half-width `m` samples over a run of `n_samples`, for an equation of `order`.
+    /// Windows of half-width `m` samples over a run of `n_samples`, for an equation of `order`. A
+    /// run shorter than one window (`2 m + 1` samples) gets no windows; `m = 0` gives weights that
+    /// are not finite.
     pub fn new(n_samples: usize, m: usize, order: usize, tau: f64) -> Windows {
         let len = 2 * m + 1;
         let stride = (m / 2).max(1);
@@ -73,7 +75,8 @@ impl Windows {
         Windows { starts, len, w }
     }
 
-    /// `int psi^(k) x dt` over every window.
+    /// `int psi^(k) x dt` over every window. Panics (unless there are no windows) when `k` is
+    /// above the `order` they were built for, or `x` ends before the last window does.
     pub fn integrate(&self, k: usize, x: &[f64]) -> Vec<f64> {
         self.starts
             .iter()
@@ -90,7 +93,8 @@ impl Windows {
 
 /// The window half-width for a run set: about a third of the mean interval between zero
 /// crossings of the detrended output (so a window sees less than a half-period of the dominant
-/// motion), clamped to 6..=60 samples.
+/// motion), clamped to 6..=60 samples. Runs shorter than 3 samples are skipped; without any run
+/// left the width is 6.
 pub fn choose_half_width(ys: &[&[f64]]) -> usize {
     let mut crossings = 0usize;
     let mut samples = 0usize;

@@ -80,7 +80,9 @@ const B32: usize = kernel::SIMD_B;
 const B64: usize = kernel::SIMD_B;
 
 impl CpuEngine {
-    /// Builds the engine for `basis` over the feature rows `features` (names must match).
+    /// Builds the engine for `basis` over the feature rows `features` (names must match). Refuses
+    /// features that fail [`Features::check`], a number of variables other than the basis's, no
+    /// samples and a feature value that is not finite.
     pub fn new(basis: &Basis, features: &Features, options: CpuOptions) -> Result<CpuEngine> {
         features.check()?;
         if features.n_vars() != basis.n_vars() {

@@ -297,7 +297,13 @@ fn mib(b: u64) -> f64 {
 }
 
 impl GpuEngine {
-    /// Builds the engine for all candidates of `basis` on the rows of `features`.
+    /// Builds the engine for all candidates of `basis` on the rows of `features`. Refuses features
+    /// that fail [`Features::check`], a number of variables other than the basis's, no samples or
+    /// no candidates, more of either than u32 indexing allows (`u32::MAX / 64`), a feature value
+    /// that is not finite, and buffers beyond `options.memory_budget_bytes` or the adapter's
+    /// limits; [`Error::NoGpu`] when no Vulkan adapter (other than a software one, unless
+    /// `options.allow_cpu_adapter`) is found, [`Error::Gpu`] when the device cannot be opened, its
+    /// workgroup memory cannot hold the factor table, or the upload or setup fails.
     pub fn new(features: &Features, basis: &Basis, options: GpuOptions) -> Result<GpuEngine> {
         features.check()?;
         let n_s = features.n_samples;

@@ -34,7 +34,8 @@ pub struct Features {
 }
 
 impl Features {
-    /// One column per name, all of one length.
+    /// One column per name, all of one length. Refuses a number of names other than of columns, and
+    /// columns of different lengths.
     pub fn new(names: Vec<String>, columns: Vec<Vec<f64>>) -> Result<Features> {
         if names.len() != columns.len() {
             return Err(Error::InvalidData(format!(
@@ -60,7 +61,7 @@ impl Features {
     }
 
     /// The shape the engines rely on (the fields are public: a value built by hand is checked
-    /// where it is used).
+    /// where it is used). Refuses `data` whose length is not `names.len() * n_samples`.
     pub fn check(&self) -> Result<()> {
         if self.data.len() != self.names.len() * self.n_samples {
             return Err(Error::InvalidData(format!(
@@ -77,6 +78,8 @@ impl Features {
         self.names.len()
     }
 
+    /// Samples of variable `k`. Panics when `data` holds fewer than `(k + 1) * n_samples` values
+    /// (on a value that passes [`Features::check`]: `k` not below [`Features::n_vars`]).
     pub fn column(&self, k: usize) -> &[f64] {
         &self.data[k * self.n_samples..(k + 1) * self.n_samples]
     }

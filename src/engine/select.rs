@@ -93,7 +93,8 @@ pub struct Decision {
 pub const AUTO_MIN_PAIRS: u64 = 50_000_000;
 
 /// Decides which engine runs a problem of `n_samples x n_candidates`, given the adapters present
-/// (best first, as [`probe`] returns them). Pure.
+/// (best first, as [`probe`] returns them). Pure. Errs ([`Error::NoGpu`]) only where `gpu` is asked
+/// for and `adapters` is empty.
 ///
 /// ```
 /// use ctsid::engine::select::{decide, probe, EngineChoice, EngineKind};
@@ -161,7 +162,8 @@ pub fn probe() -> Vec<AdapterSummary> {
     }
 }
 
-/// [`decide`] with the adapters of this machine.
+/// [`decide`] with the adapters of this machine. Errs ([`Error::NoGpu`]) only where `gpu` is asked
+/// for and this machine has no adapter (or the build no `gpu` feature).
 pub fn choose(choice: EngineChoice, n_samples: usize, n_candidates: usize) -> Result<Decision> {
     let adapters = if choice == EngineChoice::Cpu {
         Vec::new()

@@ -414,7 +414,9 @@ fn screen(
 /// Tries the near misses of every output's fit (see the module docs); the completed model and
 /// the trials. `refined` says that `model` is already refined on `fit_runs` (else it is refined
 /// there first, so that a trial differs from it by its term alone); `noise[o]` is output o's
-/// measurement noise standard deviation; `smoothing` gives a new `sign` term its width.
+/// measurement noise standard deviation; `smoothing` gives a new `sign` term its width. Refuses
+/// what [`super::refine::free_run_nrmse`] refuses on `gate_runs`. Panics when `fits` has more
+/// entries than `model` has outputs (`fits[i]` is output `i`'s), or `noise` fewer.
 pub fn complete(
     (model, refined): (&Model, bool),
     fits: &[Fit],

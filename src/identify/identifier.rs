@@ -60,19 +60,21 @@ impl Identifier {
         self
     }
 
-    /// The largest monomial degree of the candidate terms (1..=12).
+    /// The largest monomial degree of the candidate terms (1..=12). Checked by [`Identifier::fit`].
     pub fn degree(mut self, d: usize) -> Self {
         self.settings.degree = d;
         self
     }
 
-    /// One fixed order for every output instead of the search.
+    /// One fixed order for every output instead of the search. Checked by [`Identifier::fit`]
+    /// (1..=[`super::MAX_ORDER`]).
     pub fn order(mut self, n: usize) -> Self {
         self.order = Some(n);
         self
     }
 
-    /// The candidate orders searched for every output (default 1 to 4).
+    /// The candidate orders searched for every output (default 1 to 4). Checked by
+    /// [`Identifier::fit`]: not empty, each in 1..=[`super::MAX_ORDER`], none twice.
     pub fn orders(mut self, candidates: impl IntoIterator<Item = usize>) -> Self {
         self.order = None;
         self.settings.orders = Orders::Search(candidates.into_iter().collect());
@@ -80,7 +82,8 @@ impl Identifier {
     }
 
     /// A named term beside the monomials, in the model file's expression language
-    /// (`sign(q_m_d1)`, `abs(y_d1)*y_d1`); may be given several times.
+    /// (`sign(q_m_d1)`, `abs(y_d1)*y_d1`); may be given several times. Checked by
+    /// [`Identifier::fit`]: it must parse, and not be given twice.
     pub fn term(mut self, expression: impl Into<String>) -> Self {
         self.settings.terms.push(expression.into());
         self
@@ -113,7 +116,8 @@ impl Identifier {
     }
 
     /// Checks the settings against the record set and identifies. Training, validation and
-    /// test runs come from `split` (see [`Split::from_lists`]).
+    /// test runs come from `split` (see [`Split::from_lists`]). Refuses what [`identify`] refuses,
+    /// settings that [`Settings::validate`] refuses among it.
     ///
     /// ```
     /// use ctsid::records::{RecordSet, Run};

@@ -177,6 +177,12 @@ impl Settings {
         }
     }
 
+    /// Checks every setting; the error names the first bad one. Refuses no outputs, a channel named
+    /// twice among the outputs and inputs, a `label_floor` that is negative or not finite, no
+    /// candidate order, an order outside 1..=[`MAX_ORDER`], a searched order listed twice, a number
+    /// of fixed orders other than of outputs, an `eta` below 1 or not finite, a degree outside
+    /// 1..=12, and a named term that does not parse over the variables of the highest order or is
+    /// given twice.
     pub fn validate(&self) -> Result<()> {
         if self.outputs.is_empty() {
             return Err(Error::param("output", "name at least one output"));
@@ -357,7 +363,8 @@ pub struct Identification {
 }
 
 impl Identification {
-    /// Overall free-run NRMSE per output over the simulated test runs (root of mean squares).
+    /// Overall free-run NRMSE per output over the simulated test runs (root of mean squares). NaN
+    /// for every output when no test run was simulated without error.
     pub fn test_nrmse(&self) -> Vec<f64> {
         let ok: Vec<&RunSimulation> = self
             .simulations
@@ -735,7 +742,11 @@ fn prepare<'a>(
     })
 }
 
-/// Runs the whole workflow on a record set with a checked split.
+/// Runs the whole workflow on a record set with a checked split. Refuses settings that
+/// [`Settings::validate`] refuses, a split that [`Split::check`] refuses, a channel the record set
+/// lacks, an output or input that is constant over the training runs, and a run too short for
+/// derivatives up to the highest order; errors of the derivatives, the regression, the refinement
+/// and the simulations on the way are passed on.
 pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Identification> {
     settings.validate()?;
     split.check(rs.runs.len())?;

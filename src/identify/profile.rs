@@ -16,7 +16,8 @@ pub const QUANTILES: [f64; 7] = [50.0, 80.0, 90.0, 95.0, 98.0, 99.0, 100.0];
 pub struct Profile(pub [f64; 7]);
 
 impl Profile {
-    /// Profile of residuals `err` against labels `label`.
+    /// Profile of residuals `err` against labels `label`. An empty `err` gives NaN throughout; a
+    /// `label` with median magnitude 0 (or empty) is taken as 1e-300.
     pub fn new(err: &[f64], label: &[f64]) -> Profile {
         let abs_e: Vec<f64> = err.iter().map(|e| e.abs()).collect();
         let abs_l: Vec<f64> = label.iter().map(|l| l.abs()).collect();

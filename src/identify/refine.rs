@@ -456,13 +456,17 @@ fn segments(
 /// run by minimising the simulation error on `runs` (see the module docs).
 ///
 /// Fails with a typed error when the data do not fit the model, or when the starting model
-/// cannot be simulated over the segments from the given states.
+/// cannot be simulated over the segments from the given states. Refuses a model that
+/// [`Model::validate`] refuses, no runs, a `segment_len` below 4, and a run whose channels, lengths
+/// (at least 2 samples), initial state or state guesses do not fit the model; errs
+/// ([`Error::Numerical`]) when the starting model cannot be simulated.
 pub fn refine(model: &Model, runs: &[RunData], opts: &RefineOptions) -> Result<Refined> {
     refine_holding(model, runs, opts, &[])
 }
 
 /// [`refine`] with the coefficients `fixed[k]` (in the model's term order, output by output)
 /// held at their values: a nominal term the user marked as known. Shorter masks free the rest.
+/// Refuses what [`refine`] refuses.
 pub fn refine_holding(
     model: &Model,
     runs: &[RunData],
@@ -707,7 +711,8 @@ fn set_std_errors(model: &mut Model, problem: &Problem, theta: &[f64], free: &[u
 /// of the NRMSE (RMS error over the measured output's standard deviation). Each run starts from
 /// the [`crate::simulate::initial_state`] on its first [`crate::simulate::INIT_WINDOW`] samples,
 /// as every report does, so that two models are compared on equal terms. A run that diverges
-/// makes the error infinite.
+/// makes the error infinite. Refuses a model that [`Model::validate`] refuses and a run whose
+/// channels, lengths (at least 2 samples) or initial state do not fit the model; no runs give NaN.
 pub fn free_run_nrmse(model: &Model, runs: &[RunData]) -> Result<Vec<f64>> {
     let compiled = model.compile()?;
     check_runs(&compiled, runs)?;
@@ -735,7 +740,8 @@ pub fn free_run_nrmse(model: &Model, runs: &[RunData]) -> Result<Vec<f64>> {
         .collect())
 }
 
-/// One number for a gate decision: the root mean square over outputs (NaN counts as infinite).
+/// One number for a gate decision: the root mean square over outputs (NaN counts as infinite). An
+/// empty slice gives 0.
 pub fn overall(e: &[f64]) -> f64 {
     let v = (e.iter().map(|x| x * x).sum::<f64>() / e.len().max(1) as f64).sqrt();
     if v.is_nan() {
@@ -783,7 +789,8 @@ impl Gated {
 /// runs (runs the refinement did not see) is lower than the starting model's.
 ///
 /// A refinement that fails (the starting model cannot be simulated) is not an error: the
-/// starting model is returned with the reason.
+/// starting model is returned with the reason. Refuses what [`free_run_nrmse`] refuses on either
+/// run list; errors of [`refine`] other than [`Error::Numerical`] are passed on.
 pub fn refine_gated(
     model: &Model,
     fit: &[RunData],

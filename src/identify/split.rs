@@ -3,19 +3,22 @@
 
 use crate::error::{Error, Result};
 
-/// Parses `0-24,30,a7` into a list of run ids (ranges expand over integers).
+/// Parses `0-24,30,a7` into a list of run ids (ranges expand over integers). Refuses a range that
+/// runs backwards, more than 10,000,000 names, and a list that names nothing.
 pub fn parse_runs(text: &str) -> Result<Vec<String>> {
     parse_list(text, "runs")
 }
 
-/// As [`parse_runs`], with `what` naming the setting in errors (`train`, `orders`, ...).
+/// As [`parse_runs`], with `what` naming the setting in errors (`train`, `orders`, ...). Refuses
+/// what [`parse_runs`] refuses.
 pub fn parse_list(text: &str, what: &str) -> Result<Vec<String>> {
     parse_list_at_most(text, what, 10_000_000)
 }
 
 /// [`parse_list`] of at most `most` names, counted before any range is expanded: a list of
 /// run ids need not name more runs than the record has, and `0-10000000` eight times over
-/// would otherwise take gigabytes before the first unknown id is found.
+/// would otherwise take gigabytes before the first unknown id is found. Refuses a range that runs
+/// backwards, more than `most` names, and a list that names nothing.
 pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<String>> {
     // (prefix, part, range) per item; ranges are checked and counted first.
     let mut items = Vec::new();
@@ -67,7 +70,8 @@ pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<Str
 
 /// Indices of the named runs in `ids`, with an error naming the first unknown one. A name
 /// that is not an id itself but the run a piece was cut from (`RUN` for `RUN#0`, `RUN#1`, ...:
-/// [`crate::records::RecordSet::segmented`]) names all its pieces.
+/// [`crate::records::RecordSet::segmented`]) names all its pieces. Refuses a name that is neither a
+/// run id (exactly or as a number) nor a run cut into pieces.
 pub fn resolve(names: &[String], ids: &[String], what: &str) -> Result<Vec<usize>> {
     let mut out = Vec::new();
     for n in names {
@@ -113,7 +117,8 @@ pub struct Split {
 
 impl Split {
     /// The split named by run lists as the CLI takes them (`"0-3"`, `"4,5"`, ids of the record
-    /// set, ranges over numeric ids); refuses unknown runs, empty lists and overlaps.
+    /// set, ranges over numeric ids); refuses unknown runs, empty lists and overlaps. Also refuses
+    /// a backward range, a list naming more runs than the record set has, and a run listed twice.
     ///
     /// ```
     /// use ctsid::records::{RecordSet, Run};
@@ -146,7 +151,9 @@ impl Split {
         Split::new(list(train, "train")?, validation, list(test, "test")?, &ids)
     }
 
-    /// Validates that the lists are non-empty where required and do not overlap.
+    /// Validates that the lists are non-empty where required and do not overlap. Refuses an empty
+    /// `train`, an empty (but given) `validation`, an index out of range of `ids`, a run in two
+    /// lists and a run listed twice in one.
     pub fn new(
         train: Vec<usize>,
         validation: Option<Vec<usize>>,
@@ -201,7 +208,7 @@ impl Split {
     }
 
     /// Every index names one of `n_runs` runs (the fields are public: a split built by hand is
-    /// checked again where it is used).
+    /// checked again where it is used). Refuses an index of `n_runs` or more.
     pub fn check(&self, n_runs: usize) -> Result<()> {
         for (name, list) in self.lists() {
             if let Some(r) = list.iter().find(|&&r| r >= n_runs) {
@@ -214,7 +221,9 @@ impl Split {
         Ok(())
     }
 
-    /// Deterministic k folds over the training runs (run i goes to fold i mod k).
+    /// Deterministic k folds over the training runs (run i goes to fold i mod k). `k` is clamped to
+    /// 2..=the number of training runs, and folds with an empty side are left out (one training run
+    /// gives none).
     pub fn folds(&self, k: usize) -> Vec<(Vec<usize>, Vec<usize>)> {
         let k = k.clamp(2, self.train.len().max(2));
         (0..k)

@@ -149,7 +149,8 @@ impl CompiledModel {
     pub fn orders(&self) -> &[usize] {
         &self.orders
     }
-    /// Offset of output `i` in the state vector.
+    /// Offset of output `i` in the state vector. Panics when `i` is not below
+    /// [`CompiledModel::n_outputs`].
     pub fn offset(&self, i: usize) -> usize {
         self.offsets[i]
     }
@@ -166,7 +167,8 @@ impl CompiledModel {
     }
 
     /// Replaces the coefficients (same order as [`CompiledModel::coefficients`]) without
-    /// recompiling: for refinement loops that simulate many coefficient vectors.
+    /// recompiling: for refinement loops that simulate many coefficient vectors. Refuses a slice
+    /// whose length is not the number of terms.
     pub fn set_coefficients(&mut self, c: &[f64]) -> Result<()> {
         let n: usize = self.terms.iter().map(|ts| ts.len()).sum();
         if c.len() != n {

@@ -64,7 +64,11 @@ pub struct Expr {
 }
 
 impl Expr {
-    /// Parses `text` over `vars` (the names of the entries of `z` in [`Expr::eval`]).
+    /// Parses `text` over `vars` (the names of the entries of `z` in [`Expr::eval`]). Refuses an
+    /// unexpected character, a malformed number, more than 2000 tokens, nesting deeper than 64
+    /// levels, an unknown function or variable, a missing `)` or operand, a `^` without a numeric
+    /// exponent or with one beyond 64 in magnitude, and text left after the expression (an empty
+    /// text among them).
     pub fn parse(text: &str, vars: &[String]) -> Result<Expr> {
         let toks = lex(text)?;
         let mut p = Parser {
@@ -92,13 +96,15 @@ impl Expr {
         &self.text
     }
 
-    /// Value at `z`; `sign` is exact.
+    /// Value at `z`; `sign` is exact. Panics when `z` is too short for a variable the expression
+    /// reads ([`Expr::variables`]); as many values as the `vars` it was parsed over are enough.
     pub fn eval(&self, z: &[f64]) -> f64 {
         eval(&self.root, z, None)
     }
 
     /// Value at `z` with `sign(x)` replaced by `x / sqrt(x^2 + eps[i]^2)` where `i` is the
     /// variable the argument depends on most directly (its first variable), for integration.
+    /// Panics as [`Expr::eval`] does; a missing or nonpositive `eps[i]` keeps that `sign` exact.
     pub fn eval_smooth(&self, z: &[f64], eps: &[f64]) -> f64 {
         eval(&self.root, z, Some(eps))
     }
@@ -153,7 +159,8 @@ impl Expr {
     }
 
     /// Whether the expression is a product of integer powers of single variables (a monomial of
-    /// the model file), with those exponents.
+    /// the model file), with those exponents. `None` for any other expression: a sum, a function, a
+    /// number other than 1, or a power that is not a positive integer power of one variable.
     pub fn monomial(&self) -> Option<Vec<(usize, u32)>> {
         fn walk(n: &Node, out: &mut Vec<(usize, u32)>) -> bool {
             match n {

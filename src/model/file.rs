@@ -80,6 +80,8 @@ impl Serialize for Term {
 }
 
 impl Term {
+    /// A monomial term; zero exponents are left out, and a name given twice keeps its last
+    /// exponent.
     pub fn new(exponents: &[(&str, u32)], coefficient: f64) -> Term {
         Term::monomial_term(
             exponents
@@ -117,6 +119,7 @@ impl Term {
     }
 
     /// The term of a basis monomial `code` over the variables `names` (the regression's features).
+    /// Panics when a variable of `code` is not below `names.len()`.
     pub fn from_code(code: Code, names: &[String], coefficient: f64) -> Term {
         let exps = code.exponents(names.len());
         Term::monomial_term(
@@ -181,7 +184,7 @@ impl OutputEquation {
     }
 
     /// The equation from basis codes and coefficients over the feature names `names`; zero
-    /// coefficients are dropped.
+    /// coefficients are dropped. Panics when a kept code has a variable not below `names.len()`.
     pub fn from_codes(
         name: &str,
         order: usize,
@@ -514,7 +517,12 @@ impl Model {
         }
     }
 
-    /// Parses and validates a model from JSON text; `path` only labels the error messages.
+    /// Parses and validates a model from JSON text; `path` only labels the error messages. Refuses
+    /// text that is not JSON or not an object, a missing or unknown `format` (other than [`FORMAT`]
+    /// and [`FORMAT_V1`]), an unknown key at any level, a missing or mistyped field, an output
+    /// without a `terms` list, a term with both `exponents` and `expression`, an exponent named
+    /// twice or not a non-negative integer, expressions, standard errors, intervals or origins in
+    /// a `/1` file, and all that [`Model::validate`] refuses.
     ///
     /// ```
     /// use ctsid::Model;
@@ -599,7 +607,8 @@ impl Model {
         Ok(model)
     }
 
-    /// Reads and validates a model file.
+    /// Reads and validates a model file. Refuses a path that is not a regular file of at most 256
+    /// MiB or is not UTF-8 text, and all that [`Model::from_json_str`] refuses.
     pub fn read(path: &str) -> Result<Model> {
         use std::io::Read;
         let io = |e: std::io::Error| Error::file(path, e);
@@ -611,6 +620,7 @@ impl Model {
     }
 
     /// Pretty JSON text (validated first: a model that could not be read back is not written).
+    /// Refuses a model that [`Model::validate`] refuses.
     pub fn to_json_string(&self) -> Result<String> {
         self.validate()?;
         serde_json::to_string_pretty(self).map_err(|e| Error::Model {
@@ -619,13 +629,21 @@ impl Model {
         })
     }
 
-    /// Writes the model file.
+    /// Writes the model file. Refuses a model that [`Model::validate`] refuses, and errors as
+    /// [`crate::util::write_atomic`] does.
     pub fn write(&self, path: &str) -> Result<()> {
         let text = self.to_json_string()?;
         crate::util::write_atomic(std::path::Path::new(path), (text + "\n").as_bytes())
     }
 
-    /// Checks names, orders, exponents and coefficients; the error names the term at fault.
+    /// Checks names, orders, exponents and coefficients; the error names the term at fault. Refuses
+    /// a format other than [`FORMAT`], a tau that [`crate::records::check_tau`] refuses, an unknown
+    /// section, no outputs, an order of 0 or above [`MAX_ORDER`], an empty name or a variable name
+    /// used twice, two equal terms in one output, a coefficient that is not finite, a `std_error`
+    /// that is negative or not finite, an `interval` that is not a finite [low, high], a term with
+    /// both exponents and an expression, an expression that does not parse, an exponent above
+    /// [`MAX_EXPONENT`], an unknown variable, a term above the model's degree, and a
+    /// `sign_smoothing` width of an unknown variable or one that is not finite and positive.
     pub fn validate(&self) -> Result<()> {
         self.validate_at("<memory>")
     }
@@ -808,12 +826,14 @@ impl Model {
         self.outputs.iter().map(|o| o.order).sum()
     }
 
-    /// Offset of output `i`'s derivative 0 in the state vector.
+    /// Offset of output `i`'s derivative 0 in the state vector. Panics when `i` is greater than
+    /// the number of outputs (`i` equal to it gives [`Model::state_dim`]).
     pub fn state_offset(&self, i: usize) -> usize {
         self.outputs[..i].iter().map(|o| o.order).sum()
     }
 
-    /// Compiles the (validated) model into an evaluator.
+    /// Compiles the (validated) model into an evaluator. Refuses a model that [`Model::validate`]
+    /// refuses.
     pub fn compile(&self) -> Result<CompiledModel> {
         self.validate()?;
         CompiledModel::new(self)

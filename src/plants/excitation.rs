@@ -46,7 +46,9 @@ impl ExcitationConfig {
 
     /// Checks the settings (the fields are public): a positive saturation level, a bounded
     /// bandwidth (the saturation corners are searched at a step set by it), finite gain and
-    /// offset.
+    /// offset. Refuses a `u_bar` that is not finite and positive, a `mu` that is negative (or NaN),
+    /// a `w_max` that is not positive, a `w_max + mu` above 1e6 rad/s, and a gain or offset that is
+    /// not finite.
     pub fn check(&self) -> crate::Result<()> {
         let ok = self.u_bar > 0.0
             && self.u_bar.is_finite()
@@ -98,6 +100,7 @@ pub struct Excitation {
 
 impl Excitation {
     /// The unsaturated signal `e^(-mu t) sum a_i sin(w_i t + psi_i)` and its time derivative.
+    /// Panics when `w` or `psi` is shorter than `a`.
     pub fn raw(&self, t: f64) -> (f64, f64) {
         let e = (-self.cfg.mu * t).exp();
         let (mut s, mut ds) = (0.0, 0.0);
@@ -176,7 +179,7 @@ pub struct ExcitationInput {
 }
 
 impl ExcitationInput {
-    /// `u'(t)` per channel.
+    /// `u'(t)` per channel. Panics when `du` is shorter than `channels`.
     pub fn derivative(&self, t: f64, du: &mut [f64]) {
         for (c, e) in self.channels.iter().enumerate() {
             du[c] = e.derivative(t);

@@ -84,6 +84,8 @@ impl MimoPlant {
 
     /// Derivatives `0..=4` of each output at state `x`, input `u`, input rate `du`:
     /// `[output][k]`. Orders 0..2 are states, 3 is the polynomial, 4 its time derivative.
+    /// Panics when `x` is shorter than the state, `x` and `u` together are longer than the state
+    /// and inputs, or `du` is shorter than `u`.
     pub fn derivatives(&self, x: &[f64], u: &[f64], du: &[f64]) -> Vec<Vec<f64>> {
         let c = &self.compiled;
         let n = c.n_state();

@@ -123,7 +123,8 @@ impl Plant {
         }
     }
 
-    /// The true equations when they are polynomial (the throttle only at Patm = 0).
+    /// The true equations when they are polynomial (the throttle only at Patm = 0). `None` for the
+    /// throttle at a nonzero ambient pressure.
     pub fn true_model(&self, tau: Option<f64>) -> Option<Model> {
         match &self.dynamics {
             Dynamics::Throttle(t) => t.true_model(tau),
@@ -151,7 +152,8 @@ impl Plant {
         }
     }
 
-    /// Exact derivatives `0..=order+1` of every output: `[output][k]`.
+    /// Exact derivatives `0..=order+1` of every output: `[output][k]`. Panics when `x`, `u` or
+    /// `du` is too short ([`Throttle::derivatives`], [`MimoPlant::derivatives`]).
     pub fn derivatives(&self, x: &[f64], u: &[f64], du: &[f64]) -> Vec<Vec<f64>> {
         match &self.dynamics {
             Dynamics::Throttle(t) => vec![t.derivatives(x, u[0], du[0]).to_vec()],
@@ -202,7 +204,10 @@ pub fn truth_options(run: usize) -> SimOptions {
 pub const MAX_DATASET_SAMPLES: usize = 1 << 30;
 
 /// Generates `n_runs` runs of `n_samples` samples at `tau` from rest, with noise level `noise`
-/// (the paper's eta, e.g. 0.03 for 3 %), deterministically from `seed`.
+/// (the paper's eta, e.g. 0.03 for 3 %), deterministically from `seed`. Refuses a tau that
+/// [`crate::records::check_tau`] refuses, an excitation that [`ExcitationConfig::check`] refuses,
+/// more than [`MAX_DATASET_SAMPLES`] samples in all, fewer than 2 samples per run and a `noise`
+/// that is negative or not finite; errs when a run's simulation fails.
 pub fn dataset(
     plant: &Plant,
     n_runs: usize,
@@ -279,7 +284,9 @@ pub fn dataset(
 }
 
 /// Writes runs as CSV: `run, t, <inputs>, <outputs>` and, with `truth`, `<output>_true` and the
-/// exact derivatives `<output>_dk_true` for k = 1..=order+1.
+/// exact derivatives `<output>_dk_true` for k = 1..=order+1. Errs when the file cannot be created
+/// or written. Panics when a run's input, output or (with `truth`) derivative series is shorter
+/// than its `t`.
 pub fn write_csv(plant: &Plant, runs: &[Run], path: &str, truth: bool) -> Result<()> {
     let io = |e: &dyn std::fmt::Display| Error::Io {
         path: path.into(),

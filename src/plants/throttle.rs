@@ -137,7 +137,7 @@ impl Throttle {
     }
 
     /// `y, y', y'', y''', y''''` at state `x` with input `u` and input rate `du`, exactly from the
-    /// equations (no differencing).
+    /// equations (no differencing). Panics when `x` has fewer than 3 entries.
     pub fn derivatives(&self, x: &[f64], u: f64, du: f64) -> [f64; 5] {
         let p = &self.p;
         let (y, y1, i) = (x[0], x[1], x[2]);

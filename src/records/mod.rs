@@ -14,7 +14,7 @@ use std::path::Path;
 pub const TAU_RTOL: f64 = 1e-6;
 
 /// The first sample that is not a finite number below [`MAX_MAGNITUDE`] in magnitude (one test
-/// for NaN, infinities and values too large to square).
+/// for NaN, infinities and values too large to square). `None` when every sample is usable.
 pub fn first_unusable(v: &[f64]) -> Option<usize> {
     v.iter()
         .position(|x| x.is_nan() || x.abs() >= MAX_MAGNITUDE)
@@ -168,7 +168,12 @@ pub struct CsvSpec {
 }
 
 impl RecordSet {
-    /// Builds a record set from in-memory runs (validated like a file).
+    /// Builds a record set from in-memory runs (validated like a file). Refuses a tau that
+    /// [`check_tau`] refuses, a channel name given twice, a run with another number of channels
+    /// than names or with channels of different lengths, a NaN, infinite or too large sample
+    /// ([`first_unusable`]), a channel whose largest magnitude is below [`MIN_MAGNITUDE`] (all
+    /// zeros aside) and a sample [`MAX_OUTLIER`] times further from its channel's median than
+    /// nearly all others.
     pub fn new(tau: f64, channel_names: Vec<String>, runs: Vec<Run>) -> Result<RecordSet> {
         check_tau(tau)?;
         if let Some((_, j)) = crate::util::first_repeat(&channel_names) {
@@ -257,7 +262,8 @@ impl RecordSet {
             .collect()
     }
 
-    /// Index of a channel by name, with an error that lists the available ones.
+    /// Index of a channel by name, with an error that lists the available ones. Refuses a name that
+    /// is no channel.
     pub fn channel_index(&self, name: &str) -> Result<usize> {
         self.channel_names
             .iter()
@@ -269,7 +275,8 @@ impl RecordSet {
             })
     }
 
-    /// Samples of one channel in run `run` (an index into `runs`).
+    /// Samples of one channel in run `run` (an index into `runs`). Refuses a name that is no
+    /// channel and a run index out of range.
     pub fn channel(&self, run: usize, name: &str) -> Result<&[f64]> {
         let c = self.channel_index(name)?;
         let r = self.runs.get(run).ok_or_else(|| {
@@ -285,7 +292,9 @@ impl RecordSet {
     }
 
     /// Refuses a channel that is constant over `runs`: as an output there is nothing to explain,
-    /// as an input it is indistinguishable from the constant term. `role` names it ("input").
+    /// as an input it is indistinguishable from the constant term. `role` names it ("input"). An
+    /// empty `runs` passes. Panics when an entry of `runs` is not below the number of runs, or
+    /// (with `runs` not empty) `channel` is not below the number of channels.
     pub fn require_varies(&self, channel: usize, runs: &[usize], role: &str) -> Result<()> {
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
         for &r in runs {
@@ -339,7 +348,8 @@ impl RecordSet {
     /// run shorter than `len` stays whole. Pieces are named `RUN#0`, `RUN#1`, ..., or `0`, `1`,
     /// ... when the set is the single run `0` a file without a run column gives;
     /// [`crate::identify::split::resolve`] lets a list name `RUN` for all its pieces, so run ids
-    /// may not contain `#` themselves. Each piece keeps its own start time and CSV rows.
+    /// may not contain `#` themselves. Each piece keeps its own start time and CSV rows. Refuses
+    /// `len` below 2 and a run id that contains `#`.
     pub fn segmented(&self, len: usize) -> Result<RecordSet> {
         if len < 2 {
             return Err(Error::param(
@@ -382,7 +392,8 @@ impl RecordSet {
         RecordSet::new(self.tau, self.channel_names.clone(), runs)
     }
 
-    /// Loads channels from a CSV file with a header row.
+    /// Loads channels from a CSV file with a header row. Refuses a path that is not a readable
+    /// regular file, and all that [`RecordSet::from_reader`] refuses.
     pub fn from_csv(path: impl AsRef<Path>, spec: &CsvSpec) -> Result<RecordSet> {
         let path = path.as_ref();
         let p = path.display().to_string();
@@ -392,7 +403,8 @@ impl RecordSet {
 
     /// Loads `columns` of a CSV file whose runs are told apart by `run_column` (the whole file
     /// is one run without it), sampled every `tau` seconds. [`RecordSet::from_csv`] takes a
-    /// time column instead.
+    /// time column instead. Refuses what [`RecordSet::from_csv`] refuses, a `tau` that
+    /// [`check_tau`] refuses among it.
     ///
     /// ```
     /// use ctsid::RecordSet;
@@ -422,7 +434,13 @@ impl RecordSet {
         Self::from_csv(path, &spec)
     }
 
-    /// Loads from any reader; `label` names the source in messages.
+    /// Loads from any reader; `label` names the source in messages. Refuses a tau that
+    /// [`check_tau`] refuses, neither a tau nor a time column, a run or time column that is also a
+    /// channel, no columns, an empty file, a column missing from the header or named twice in it, a
+    /// malformed row (a wrong number of fields), a cell that is not a finite number below
+    /// [`MAX_MAGNITUDE`], an empty run id, no data rows, times that do not increase within a run or
+    /// are not uniform, a time column with no run of two samples and no tau, a tau that disagrees
+    /// with the time column by more than [`TAU_RTOL`], and all that [`RecordSet::new`] refuses.
     pub fn from_reader<R: std::io::Read>(
         reader: R,
         label: &str,
@@ -660,7 +678,8 @@ fn finish(tau: Option<f64>, runs: Vec<Acc>, spec: &CsvSpec, label: &str) -> Resu
 pub const TAU_MIN: f64 = 1e-12;
 pub const TAU_MAX: f64 = 1e9;
 
-/// Checks a sampling period (seconds) against [TAU_MIN, TAU_MAX].
+/// Checks a sampling period (seconds) against [TAU_MIN, TAU_MAX]. NaN and infinities are refused
+/// too.
 pub fn check_tau(tau: f64) -> Result<()> {
     if (TAU_MIN..=TAU_MAX).contains(&tau) {
         Ok(())

@@ -20,7 +20,7 @@ impl Cholesky {
         self.rows.is_empty()
     }
 
-    /// Solves L x = b in place.
+    /// Solves L x = b in place. Panics when `b` is shorter than [`Cholesky::len`].
     pub fn solve_lower(&self, b: &mut [f64]) {
         for i in 0..self.rows.len() {
             let r = &self.rows[i];
@@ -29,7 +29,7 @@ impl Cholesky {
         }
     }
 
-    /// Solves L^T x = b in place.
+    /// Solves L^T x = b in place. Panics when `b` is shorter than [`Cholesky::len`].
     pub fn solve_upper(&self, b: &mut [f64]) {
         let k = self.rows.len();
         for i in (0..k).rev() {
@@ -41,14 +41,15 @@ impl Cholesky {
         }
     }
 
-    /// Solves G x = b in place.
+    /// Solves G x = b in place. Panics when `b` is shorter than [`Cholesky::len`].
     pub fn solve(&self, b: &mut [f64]) {
         self.solve_lower(b);
         self.solve_upper(b);
     }
 
     /// The pivot a new column would get: `g` holds its inner products with the current
-    /// columns, `c` its squared norm. Returns (w = L^{-1} g, pivot).
+    /// columns, `c` its squared norm. Returns (w = L^{-1} g, pivot). Panics when `g` is shorter
+    /// than [`Cholesky::len`].
     pub fn pivot(&self, g: &[f64], c: f64) -> (Vec<f64>, f64) {
         let mut w = g.to_vec();
         self.solve_lower(&mut w);
@@ -56,13 +57,15 @@ impl Cholesky {
         (w, (c - v).abs().sqrt())
     }
 
-    /// Appends a column with `w` and `pivot` from [`Cholesky::pivot`].
+    /// Appends a column with `w` and `pivot` from [`Cholesky::pivot`]. Nothing checks that `w` has
+    /// [`Cholesky::len`] entries; another length corrupts the factor.
     pub fn append(&mut self, mut w: Vec<f64>, pivot: f64) {
         w.push(pivot);
         self.rows.push(w);
     }
 
-    /// Removes column/row `i`, restoring the triangular shape with Givens rotations.
+    /// Removes column/row `i`, restoring the triangular shape with Givens rotations. Panics when
+    /// `i` is not below [`Cholesky::len`].
     pub fn delete(&mut self, i: usize) {
         self.rows.remove(i);
         let k = self.rows.len();
@@ -81,7 +84,8 @@ impl Cholesky {
     }
 
     /// Factorises a dense symmetric positive definite matrix (row-major k x k); `None` when a
-    /// pivot falls below `tol` times the largest diagonal element.
+    /// pivot falls below `tol` times the largest diagonal element. A NaN or infinite pivot gives
+    /// `None` too. Panics when `g` is shorter than `k * k`.
     pub fn factor(g: &[f64], k: usize, tol: f64) -> Option<Cholesky> {
         let dmax = (0..k).map(|i| g[i * k + i]).fold(0.0f64, f64::max);
         let mut ch = Cholesky::default();

@@ -109,7 +109,7 @@ macro_rules! setter {
 }
 
 impl RegressionBuilder {
-    setter!(/// Largest monomial degree d (0..=12).
+    setter!(/// Largest monomial degree d (1..=12).
         degree: usize);
     setter!(/// LARS or LassoLars (default).
         method: Method);
@@ -166,7 +166,11 @@ impl RegressionBuilder {
         self
     }
 
-    /// Checks every setting; the error names the first bad one.
+    /// Checks every setting; the error names the first bad one. Refuses a degree outside 1..=12, a
+    /// `max_terms` or `max_steps` of 0, `effective_samples` below 2 or not finite, an `alpha_min`,
+    /// `epsilon` or `rss_floor` that is negative or not finite, an `epsilon` of 1 or more, an
+    /// `ebic_gamma` outside [0, 1], a `collinearity_tol` outside (0, 1), a `refresh_tol` that is
+    /// not finite and positive, and a `max_candidates` of 0.
     pub fn build(self) -> Result<Regression> {
         crate::basis::check_degree(self.degree)?;
         if self.max_terms == 0 {
@@ -400,7 +404,9 @@ impl Model {
         s
     }
 
-    /// Evaluates the model on feature rows (by the model's feature names).
+    /// Evaluates the model on feature rows (by the model's feature names). Refuses features that
+    /// fail [`Features::check`], a term whose expression does not parse over the feature names, and
+    /// a term in a variable the features lack.
     pub fn predict(&self, features: &Features) -> Result<Vec<f64>> {
         features.check()?;
         let mut out = vec![0.0; features.n_samples];
@@ -449,7 +455,8 @@ impl Regression {
         &self.path
     }
 
-    /// Builds the basis and the engine chosen by the settings, then fits.
+    /// Builds the basis and the engine chosen by the settings, then fits. Refuses what
+    /// [`Regression::fit_with_columns`] refuses.
     pub fn fit(
         &self,
         features: &Features,
@@ -462,7 +469,13 @@ impl Regression {
 
     /// [`Regression::fit`] with named candidate columns after the monomials (any engine sweeps
     /// the monomials; the named columns are swept on the CPU beside it, see
-    /// [`crate::engine::WithColumns`]).
+    /// [`crate::engine::WithColumns`]). Refuses feature names that [`Basis::new`] refuses (too many
+    /// candidates among them), features that fail [`Features::check`], with no samples or with a
+    /// value that is not finite, fewer than [`MIN_SAMPLES`] samples, a label of another length or
+    /// not finite, weights of another length, negative, not finite or all zero, a named column of
+    /// another length, a GPU asked for where there is none, f32 sweeps asked for (GPU or
+    /// [`Precision::F32`]) that the label would overflow, and a coefficient beyond f64's range in
+    /// the data's units; errs ([`Error::Numerical`]) when the chosen terms are linearly dependent.
     pub fn fit_with_columns(
         &self,
         features: &Features,
@@ -576,7 +589,10 @@ impl Regression {
         Ok(model)
     }
 
-    /// Fits with a given engine over `basis` (the engine's candidates must be that basis, in order).
+    /// Fits with a given engine over `basis` (the engine's candidates must be that basis, in
+    /// order). Refuses an engine whose number of candidates is not `basis.len()`, and, as
+    /// [`Regression::fit_with_columns`] does, fewer than [`MIN_SAMPLES`] samples, a bad label or
+    /// bad weights and linearly dependent chosen terms.
     pub fn fit_with_engine(
         &self,
         basis: &Basis,

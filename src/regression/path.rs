@@ -147,6 +147,7 @@ pub struct ColumnStore {
 }
 
 impl ColumnStore {
+    /// `None` when `id` was never stored.
     pub fn position(&self, id: usize) -> Option<usize> {
         self.ids.iter().position(|&j| j == id)
     }
@@ -385,7 +386,11 @@ fn begin<'a>(
     Ok(Ok(Begun { sd, path, y_tilde }))
 }
 
-/// Computes the path of `y` over every candidate of `engine` (see the module docs).
+/// Computes the path of `y` over every candidate of `engine` (see the module docs). Refuses an
+/// `alpha_min` that is negative or not finite, a `max_terms` of 0, a label whose length is not the
+/// engine's sample count or that is not finite, and weights of another length, negative, not finite
+/// or all zero; errs ([`Error::Numerical`]) when the active system becomes singular, and with
+/// whatever error the engine gives.
 pub fn lars_path(
     engine: &mut dyn SweepEngine,
     y: &[f64],
@@ -398,7 +403,7 @@ pub fn lars_path(
 /// [`lars_path`] with a monitor called with the path and the index of each new breakpoint
 /// (its support is final when it is called); returning `true` stops the path there with
 /// [`StopReason::NoImprovement`]. Model selection uses it to stop computing breakpoints it
-/// can no longer choose.
+/// can no longer choose. Refuses what [`lars_path`] refuses.
 pub fn lars_path_monitored(
     engine: &mut dyn SweepEngine,
     y: &[f64],

@@ -27,7 +27,7 @@ use super::cholesky::Cholesky;
 use super::path::Path;
 use crate::error::{Error, Result};
 
-/// ln C(p, k).
+/// ln C(p, k). Infinity when `k > p`.
 pub fn ln_binom(p: usize, k: usize) -> f64 {
     if k > p {
         return f64::INFINITY;
@@ -45,7 +45,8 @@ pub fn ebic(n: usize, rss: f64, k: usize, p: usize, gamma: f64, floor: f64) -> f
 }
 
 /// eBIC of every breakpoint's support (None where the refit is singular), in path order.
-/// `n` is eBIC's sample count (the rows, or fewer effective samples).
+/// `n` is eBIC's sample count (the rows, or fewer effective samples). Panics on a path edited by
+/// hand whose breakpoints name a candidate that `path.store` does not hold.
 pub fn path_ebic(path: &Path, n: usize, p: usize, gamma: f64, rss_floor: f64) -> Vec<Scored> {
     let mut scorer = EbicScorer::new(n, p, gamma, rss_floor);
     (0..path.breakpoints.len())
@@ -88,7 +89,8 @@ impl EbicScorer {
         }
     }
 
-    /// eBIC and OLS RSS of breakpoint `b`'s support (None where the refit is singular).
+    /// eBIC and OLS RSS of breakpoint `b`'s support (None where the refit is singular). Panics
+    /// when `b` is not below `path.breakpoints.len()`, and as [`path_ebic`] does.
     pub fn score(&mut self, path: &Path, b: usize) -> Scored {
         let floor = (self.rss_floor * path.y_norm).powi(2);
         let mut key: Vec<usize> = path.breakpoints[b].active.clone();
@@ -175,7 +177,10 @@ pub struct LeastSquares {
     pub removal_cost: Vec<f64>,
 }
 
-/// Solves min ||y - X b|| for the given columns; errors when they are rank deficient.
+/// Solves min ||y - X b|| for the given columns; errors when they are rank deficient. Refuses more
+/// columns than samples and a column that is zero everywhere or holds a NaN; no columns give the
+/// plain sum of squares of `y`. Every column must hold `y.len()` values: another length gives a
+/// wrong fit, or a panic when the column is shorter.
 pub fn least_squares(cols: &[Vec<f64>], y: &[f64]) -> Result<LeastSquares> {
     let k = cols.len();
     let n = y.len();

@@ -84,6 +84,7 @@ impl Comparison<'_> {
 }
 
 /// The figure of measured and simulated outputs, the error below and, on long records, the zoom.
+/// Panics when `c.measured` or a free run in `c.simulated` is shorter than `c.t`.
 pub fn comparison_figure(c: &Comparison) -> String {
     let errors = c.errors();
     let mut traces = vec![Series {
@@ -207,7 +208,9 @@ impl CorrelationData {
 }
 
 /// Writes both figures for the first `limit` runs of each output and returns the summary as
-/// Markdown: per run and output the RMS, NRMSE, fit, error mean and the residual tests.
+/// Markdown: per run and output the RMS, NRMSE, fit, error mean and the residual tests. Errs when a
+/// figure cannot be written ([`write_file`]); a comparison without a free run is left out. Panics
+/// as [`comparison_figure`] does, on the comparisons it draws.
 pub fn write_comparisons(dir: &Path, comparisons: &[Comparison], limit: usize) -> Result<String> {
     let mut table = super::Table::new(&[
         "run",
@@ -273,7 +276,10 @@ fn summary_row(c: &Comparison, sim: &[f64], r: &Resid, plots: String) -> Vec<Str
 
 /// [`write_comparisons`] for free runs of one model on runs of a record set: `runs` holds
 /// (index of the run in `records`, simulated outputs in the order of `outputs`); channels are
-/// found by name. Times are the record's own (`t0 + k tau`).
+/// found by name. Times are the record's own (`t0 + k tau`). Refuses an output or input that is not
+/// a channel of `records`, and errs as [`write_comparisons`] does. Panics when an index in `runs`
+/// is not below the number of runs of `records`, a run's simulation has fewer outputs than
+/// `outputs`, or (on a drawn run) a simulated output is shorter than its run.
 pub fn write_record_report(
     dir: &Path,
     records: &RecordSet,

@@ -10,7 +10,8 @@ use crate::error::{Error, Result};
 use std::path::Path;
 
 /// Writes a text file, creating the folder, with an error naming the path. Characters of `name`
-/// other than ASCII letters, digits and `._-` become `_` (names carry run ids from the data).
+/// other than ASCII letters, digits and `._-` become `_` (names carry run ids from the data). Errs
+/// when the folder cannot be created or the file cannot be written.
 pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir.display().to_string(), e))?;
     // Names carry run ids and channel names from the data: keep them inside `dir`.

@@ -50,7 +50,8 @@ impl Correlation {
             .count()
     }
 
-    /// Lags tested (zero excluded for an autocorrelation).
+    /// Lags tested (zero excluded for an autocorrelation). An autocorrelation with no lags
+    /// overflows: debug builds panic, release builds return `usize::MAX`.
     pub fn tested(&self) -> usize {
         self.lags.len() - usize::from(self.auto)
     }
@@ -105,7 +106,8 @@ fn correlate(a: &[f64], b: &[f64], lags: &[i64]) -> Vec<f64> {
 
 /// Residual analysis of `error` (simulated minus measured) against `inputs` (name, samples), at
 /// `lags` lags each side spaced `stride` samples apart (the window at most a quarter of the
-/// samples).
+/// samples). Constant signals give correlations of 0 (not NaN), and an input of another length is
+/// correlated over the samples both have.
 pub fn analyse(error: &[f64], inputs: &[(&str, &[f64])], lags: usize, stride: usize) -> Resid {
     let n = error.len();
     let stride = stride.max(1);

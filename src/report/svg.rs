@@ -110,13 +110,14 @@ const TITLE_H: f64 = 36.0;
 const PANEL_TOP: f64 = 22.0;
 const PANEL_BOTTOM: f64 = 44.0;
 
-/// Renders one panel as an SVG document (the common case).
+/// Renders one panel as an SVG document (the common case). Panics as [`figure`] does.
 pub fn line_plot(title: &str, xlabel: &str, ylabel: &str, series: &[Series]) -> String {
     let panel = Panel::lines("", xlabel, ylabel, series.to_vec()).height(384.0);
     figure(title, &[panel])
 }
 
-/// Renders panels stacked top to bottom under a figure title as an SVG document.
+/// Renders panels stacked top to bottom under a figure title as an SVG document. Panics when a
+/// series' `y`, or a bound of its band, is shorter than its `x`.
 pub fn figure(title: &str, panels: &[Panel]) -> String {
     let h = TITLE_H + panels.iter().map(|p| p.height).sum::<f64>();
     let mut s = String::new();

@@ -34,7 +34,7 @@ impl DenseEngine {
         })
     }
 
-    /// Builds from columns of equal length.
+    /// Builds from columns of equal length. Refuses columns of different lengths.
     pub fn from_columns(columns: &[Vec<f64>]) -> Result<DenseEngine> {
         let n = columns.first().map_or(0, Vec::len);
         if columns.iter().any(|c| c.len() != n) {
