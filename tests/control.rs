@@ -347,7 +347,7 @@ fn the_command_prints_the_design_and_writes_the_trace() {
     );
     let text = std::fs::read_to_string(&trace).unwrap();
     assert!(
-        text.starts_with("t,setpoint,y,y_measured,y_hat,y_d1_hat,u\n"),
+        text.starts_with("t,reference,y,y_measured,y_hat,y_d1_hat,u\n"),
         "{text}"
     );
     assert_eq!(

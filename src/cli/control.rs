@@ -1,13 +1,16 @@
 //! `ctsid control MODEL.json --setpoint R --from Y0 [--bandwidth W] [--observer-speed F]
 //! [--tau T] [--plant PLANT.json] [--noise SD] [--seed S] [--duration T] [--u-min A --u-max B]
-//! [-o TRACE.csv] [--report DIR]`
+//! [-o TRACE.csv] [--report DIR] [--reference FILE.csv|steps] [--law placement|profile]
+//! [--sigma S] [--block K] [--observer linearised|chain]`
 //!
 //! Designs an observer and state feedback with integral action on a one-output, one-input model
 //! ([`ctsid::control`]), prints the operating point, the linearisation's poles, the gains and
 //! the placed poles, then runs the digital loop for a setpoint step from rest at `--from` around
 //! the plant (the model itself, or `--plant`, another model file: say the design was made on a
 //! simple model and the plant is a richer one) and prints the step figures. `-o` writes the
-//! trace (t, setpoint, y, measured y, estimates, u).
+//! trace (t, reference, y, measured y, estimates, u). With `--reference`, `--law profile` or
+//! `--block`, the loop follows the reference under the chosen law instead
+//! ([`ctsid::control::tracking`]) and prints the tracking figures.
 
 use clap::Args;
 use ctsid::control::{self, DesignOptions, Scenario};
@@ -61,9 +64,43 @@ pub struct ControlArgs {
     #[arg(short = 'o', long)]
     pub output: Option<PathBuf>,
     /// Write plots into this folder: step.svg (output, measured, designed response, setpoint)
-    /// and input.svg.
+    /// and input.svg; with a reference, tracking.svg (reference, output, tracking error,
+    /// observer error, input).
     #[arg(long)]
     pub report: Option<PathBuf>,
+    /// The control law: `placement` (state feedback with integral action, poles at
+    /// -bandwidth) or `profile` (the source paper's exponential-profile law: the input whose
+    /// predicted y^(n) follows an exponential profile of rates sigma, 2 sigma, ..., n sigma).
+    #[arg(long, value_enum, default_value_t = LawArg::Placement)]
+    pub law: LawArg,
+    /// Rate of the profile law's slowest exponential, in 1/s (default: the bandwidth).
+    #[arg(long, allow_hyphen_values = true)]
+    pub sigma: Option<f64>,
+    /// Decide the input every K samples and hold it in between (the paper's blocking kappa).
+    #[arg(long, default_value_t = 1)]
+    pub block: usize,
+    /// A reference to follow instead of one step: a CSV file of (time s, reference), or
+    /// `steps` for the built-in scenario after the paper's (steps and ramps between --from and
+    /// --setpoint over --duration, 5 s by default).
+    #[arg(long)]
+    pub reference: Option<String>,
+    /// The observer's gains: `linearised` (poles placed on the model's linearisation) or
+    /// `chain` (the paper's: a chain of integrators with every pole at -observer-speed x
+    /// bandwidth, the model as the known leading term).
+    #[arg(long, value_enum, default_value_t = ObserverArg::Linearised)]
+    pub observer: ObserverArg,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LawArg {
+    Placement,
+    Profile,
+}
+
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ObserverArg {
+    Linearised,
+    Chain,
 }
 
 pub fn run(a: ControlArgs) -> Result<()> {
@@ -99,7 +136,11 @@ pub fn run(a: ControlArgs) -> Result<()> {
     let mut o = DesignOptions::new(a.setpoint, tau);
     o.bandwidth = a.bandwidth;
     o.observer_speed = a.observer_speed;
-    let d = control::design(&model, &o)?;
+    let mut d = control::design(&model, &o)?;
+    if a.observer == ObserverArg::Chain {
+        d.l = control::chain_observer_gains(d.order, d.observer_speed * d.bandwidth);
+    }
+    let tracking = tracking_settings(&a, &d)?;
     let plant_model = match &a.plant {
         Some(p) => {
             let m = Model::read(&p.to_string_lossy())?;
@@ -127,8 +168,12 @@ pub fn run(a: ControlArgs) -> Result<()> {
         None => model.clone(),
     };
     let (compiled, x0, u0) = control::model_at_rest(&plant_model, a.from, d.u_star)?;
+    let default_duration = match &tracking {
+        Some(tk) if a.reference.is_some() => tk.reference.end().max(10.0 * d.tau),
+        _ => control::default_duration(&d),
+    };
     let scenario = Scenario {
-        duration: a.duration.unwrap_or(control::default_duration(&d)),
+        duration: a.duration.unwrap_or(default_duration),
         noise_sd: a.noise,
         seed: a.seed,
         u_limits: a.u_min.zip(a.u_max),
@@ -181,8 +226,18 @@ pub fn run(a: ControlArgs) -> Result<()> {
         gains(&d.k),
         d.k_i
     )?;
-    outln!("observer gains L (on {y} - {y}_hat): {}", gains(&d.l))?;
+    outln!(
+        "observer gains L (on {y} - {y}_hat, {}): {}",
+        match a.observer {
+            ObserverArg::Linearised => "placed on the linearisation",
+            ObserverArg::Chain => "chain of integrators",
+        },
+        gains(&d.l)
+    )?;
     outln!("")?;
+    if let Some(tk) = tracking {
+        return run_tracking(&a, &d, &plant, &scenario, &tk, &names);
+    }
     // The design is printed before the loop runs: when the loop fails, it explains why.
     let tr = control::run(&d, &plant, &scenario)?;
     let m = control::metrics(&tr, &d, a.from)?;
@@ -292,7 +347,7 @@ pub fn run(a: ControlArgs) -> Result<()> {
         );
     }
     if let Some(path) = &a.output {
-        write_trace(path, &tr, d.setpoint, &names)?;
+        write_trace(path, &tr, &names)?;
         eprintln!("wrote {}", path.display());
     }
     if let Some(dir) = &a.report {
@@ -307,23 +362,18 @@ pub fn run(a: ControlArgs) -> Result<()> {
 /// sampled sixth-order loops the design cannot hold 11-23 %).
 const DESIGN_STRAY: f64 = 5.0;
 
-fn write_trace(
-    path: &std::path::Path,
-    tr: &control::Trace,
-    setpoint: f64,
-    names: &[String],
-) -> Result<()> {
+fn write_trace(path: &std::path::Path, tr: &control::Trace, names: &[String]) -> Result<()> {
     let io = |e: std::io::Error| Error::file(path.display().to_string(), e);
     let mut w = ctsid::util::AtomicFile::create(path)?;
     let hats: Vec<String> = names.iter().map(|n| format!("{n}_hat")).collect();
-    writeln!(w, "t,setpoint,y,y_measured,{},u", hats.join(",")).map_err(io)?;
+    writeln!(w, "t,reference,y,y_measured,{},u", hats.join(",")).map_err(io)?;
     for i in 0..tr.t.len() {
         let est: Vec<String> = tr.estimate.iter().map(|e| format!("{:e}", e[i])).collect();
         writeln!(
             w,
             "{},{},{:e},{:e},{},{:e}",
             tr.t[i],
-            setpoint,
+            tr.reference[i],
             tr.y[i],
             tr.y_measured[i],
             est.join(","),
@@ -364,4 +414,90 @@ fn write_plots(
         }],
     );
     write_file(dir, "input.svg", &input)
+}
+
+/// The tracking run the flags ask for (`None`: the classic setpoint step under the pole
+/// placement, with its design checks).
+fn tracking_settings(a: &ControlArgs, d: &control::Design) -> Result<Option<control::Tracking>> {
+    let law = match a.law {
+        LawArg::Placement => {
+            if a.sigma.is_some() {
+                return Err(Error::param(
+                    "sigma",
+                    "is a setting of --law profile; the placement law takes --bandwidth",
+                ));
+            }
+            control::Law::PolePlacement
+        }
+        LawArg::Profile => control::Law::Profile(control::ProfileLaw {
+            sigma: a.sigma.unwrap_or(d.bandwidth),
+        }),
+    };
+    let reference = match a.reference.as_deref() {
+        None => control::Reference::constant(a.setpoint),
+        Some("steps") => {
+            control::Reference::steps_and_ramps(a.from, a.setpoint, a.duration.unwrap_or(5.0))?
+        }
+        Some(path) => control::Reference::read_csv(std::path::Path::new(path))?,
+    };
+    let tk = control::Tracking {
+        reference,
+        law,
+        block: a.block,
+    };
+    tk.check()?;
+    let classic = a.reference.is_none() && a.law == LawArg::Placement && a.block == 1;
+    Ok((!classic).then_some(tk))
+}
+
+/// Runs and reports a tracking loop (a reference, the profile law or blocking).
+fn run_tracking(
+    a: &ControlArgs,
+    d: &control::Design,
+    plant: &control::Plant,
+    scenario: &Scenario,
+    tk: &control::Tracking,
+    names: &[String],
+) -> Result<()> {
+    let tr = control::track(d, plant, scenario, tk)?;
+    let m = control::tracking_metrics(&tr.t, &tr.y, &tr.u, &tk.reference, scenario.u_limits);
+    let law = match tk.law {
+        control::Law::PolePlacement => "pole placement".to_string(),
+        control::Law::Profile(p) => format!("exponential profile (sigma {} 1/s)", num4(p.sigma)),
+    };
+    let plant_name = a
+        .plant
+        .as_ref()
+        .map_or("the model itself".to_string(), |p| p.display().to_string());
+    let reference = match a.reference.as_deref() {
+        None => format!("step {} -> {}", short(a.from), short(a.setpoint)),
+        Some("steps") => "the built-in steps and ramps".to_string(),
+        Some(p) => p.to_string(),
+    };
+    outln!(
+        "{reference} around {plant_name}, law: {law}, input decided every {} sample(s), {} s, noise sd {}:",
+        tk.block,
+        num4(scenario.duration),
+        short(a.noise)
+    )?;
+    outln!(
+        "{}",
+        control::tracking::describe(&m, tr.t.len(), tr.decision_seconds)
+    )?;
+    if let Some(path) = &a.output {
+        write_trace(path, &tr, names)?;
+        eprintln!("wrote {}", path.display());
+    }
+    if let Some(dir) = &a.report {
+        let title = format!("{}: {reference}, {law}", d.output);
+        let svg = control::tracking::tracking_plot(&tr, &title, &d.output, &d.input);
+        ctsid::report::write_file(dir, "tracking.svg", &svg)?;
+        let text = format!(
+            "# {title}\n\n{}\n\n![tracking](tracking.svg)\n",
+            control::tracking::describe(&m, tr.t.len(), tr.decision_seconds)
+        );
+        ctsid::report::write_file(dir, "report.md", &text)?;
+        eprintln!("plots written to {}", dir.display());
+    }
+    Ok(())
 }

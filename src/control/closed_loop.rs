@@ -1,5 +1,6 @@
 //! The designed controller around a plant: a digital loop sampled at tau, and step metrics.
 
+use super::tracking::{Law, ProfileDecider, Tracking};
 use super::Design;
 use crate::error::{Error, Result};
 use crate::model::{CompiledModel, Model};
@@ -41,6 +42,11 @@ pub struct Trace {
     pub estimate: Vec<Vec<f64>>,
     /// The input applied from this sample to the next.
     pub u: Vec<f64>,
+    /// The reference at each sample.
+    pub reference: Vec<f64>,
+    /// Mean wall-clock time of one decision of the law, in seconds (a measurement of this
+    /// machine, not part of the result).
+    pub decision_seconds: f64,
 }
 
 /// Step-response figures of a trace, against a step from `from` to the setpoint.
@@ -267,9 +273,15 @@ impl System for Loop<'_> {
 /// Each sample: measure (plus noise), compute the input from the observer's state and the
 /// integral of the error, hold it over the sample; the plant and the observer (the design's
 /// nonlinear model corrected by its gain towards the held measurement) advance together with
-/// the crate's stiff integrator ([`crate::simulate::simulate`]).
+/// the crate's stiff integrator ([`crate::simulate::simulate`]). [`track`] with
+/// [`Tracking::step`].
 pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
-    check(d)?;
+    track(d, plant, s, &Tracking::step(d.setpoint))
+}
+
+/// Checks a scenario's duration, noise and input limits (the limits must hold the design's
+/// steady input where the law needs it: the pole placement).
+fn check_scenario(d: &Design, s: &Scenario, law: &Law) -> Result<()> {
     if !(s.duration.is_finite() && s.duration > 0.0) {
         return Err(Error::param(
             "duration",
@@ -281,10 +293,10 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
         if !(lo.is_finite() && hi.is_finite() && lo < hi) {
             return Err(Error::param(
                 "u-min/u-max",
-                format!("[{lo}, {hi}]; give finite limits, low < high"),
+                format!("[{lo}, {hi}]; give finite limits, low < high (an empty input range holds nothing)"),
             ));
         }
-        if !(lo..=hi).contains(&d.u_star) {
+        if matches!(law, Law::PolePlacement) && !(lo..=hi).contains(&d.u_star) {
             return Err(Error::param(
                 "u-min/u-max",
                 format!(
@@ -294,6 +306,10 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
             ));
         }
     }
+    Ok(())
+}
+
+fn check_plant(plant: &Plant) -> Result<()> {
     let sys = plant.system;
     if sys.n_inputs() != 1 || plant.output >= sys.dim() || plant.x0.len() != sys.dim() {
         return Err(Error::param(
@@ -313,6 +329,11 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
             "the initial state or input is not finite",
         ));
     }
+    Ok(())
+}
+
+/// The number of samples of a run, checked against [`MAX_SAMPLES`] and a floor of 10.
+fn sample_count(d: &Design, s: &Scenario) -> Result<usize> {
     let samples = (s.duration / d.tau).round() + 1.0;
     if samples > MAX_SAMPLES as f64 {
         return Err(Error::param(
@@ -332,7 +353,74 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
             ),
         ));
     }
-    let samples = samples as usize;
+    Ok(samples as usize)
+}
+
+/// The law's state between samples: the pole placement's integral of the error and its steady
+/// input at the current reference; the profile law's decider.
+enum Controller<'m> {
+    Placement {
+        q: f64,
+        /// (reference, steady input there): the last one computed.
+        u_star: (f64, f64),
+    },
+    Profile(ProfileDecider<'m>),
+}
+
+impl Controller<'_> {
+    /// The input before limits, from the observer's state `xh` and the reference (r, r').
+    fn raw(&mut self, d: &Design, xh: &[f64], r: (f64, f64), u_prev: f64) -> Result<f64> {
+        let n = d.order;
+        match self {
+            Controller::Placement { q, u_star } => {
+                if u_star.0 != r.0 {
+                    let u = super::steady_input(&d.model, r.0).map_err(|e| {
+                        Error::InvalidData(format!(
+                            "the reference {} has no steady input on the model ({e}); keep the reference where the model can hold the output",
+                            r.0
+                        ))
+                    })?;
+                    *u_star = (r.0, u);
+                }
+                let target = |j: usize| match j {
+                    0 => r.0,
+                    1 => r.1,
+                    _ => 0.0,
+                };
+                let dev: f64 = (0..n).map(|j| d.k[j] * (xh[j] - target(j))).sum();
+                Ok(u_star.1 - dev - d.k_i * *q)
+            }
+            Controller::Profile(p) => {
+                let mut refs = vec![0.0; n + 1];
+                refs[0] = r.0;
+                if n >= 1 {
+                    refs[1] = r.1;
+                }
+                p.decide(xh, &refs, u_prev).ok_or_else(|| {
+                    Error::InvalidData(format!(
+                        "the exponential-profile law found no input at the estimate {xh:?}: the model does not depend on its input there{}",
+                        if p.limits.is_none() && !p.affine {
+                            "; the model is not affine in its input: give --u-min and --u-max for the search"
+                        } else {
+                            ""
+                        }
+                    ))
+                })
+            }
+        }
+    }
+}
+
+/// Runs a tracking loop around `plant`: the reference `tk.reference` from t = 0, the input
+/// decided by `tk.law` every `tk.block` samples and held in between (clipped to the
+/// scenario's limits), the observer as in [`run`]. The trace carries the reference.
+pub fn track(d: &Design, plant: &Plant, s: &Scenario, tk: &Tracking) -> Result<Trace> {
+    check(d)?;
+    tk.check()?;
+    check_scenario(d, s, &tk.law)?;
+    check_plant(plant)?;
+    let samples = sample_count(d, s)?;
+    let sys = plant.system;
     let n = d.order;
     let model = d.model.compile()?;
     let sys_loop = Loop {
@@ -341,12 +429,13 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
         l: &d.l,
     };
     let np = sys.dim();
-    // Divergence: the output beyond 1e12 times the scale of the step (derivative states scale
-    // with powers of the bandwidth, so only their finiteness is judged).
-    let scale = [d.setpoint, plant.x0[plant.output]]
+    // Divergence: the output beyond 1e12 times the scale of the reference (derivative states
+    // scale with powers of the bandwidth, so only their finiteness is judged).
+    let r0 = tk.reference.at(0.0).0;
+    let scale = [d.setpoint, r0, plant.x0[plant.output]]
         .iter()
         .fold(0.0f64, |m, v| m.max(v.abs()))
-        .max((d.setpoint - plant.x0[plant.output]).abs())
+        .max((r0 - plant.x0[plant.output]).abs())
         .max(1e-300);
     // Absolute tolerance on the scale of the step (the default 1e-10 would be the whole step of
     // a plant measured in units of 1e-10).
@@ -362,35 +451,57 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
     let mut z = plant.x0.clone();
     z.extend(std::iter::repeat_n(0.0, n));
     z[np] = plant.x0[plant.output];
-    let law = |xh: &[f64]| -> f64 {
-        let mut dev = 0.0;
-        for j in 0..n {
-            let target = if j == 0 { d.setpoint } else { 0.0 };
-            dev += d.k[j] * (xh[j] - target);
+    let mut ctl = match tk.law {
+        Law::PolePlacement => {
+            let mut c = Controller::Placement {
+                q: 0.0,
+                u_star: (d.setpoint, d.u_star),
+            };
+            // Bumpless: the integrator starts where the law gives the rest input u0.
+            let raw = c.raw(d, &z[np..], tk.reference.at(0.0), plant.u0)?;
+            if d.k_i != 0.0 {
+                c = match c {
+                    Controller::Placement { u_star, .. } => Controller::Placement {
+                        q: (raw - plant.u0) / d.k_i,
+                        u_star,
+                    },
+                    c => c,
+                };
+            }
+            c
         }
-        d.u_star - dev
-    };
-    let mut q = if d.k_i != 0.0 {
-        (law(&z[np..]) - plant.u0) / d.k_i
-    } else {
-        0.0
+        Law::Profile(p) => Controller::Profile(ProfileDecider {
+            model: &model,
+            c: super::tracking::profile_polynomial(n, p.sigma),
+            affine: super::tracking::affine_in_input(&d.model),
+            limits: s.u_limits,
+        }),
     };
     let mut tr = Trace {
         estimate: vec![Vec::with_capacity(samples); n],
         ..Default::default()
     };
+    let (mut u, mut raw) = (plant.u0, plant.u0);
+    let mut decisions = 0usize;
     for k in 0..samples {
         let t = k as f64 * d.tau;
         let y = z[plant.output];
         let ym = y + s.noise_sd * rng.normal();
-        let raw = law(&z[np..]) - d.k_i * q;
-        let u = match s.u_limits {
-            Some((lo, hi)) => raw.clamp(lo, hi),
-            None => raw,
-        };
+        let r = tk.reference.at(t);
+        if k % tk.block == 0 {
+            let clock = std::time::Instant::now();
+            raw = ctl.raw(d, &z[np..], r, u)?;
+            tr.decision_seconds += clock.elapsed().as_secs_f64();
+            decisions += 1;
+            u = match s.u_limits {
+                Some((lo, hi)) => raw.clamp(lo, hi),
+                None => raw,
+            };
+        }
         tr.t.push(t);
         tr.y.push(y);
         tr.y_measured.push(ym);
+        tr.reference.push(r.0);
         for j in 0..n {
             tr.estimate[j].push(z[np + j]);
         }
@@ -398,12 +509,14 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
         if k + 1 == samples {
             break;
         }
-        // Conditional integration: while the input is clipped, integrate only what pulls it back
-        // inside the limits (the rest would wind up).
-        let dq = d.tau * (ym - d.setpoint);
-        let pull = -d.k_i * dq;
-        if u == raw || (raw > u && pull < 0.0) || (raw < u && pull > 0.0) {
-            q += dq;
+        if let Controller::Placement { q, .. } = &mut ctl {
+            // Conditional integration: while the input is clipped, integrate only what pulls
+            // it back inside the limits (the rest would wind up).
+            let dq = d.tau * (ym - r.0);
+            let pull = -d.k_i * dq;
+            if u == raw || (raw > u && pull < 0.0) || (raw < u && pull > 0.0) {
+                *q += dq;
+            }
         }
         let diverged = |why: String| {
             Error::InvalidData(format!(
@@ -428,10 +541,11 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
             )));
         }
         let yn = z[plant.output];
-        if !yn.is_finite() || (yn - d.setpoint).abs() > 1e12 * scale {
+        if !yn.is_finite() || (yn - r.0).abs() > 1e12 * scale {
             return Err(diverged(format!("output {yn:e}")));
         }
     }
+    tr.decision_seconds /= decisions.max(1) as f64;
     Ok(tr)
 }
 

@@ -35,12 +35,16 @@
 
 pub mod closed_loop;
 pub mod design;
+pub mod tracking;
 
 pub use closed_loop::{
-    default_duration, designed_response, metrics, model_at_rest, rest_state, run, step_plot, Plant,
-    Scenario, StepMetrics, Trace, MAX_SAMPLES,
+    default_duration, designed_response, metrics, model_at_rest, rest_state, run, step_plot, track,
+    Plant, Scenario, StepMetrics, Trace, MAX_SAMPLES,
 };
 pub use design::{design, steady_input, DesignOptions};
+pub use tracking::{
+    chain_observer_gains, tracking_metrics, Law, ProfileLaw, Reference, Tracking, TrackingMetrics,
+};
 
 use crate::model::Model;
 use nalgebra::{DMatrix, DVector};
