@@ -226,8 +226,10 @@ pub(super) struct ChainLu {
     chains: Vec<(usize, usize)>,
     /// `B^p` for p = 0 ..= the longest chain.
     bp: Vec<M3>,
-    /// The chains' top rows of the stage Jacobians: `[stage][chain][state]`.
-    g: Vec<f64>,
+    /// The nonzero entries (state, value) of the chains' top rows of the stage Jacobians,
+    /// `[stage * chains + chain]`: a model's top row holds the few states its terms use, and
+    /// scanning whole rows made every solve O(chains n).
+    g: Vec<Vec<(usize, f64)>>,
     /// Factors of `I - M`, unknowns ordered chain-major (`3 o + i`).
     lu: DenseLu,
 }
@@ -283,6 +285,16 @@ impl ChainLu {
             }
         }
         let lu = DenseLu::factor(m, mat)?;
+        let g = g
+            .chunks_exact(n)
+            .map(|row| {
+                row.iter()
+                    .enumerate()
+                    .filter(|(_, v)| **v != 0.0)
+                    .map(|(s, v)| (s, *v))
+                    .collect()
+            })
+            .collect();
         Some(ChainLu {
             n,
             chains: chains.to_vec(),
@@ -329,13 +341,10 @@ impl ChainLu {
         for o in 0..nc {
             t.iter_mut().for_each(|v| *v = 0.0);
             for j in 0..3 {
-                let g = &self.g[(j * nc + o) * n..(j * nc + o + 1) * n];
                 let tj = &mut t[j * q..(j + 1) * q];
-                for (s, &gs) in g.iter().enumerate() {
-                    if gs != 0.0 {
-                        let cs = &b[row(j, s)..row(j, s) + q];
-                        tj.iter_mut().zip(cs).for_each(|(a, c)| *a += gs * c);
-                    }
+                for &(s, gs) in &self.g[j * nc + o] {
+                    let cs = &b[row(j, s)..row(j, s) + q];
+                    tj.iter_mut().zip(cs).for_each(|(a, c)| *a += gs * c);
                 }
             }
             for i in 0..3 {
