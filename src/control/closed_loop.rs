@@ -129,10 +129,38 @@ pub fn step_plot(
     y_label: &str,
     output_label: &str,
 ) -> Result<String> {
-    use crate::report::svg::{figure, Panel, Series};
     let designed = designed_response(d, from, tr.t.len())?;
     let setpoint = vec![d.setpoint; tr.t.len()];
-    let deviation: Vec<f64> = tr.y.iter().zip(&designed).map(|(y, r)| y - r).collect();
+    let top = [
+        ("measured", &tr.y_measured[..], "#bbbbbb", false),
+        (output_label, &tr.y[..], "black", false),
+        ("designed response", &designed[..], "#1f77b4", true),
+        ("setpoint", &setpoint[..], "#2ca02c", true),
+    ];
+    let against = ("output minus designed response", "deviation", &designed[..]);
+    Ok(loop_figure(
+        tr,
+        title,
+        ("step", y_label),
+        &d.input,
+        &top,
+        against,
+    ))
+}
+
+/// The stacked panels of a loop's plot: `top` (label, values, colour, dashed) over the trace's
+/// time; the output minus `against.2` (panel title, series label); the observer's error on the
+/// output; the input.
+pub(crate) fn loop_figure(
+    tr: &Trace,
+    title: &str,
+    (top_title, y_label): (&str, &str),
+    u_label: &str,
+    top: &[(&str, &[f64], &str, bool)],
+    against: (&str, &str, &[f64]),
+) -> String {
+    use crate::report::svg::{figure, Panel, Series};
+    let deviation: Vec<f64> = tr.y.iter().zip(against.2).map(|(y, r)| y - r).collect();
     let observer: Vec<f64> = match tr.estimate.first() {
         Some(est) => est.iter().zip(&tr.y).map(|(e, y)| e - y).collect(),
         None => vec![f64::NAN; tr.t.len()],
@@ -147,21 +175,18 @@ pub fn step_plot(
     };
     let panels = vec![
         Panel::lines(
-            "step",
+            top_title,
             "t (s)",
             y_label,
-            vec![
-                series("measured", &tr.y_measured, "#bbbbbb", false),
-                series(output_label, &tr.y, "black", false),
-                series("designed response", &designed, "#1f77b4", true),
-                series("setpoint", &setpoint, "#2ca02c", true),
-            ],
+            top.iter()
+                .map(|&(label, y, color, dashed)| series(label, y, color, dashed))
+                .collect(),
         ),
         Panel::lines(
-            "output minus designed response",
+            against.0,
             "t (s)",
             y_label,
-            vec![series("deviation", &deviation, "#d62728", false)],
+            vec![series(against.1, &deviation, "#d62728", false)],
         )
         .height(180.0),
         Panel::lines(
@@ -174,12 +199,12 @@ pub fn step_plot(
         Panel::lines(
             "input",
             "t (s)",
-            &d.input,
+            u_label,
             vec![series("input", &tr.u, "#ff7f0e", false)],
         )
         .height(200.0),
     ];
-    Ok(figure(title, &panels))
+    figure(title, &panels)
 }
 
 /// The designed step response at the loop's sample times `k tau`, k < `samples`: the model

@@ -527,54 +527,17 @@ pub fn describe(m: &TrackingMetrics, samples: usize, decision_seconds: f64) -> S
 /// SVG of a tracking run: reference, output and measurement; the tracking error; the
 /// observer's error on the output; the input.
 pub fn tracking_plot(tr: &super::Trace, title: &str, y_label: &str, u_label: &str) -> String {
-    use crate::report::svg::{figure, Panel, Series};
-    let error: Vec<f64> = tr.y.iter().zip(&tr.reference).map(|(y, r)| y - r).collect();
-    let observer: Vec<f64> = match tr.estimate.first() {
-        Some(est) => est.iter().zip(&tr.y).map(|(e, y)| e - y).collect(),
-        None => vec![f64::NAN; tr.t.len()],
-    };
-    let series = |label, y, color, dashed| Series {
-        label,
-        x: &tr.t,
-        y,
-        color,
-        band: None,
-        dashed,
-    };
-    let panels = vec![
-        Panel::lines(
-            "tracking",
-            "t (s)",
-            y_label,
-            vec![
-                series("measured", &tr.y_measured, "#bbbbbb", false),
-                series("output", &tr.y, "black", false),
-                series("reference", &tr.reference, "#2ca02c", true),
-            ],
-        ),
-        Panel::lines(
-            "output minus reference",
-            "t (s)",
-            y_label,
-            vec![series("tracking error", &error, "#d62728", false)],
-        )
-        .height(180.0),
-        Panel::lines(
-            "observer: estimated minus true output",
-            "t (s)",
-            y_label,
-            vec![series("estimation error", &observer, "#9467bd", false)],
-        )
-        .height(180.0),
-        Panel::lines(
-            "input",
-            "t (s)",
-            u_label,
-            vec![series("input", &tr.u, "#ff7f0e", false)],
-        )
-        .height(200.0),
+    let top = [
+        ("measured", &tr.y_measured[..], "#bbbbbb", false),
+        ("output", &tr.y[..], "black", false),
+        ("reference", &tr.reference[..], "#2ca02c", true),
     ];
-    figure(title, &panels)
+    let against = (
+        "output minus reference",
+        "tracking error",
+        &tr.reference[..],
+    );
+    super::closed_loop::loop_figure(tr, title, ("tracking", y_label), u_label, &top, against)
 }
 
 #[cfg(test)]
