@@ -56,6 +56,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod basis;
+pub mod benchmark;
 pub mod control;
 pub mod demo;
 pub mod derivatives;

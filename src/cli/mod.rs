@@ -13,6 +13,7 @@ macro_rules! outln {
     ($($t:tt)*) => { $crate::cli::write_stdout(&format!("{}\n", format_args!($($t)*))) };
 }
 
+mod benchmark;
 mod control;
 mod csvout;
 mod demo;
@@ -61,6 +62,8 @@ pub enum Command {
     Control(control::ControlArgs),
     /// Print a model file: its equations, then each term's coefficient, standard error, interval and origin.
     Show(show::ShowArgs),
+    /// A public benchmark (silverbox, emps, tanks) by one workflow: a linear nominal by identify, discover in rounds, scored by the benchmark's protocol beside the published rows.
+    Benchmark(benchmark::BenchmarkArgs),
 }
 
 pub fn run(cli: Cli) -> Result<()> {
@@ -74,6 +77,7 @@ pub fn run(cli: Cli) -> Result<()> {
         Command::Discover(a) => discover::run(a),
         Command::Control(a) => control::run(a),
         Command::Show(a) => show::run(a),
+        Command::Benchmark(a) => benchmark::run(a),
     }
 }
 

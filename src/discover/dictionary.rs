@@ -112,6 +112,15 @@ pub fn build(
     add("trigonometric", format!("cos({y})^2"));
     add("offset", "1".into());
     add("sqrt_outflow", format!("sqrt(abs({y}))*sign({y})"));
+    if order >= 2 {
+        // Torricelli outflow seen one derivative up (a tank's level y in a second-order
+        // model): d/dt sqrt(y) = y' / (2 sqrt(y)); the floor keeps an empty tank finite.
+        let floor = num(0.01 * scales.sd[0]);
+        add(
+            "sqrt_outflow",
+            format!("{}/sqrt(abs({y}) + {floor})", vars[1]),
+        );
+    }
     for &c in &inputs {
         let u = &vars[c];
         let s = num(0.7 * scales.p99[c]);

@@ -1,0 +1,161 @@
+//! `ctsid benchmark NAME [--data DIR] [--out DIR]`: the one workflow of [`ctsid::benchmark`]
+//! (a linear nominal by identify, then discover in rounds) on a public benchmark record, scored
+//! by the benchmark's protocol beside the published rows. `--out` writes `NAME.model.json`,
+//! `NAME.csv` (benchmark, metric, ours, linear, pnarx, best), the test run as `NAME_test.csv`
+//! (so that `ctsid simulate` checks the printed RMS) and `NAME_test.svg`.
+
+use clap::Args;
+use ctsid::benchmark::{self, Benchmark, Outcome};
+use ctsid::util::num4;
+use ctsid::{Error, Result};
+use std::path::PathBuf;
+
+#[derive(Args, Debug)]
+pub struct BenchmarkArgs {
+    /// silverbox, emps or tanks.
+    pub name: String,
+    /// The folder holding the records (`silverbox/`, `emps/`, `cascaded_tanks/`).
+    #[arg(long, default_value = "../shared/data")]
+    pub data: PathBuf,
+    /// Write the final model, the scores and the test plot into this folder.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn run(a: BenchmarkArgs) -> Result<()> {
+    if let Some(d) = &a.out {
+        super::check_output_dir(d)?;
+    }
+    let b = benchmark::load(&a.name, &a.data.to_string_lossy())?;
+    outln!("# {} ({})\n", b.title, b.name)?;
+    outln!("protocol: {}.\n", b.protocol)?;
+    let o = benchmark::run(&b)?;
+    outln!(
+        "nominal (identify, degree 1, {:.1} s): {}",
+        o.identify_seconds,
+        o.nominal.outputs[0].to_text()
+    )?;
+    for (k, r) in o.rounds.iter().enumerate() {
+        outln!(
+            "discover round {}: {}{}; validation NRMSE {:.4} -> {:.4} ({:.1} s)",
+            k + 1,
+            r.verdict,
+            if r.effects.is_empty() {
+                String::new()
+            } else {
+                format!(" ({})", r.effects.join(", "))
+            },
+            r.validation_before,
+            r.validation_after,
+            r.seconds
+        )?;
+        if let Some(why) = &r.closest {
+            outln!("  {why}")?;
+        }
+    }
+    outln!("final model: {}\n", o.model.outputs[0].to_text())?;
+    outln!("{}", table(&b, &o))?;
+    outln!("time {:.1} s", o.seconds)?;
+    if let Some(dir) = &a.out {
+        write_outputs(dir, &b, &o)?;
+        let d = dir.display();
+        outln!(
+            "wrote {d}/{n}.model.json, {n}.csv, {n}_test.csv, {n}_test.svg; the first row again: ctsid simulate {d}/{n}.model.json {d}/{n}_test.csv --time-column t_s --init-window {i} --score-from {i}",
+            n = b.name,
+            i = b.init
+        )?;
+    }
+    Ok(())
+}
+
+/// The scores beside the published rows, markdown.
+fn table(b: &Benchmark, o: &Outcome) -> String {
+    let mut s = format!(
+        "| metric ({}) | ours | our linear nominal | linear | polynomial NARX | best published |\n|---|---|---|---|---|---|\n",
+        b.unit
+    );
+    for sc in &o.scores {
+        let p = &sc.metric.published;
+        s += &format!(
+            "| {} | {} | {} | {} | {} | {} ({}) |\n",
+            sc.metric.name,
+            num4(sc.ours),
+            num4(sc.nominal),
+            p.linear,
+            p.pnarx,
+            p.best,
+            p.best_by
+        );
+    }
+    s
+}
+
+fn write_outputs(dir: &std::path::Path, b: &Benchmark, o: &Outcome) -> Result<()> {
+    use ctsid::report::{svg, write_file};
+    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir.display().to_string(), e))?;
+    let model_path = dir.join(format!("{}.model.json", b.name));
+    o.model.write(&model_path.to_string_lossy())?;
+    let mut csv = String::from("benchmark,metric,ours,linear,pnarx,best\n");
+    for sc in &o.scores {
+        let p = &sc.metric.published;
+        csv += &format!(
+            "{},{} ({}),{},{},{},{}\n",
+            b.name, sc.metric.name, b.unit, sc.ours, p.linear, p.pnarx, p.best
+        );
+    }
+    write_file(dir, &format!("{}.csv", b.name), &csv)?;
+    // The test run as its own record, so that `ctsid simulate` can check the printed RMS.
+    let mut test = format!("t_s,{},{}\n", b.output, b.input);
+    let run = &b.records.runs[b.split.test[0]];
+    let (yi, ui) = (
+        b.records.channel_index(&b.output)?,
+        b.records.channel_index(&b.input)?,
+    );
+    for k in 0..run.len() {
+        test += &format!(
+            "{},{:e},{:e}\n",
+            k as f64 * b.records.tau,
+            run.channels[yi][k],
+            run.channels[ui][k]
+        );
+    }
+    write_file(dir, &format!("{}_test.csv", b.name), &test)?;
+    let series = |label, y, color| svg::Series {
+        label,
+        x: &o.test_t,
+        y,
+        color,
+        band: None,
+        dashed: false,
+    };
+    let error: Vec<f64> = o
+        .test_simulated
+        .iter()
+        .zip(&o.test_measured)
+        .map(|(s, m)| s - m)
+        .collect();
+    let panels = [
+        svg::Panel::lines(
+            "test run: free run from the input",
+            "t (s)",
+            &b.output,
+            vec![
+                series("measured", &o.test_measured, "black"),
+                series("simulated", &o.test_simulated, "#d62728"),
+            ],
+        ),
+        svg::Panel::lines(
+            "simulated minus measured",
+            "t (s)",
+            &b.output,
+            vec![series("error", &error, "#1f77b4")],
+        )
+        .height(200.0),
+    ];
+    let title = format!("{}: test run, final model", b.title);
+    write_file(
+        dir,
+        &format!("{}_test.svg", b.name),
+        &svg::figure(&title, &panels),
+    )
+}

@@ -1,0 +1,110 @@
+//! `ctsid benchmark` on the public benchmarks (skipped with a notice without `../shared`): the
+//! model files it writes simulate with `ctsid simulate` to the RMS it printed; Silverbox beats
+//! the published linear baseline; on EMPS the discover rounds improve on the linear nominal
+//! (the published baseline is not beaten yet: docs/benchmarks.md).
+
+mod common;
+
+use common::cli::{ctsid, fails, temp_file};
+use common::shared_data;
+
+/// Runs `ctsid benchmark NAME --out DIR`; (its stdout, the model file).
+fn bench(name: &str) -> (String, String) {
+    let out = temp_file("bench", "x", "");
+    let dir = std::path::Path::new(&out).parent().unwrap().join(name);
+    let dir = dir.to_string_lossy().to_string();
+    let (ok, stdout, err) = ctsid(&["benchmark", name, "--out", &dir]);
+    assert!(ok, "{name}: {err}");
+    (stdout, format!("{dir}/{name}.model.json"))
+}
+
+/// (ours, our linear nominal, the published linear baseline) of each metric row.
+fn rows(out: &str) -> Vec<(f64, f64, f64)> {
+    out.lines()
+        .filter(|l| l.starts_with("| ") && !l.starts_with("| metric"))
+        .map(|l| {
+            let c: Vec<&str> = l.split('|').map(str::trim).collect();
+            (
+                c[2].parse().unwrap(),
+                c[3].parse().unwrap(),
+                c[4].parse().unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// The RMS `ctsid simulate` prints for the model file on the test record the benchmark wrote.
+fn simulated_rms(out: &str) -> f64 {
+    let cmd = out
+        .split("the first row again: ctsid ")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no check command in:\n{out}"))
+        .trim();
+    let args: Vec<&str> = cmd.split_whitespace().collect();
+    let (ok, stdout, err) = ctsid(&args);
+    assert!(ok, "{cmd}: {err}");
+    let all = stdout.lines().last().unwrap();
+    all.split_whitespace().nth(2).unwrap().parse().unwrap()
+}
+
+#[test]
+fn silverbox_beats_the_linear_baseline_and_its_model_file_simulates_to_the_printed_rms() {
+    if shared_data("silverbox/SNLS80mV.csv").is_none() {
+        return;
+    }
+    let (out, _) = bench("silverbox");
+    // Measured: 0.927 mV (arrow full) and 0.737 mV (without extrapolation); published linear
+    // 14.4 and 6.58, polynomial NARX 2.25 and 0.571.
+    for (ours, _, linear) in rows(&out) {
+        assert!(
+            ours < linear / 5.0,
+            "ours {ours} against linear {linear}\n{out}"
+        );
+    }
+    let printed = rows(&out)[0].0;
+    let simulated = 1e3 * simulated_rms(&out);
+    assert!(
+        (simulated - printed).abs() < 1e-3 * printed,
+        "{simulated} vs {printed}"
+    );
+}
+
+#[test]
+fn emps_discover_rounds_improve_on_the_linear_nominal() {
+    if shared_data("emps/EMPS_train_DATA_EMPS.csv").is_none() {
+        return;
+    }
+    let (out, _) = bench("emps");
+    // Measured: our linear nominal 15.06 mm, after the rounds (Coulomb friction and a
+    // quadratic velocity term) 6.27 mm; the published linear baseline, 5.53 mm, is not beaten
+    // yet (docs/benchmarks.md says why).
+    let (ours, nominal, _) = rows(&out)[0];
+    assert!(
+        ours < 0.6 * nominal,
+        "ours {ours}, nominal {nominal}\n{out}"
+    );
+    assert!(out.contains("sign(q_m_d1)"), "{out}");
+}
+
+#[test]
+fn tanks_model_file_simulates_to_the_printed_rms() {
+    if shared_data("cascaded_tanks/cascaded_tanks_estimation.csv").is_none() {
+        return;
+    }
+    let (out, _) = bench("tanks");
+    let printed = rows(&out)[0].0;
+    let simulated = simulated_rms(&out);
+    assert!(
+        (simulated - printed).abs() < 1e-3 * printed,
+        "{simulated} vs {printed}"
+    );
+}
+
+#[test]
+fn unknown_benchmarks_and_missing_data_are_one_line_errors() {
+    fails(&["benchmark", "nope"], &["silverbox, emps, tanks"]);
+    fails(
+        &["benchmark", "emps", "--data", "/nonexistent"],
+        &["EMPS_train"],
+    );
+}
