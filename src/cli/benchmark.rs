@@ -37,9 +37,14 @@ pub fn run(a: BenchmarkArgs) -> Result<()> {
     )?;
     for (k, r) in o.rounds.iter().enumerate() {
         outln!(
-            "discover round {}: {}{}; validation NRMSE {:.4} -> {:.4} ({:.1} s)",
+            "discover round {}: {}{}{}; validation NRMSE {:.4} -> {:.4} ({:.1} s)",
             k + 1,
             r.verdict,
+            if r.verdict == "added" && !r.kept {
+                ", not kept: the validation error did not fall"
+            } else {
+                ""
+            },
             if r.effects.is_empty() {
                 String::new()
             } else {
