@@ -16,11 +16,12 @@
 //! The records are read from `../shared/data` (or a folder given), whose READMEs give the
 //! sources and the published tables.
 
+use crate::discover::benchmarks::columns;
 use crate::discover::{discover, Options};
 use crate::error::{Error, Result};
 use crate::identify::Split;
 use crate::model::Model;
-use crate::records::{CsvSpec, RecordSet, Run};
+use crate::records::{RecordSet, Run};
 use crate::simulate::{free_run, run_data, SimOptions};
 
 /// Most discover rounds.
@@ -64,23 +65,6 @@ pub struct Benchmark {
     pub metrics: Vec<Metric>,
     /// The protocol in words, for the report.
     pub protocol: &'static str,
-}
-
-/// The named columns of a one-run CSV, each a vector; the time column is not needed (the
-/// sampling is a fact of the record).
-fn columns(path: &str, names: &[&str], tau: f64) -> Result<Vec<Vec<f64>>> {
-    let spec = CsvSpec {
-        columns: names.iter().map(|c| c.to_string()).collect(),
-        run_column: None,
-        time_column: None,
-        tau: Some(tau),
-    };
-    let rs = RecordSet::from_csv(path, &spec)?;
-    Ok(rs
-        .runs
-        .into_iter()
-        .next()
-        .map_or_else(Vec::new, |r| r.channels))
 }
 
 /// `k` equal consecutive runs of samples `from..to` of the columns (`cols[c][sample]`).

@@ -6,7 +6,7 @@ mod common;
 
 use common::cli::{ctsid, fails, temp_file};
 use ctsid::control::{self, DesignOptions, Law, Plant, ProfileLaw, Reference, Scenario, Tracking};
-use ctsid::model::{derivative_name, Model, OutputEquation, Term};
+use ctsid::model::{derivative_name, CompiledModel, Model, OutputEquation, Term};
 
 /// `y^(n) = -sum_k C(n, k) y^(k) + u + extra`: every pole at -1, gain 1.
 fn chain(n: usize, extra: Vec<Term>) -> Model {
@@ -27,7 +27,40 @@ struct Run {
     metrics: control::TrackingMetrics,
 }
 
-/// The model around itself, from rest at 0, following `reference` with `tk`'s law.
+/// The design at 1.0 on `model` and the model at rest at 0: a loop around the model itself.
+fn around_itself(model: &Model) -> (control::Design, CompiledModel, Vec<f64>, f64) {
+    let d = control::design(model, &DesignOptions::new(1.0, 0.01)).unwrap();
+    let (c, x0, u0) = control::model_at_rest(model, 0.0, 0.0).unwrap();
+    (d, c, x0, u0)
+}
+
+fn scenario(duration: f64, limits: Option<(f64, f64)>) -> Scenario {
+    Scenario {
+        duration,
+        noise_sd: 0.0,
+        seed: 0,
+        u_limits: limits,
+    }
+}
+
+/// The model around itself following `tk`.
+fn try_track(
+    model: &Model,
+    tk: &Tracking,
+    limits: Option<(f64, f64)>,
+    duration: f64,
+) -> ctsid::Result<control::Trace> {
+    let (d, c, x0, u0) = around_itself(model);
+    let plant = Plant {
+        system: &c,
+        output: 0,
+        x0,
+        u0,
+    };
+    control::track(&d, &plant, &scenario(duration, limits), tk)
+}
+
+/// The model around itself, from rest at 0, following `reference` with `law`.
 fn track(
     model: &Model,
     reference: Reference,
@@ -36,26 +69,12 @@ fn track(
     limits: Option<(f64, f64)>,
     duration: f64,
 ) -> Run {
-    let d = control::design(model, &DesignOptions::new(1.0, 0.01)).unwrap();
-    let (c, x0, u0) = control::model_at_rest(model, 0.0, 0.0).unwrap();
-    let plant = Plant {
-        system: &c,
-        output: 0,
-        x0,
-        u0,
-    };
-    let s = Scenario {
-        duration,
-        noise_sd: 0.0,
-        seed: 0,
-        u_limits: limits,
-    };
     let tk = Tracking {
         reference: reference.clone(),
         law,
         block,
     };
-    let trace = control::track(&d, &plant, &s, &tk).unwrap();
+    let trace = try_track(model, &tk, limits, duration).unwrap();
     let metrics = control::tracking_metrics(&trace.t, &trace.y, &trace.u, &reference, limits);
     Run { trace, metrics }
 }
@@ -147,26 +166,12 @@ fn a_plant_not_affine_in_its_input_is_solved_by_the_bounded_search() {
     let u = *r.trace.u.last().unwrap();
     assert!((u - 0.770_916_997).abs() < 1e-4, "{u}");
     // Without limits the search has no range: a one-line error that says what to give.
-    let d = control::design(&m, &DesignOptions::new(1.0, 0.01)).unwrap();
-    let (c, x0, u0) = control::model_at_rest(&m, 0.0, 0.0).unwrap();
-    let plant = Plant {
-        system: &c,
-        output: 0,
-        x0,
-        u0,
-    };
-    let s = Scenario {
-        duration: 1.0,
-        noise_sd: 0.0,
-        seed: 0,
-        u_limits: None,
-    };
     let tk = Tracking {
         reference: Reference::constant(1.0),
         law: profile(2.0),
         block: 1,
     };
-    let e = control::track(&d, &plant, &s, &tk).unwrap_err().to_string();
+    let e = try_track(&m, &tk, None, 1.0).unwrap_err().to_string();
     assert!(e.contains("--u-min") && !e.contains('\n'), "{e}");
 }
 
@@ -200,21 +205,14 @@ fn blocking_holds_the_input_and_saturation_clips_it() {
 
 #[test]
 fn the_placement_law_with_a_constant_reference_is_the_step_run() {
-    let m = chain(2, vec![]);
-    let d = control::design(&m, &DesignOptions::new(1.0, 0.01)).unwrap();
-    let (c, x0, u0) = control::model_at_rest(&m, 0.0, 0.0).unwrap();
+    let (d, c, x0, u0) = around_itself(&chain(2, vec![]));
     let plant = Plant {
         system: &c,
         output: 0,
         x0,
         u0,
     };
-    let s = Scenario {
-        duration: 3.0,
-        noise_sd: 0.0,
-        seed: 0,
-        u_limits: None,
-    };
+    let s = scenario(3.0, None);
     let a = control::run(&d, &plant, &s).unwrap();
     let b = control::track(&d, &plant, &s, &Tracking::step(1.0)).unwrap();
     assert_eq!(a.y, b.y);

@@ -24,7 +24,7 @@ pub struct Setup {
 /// The named columns of a single-run CSV through the crate's record loader (so a missing column
 /// or a bad value is the usual one-line error), one vector per column. The benchmarks' time
 /// columns are rounded to a few digits, so the known sampling period is given instead.
-fn columns(path: &str, names: &[&str], tau: f64) -> Result<Vec<Vec<f64>>> {
+pub(crate) fn columns(path: &str, names: &[&str], tau: f64) -> Result<Vec<Vec<f64>>> {
     let spec = CsvSpec {
         columns: names.iter().map(|c| c.to_string()).collect(),
         run_column: None,
