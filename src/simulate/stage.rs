@@ -232,6 +232,9 @@ pub(super) struct ChainLu {
     g: Vec<Vec<(usize, f64)>>,
     /// Factors of `I - M`, unknowns ordered chain-major (`3 o + i`).
     lu: DenseLu,
+    /// Work space of the solves (the reduced right-hand sides, the top rows' sums, the reduced
+    /// solve's scratch), kept with the factors so that a Newton iteration allocates nothing.
+    work: std::cell::RefCell<(Vec<f64>, Vec<f64>, Vec<f64>)>,
 }
 
 impl ChainLu {
@@ -301,12 +304,16 @@ impl ChainLu {
             bp,
             g,
             lu,
+            work: Default::default(),
         })
     }
 
     fn solve(&self, b: &[f64], x: &mut [f64]) {
         x.copy_from_slice(b);
-        self.solve_many(x, 1, &mut Vec::new());
+        // The reduced solve's scratch is taken out: `solve_many` borrows the rest of the work.
+        let mut scratch = std::mem::take(&mut self.work.borrow_mut().2);
+        self.solve_many(x, 1, &mut scratch);
+        self.work.borrow_mut().2 = scratch;
     }
 
     /// Solves for `q` right-hand sides, `b` row-major `3n x q` (row `i n + s`: stage i, state
@@ -316,7 +323,12 @@ impl ChainLu {
         let bm = self.bp[1.min(self.bp.len() - 1)];
         let row = |i: usize, s: usize| (i * n + s) * q;
         // r_o starts as the top rows; the top's c is zero; c_k = R_k + B c_{k+1} down the chain.
-        let mut r = vec![0.0; 3 * nc * q];
+        let mut work = self.work.borrow_mut();
+        let (r, t, _) = &mut *work;
+        r.clear();
+        r.resize(3 * nc * q, 0.0);
+        t.clear();
+        t.resize(3 * q, 0.0);
         for (o, &(off, len)) in self.chains.iter().enumerate() {
             let top = off + len - 1;
             for i in 0..3 {
@@ -337,7 +349,6 @@ impl ChainLu {
             }
         }
         // r_o += B t, t_j = sum_s g_o^j[s] c_j(s).
-        let mut t = vec![0.0; 3 * q];
         for o in 0..nc {
             t.iter_mut().for_each(|v| *v = 0.0);
             for j in 0..3 {
@@ -357,7 +368,7 @@ impl ChainLu {
                 }
             }
         }
-        self.lu.solve_many(&mut r, q, scratch);
+        self.lu.solve_many(r, q, scratch);
         // dZ_k = c_k + B^(L-1-k) W_o.
         for (o, &(off, len)) in self.chains.iter().enumerate() {
             for k in 0..len {
