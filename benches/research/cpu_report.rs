@@ -4,7 +4,7 @@
 //!
 //! Run: `benches/cpu_report.sh` (or `cargo bench --bench cpu_report`).
 use ctsid::basis::{Basis, BasisLimits};
-use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
+use ctsid::engine::{ColumnStats, CpuEngine, CpuOptions, Features, Precision, SweepEngine};
 use ctsid::regression::{lars_path, Method, PathOptions, Regression};
 use std::time::Instant;
 
@@ -83,6 +83,130 @@ fn time<F: FnMut()>(reps: usize, mut f: F) -> f64 {
     t.elapsed().as_secs_f64() / reps as f64
 }
 
+/// An engine that times what it is asked: a path's time splits into sweeps, column statistics
+/// and the rest (active-set algebra, exact columns).
+struct Timed<'a> {
+    inner: &'a mut CpuEngine,
+    sweeps: f64,
+    stats: f64,
+}
+
+impl SweepEngine for Timed<'_> {
+    fn describe(&self) -> String {
+        self.inner.describe()
+    }
+    fn n_samples(&self) -> usize {
+        self.inner.n_samples()
+    }
+    fn n_candidates(&self) -> usize {
+        self.inner.n_candidates()
+    }
+    fn column_stats(&mut self, weights: Option<&[f64]>) -> ctsid::Result<ColumnStats> {
+        let t = Instant::now();
+        let r = self.inner.column_stats(weights);
+        self.stats += t.elapsed().as_secs_f64();
+        r
+    }
+    fn sweep(&mut self, v: &[f64], out: &mut [f64]) -> ctsid::Result<()> {
+        let t = Instant::now();
+        let r = self.inner.sweep(v, out);
+        self.sweeps += t.elapsed().as_secs_f64();
+        r
+    }
+    fn columns(&mut self, idx: &[usize]) -> ctsid::Result<Vec<Vec<f64>>> {
+        self.inner.columns(idx)
+    }
+}
+
+fn median(t: &[f64]) -> f64 {
+    let mut t = t.to_vec();
+    t.sort_by(f64::total_cmp);
+    let m = t.len() / 2;
+    if t.len() % 2 == 1 {
+        t[m]
+    } else {
+        0.5 * (t[m - 1] + t[m])
+    }
+}
+
+fn fmt_times(t: &[f64]) -> String {
+    t.iter()
+        .map(|x| format!("{x:.2}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// Writes the problem (variables, exponents, label) to a temporary folder and runs
+/// `lars_sklearn.py` on it: scikit-learn's times (three paths) and entering order.
+fn sklearn_path(
+    python: &str,
+    f: &Features,
+    b: &Basis,
+    y: &[f64],
+    steps: usize,
+) -> Result<(Vec<f64>, Vec<usize>), String> {
+    let dir = std::env::temp_dir().join(format!("ctsid-lars-sklearn-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let n = f.n_samples;
+    let nz = f.n_vars();
+    let mut z = Vec::with_capacity(n * nz * 8);
+    for i in 0..n {
+        for k in 0..nz {
+            z.extend_from_slice(&f.column(k)[i].to_le_bytes());
+        }
+    }
+    let exps: Vec<u8> = (0..b.len())
+        .flat_map(|j| b.code(j).exponents(nz).into_iter().map(|p| p as u8))
+        .collect();
+    let ys: Vec<u8> = y.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let meta = format!(
+        "{{\"samples\": {n}, \"vars\": {nz}, \"candidates\": {}, \"steps\": {steps}}}",
+        b.len()
+    );
+    for (name, bytes) in [
+        ("z.f64", z),
+        ("exps.u8", exps),
+        ("y.f64", ys),
+        ("problem.json", meta.into_bytes()),
+    ] {
+        std::fs::write(dir.join(name), bytes).map_err(|e| e.to_string())?;
+    }
+    let script = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/benches/research/lars_sklearn.py"
+    );
+    let out = std::process::Command::new(python)
+        .arg(script)
+        .arg(&dir)
+        .arg("3")
+        .output()
+        .map_err(|e| format!("{python}: {e}"));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = out?;
+    if !out.status.success() {
+        return Err(String::from_utf8_lossy(&out.stderr).trim().to_string());
+    }
+    let text = String::from_utf8_lossy(&out.stdout);
+    let field = |key: &str| -> Vec<String> {
+        text.lines()
+            .find_map(|l| l.strip_prefix(key))
+            .map(|l| l.split_whitespace().map(str::to_string).collect())
+            .unwrap_or_default()
+    };
+    let times: Vec<f64> = field("seconds ")
+        .iter()
+        .filter_map(|t| t.parse().ok())
+        .collect();
+    let order: Vec<usize> = field("order ")
+        .iter()
+        .filter_map(|t| t.parse().ok())
+        .collect();
+    if times.is_empty() {
+        return Err(format!("no times in the script's output: {text}"));
+    }
+    Ok((times, order))
+}
+
 fn main() {
     let n = 25_000;
     let cores = rayon::current_num_threads();
@@ -128,7 +252,6 @@ fn main() {
         }
     }
     y.iter_mut().for_each(|x| *x += 0.01 * r.uniform());
-    let t0 = Instant::now();
     let mut e = CpuEngine::new(
         &b,
         &f,
@@ -138,25 +261,85 @@ fn main() {
         },
     )
     .unwrap();
-    let t_build = t0.elapsed().as_secs_f64();
     let opts = PathOptions {
         method: Method::Lars,
         max_terms: 200,
         max_steps: 200,
         ..PathOptions::default()
     };
-    let t0 = Instant::now();
-    let path = lars_path(&mut e, &y, None, &opts).unwrap();
-    let t_path = t0.elapsed().as_secs_f64();
+    // Three paths before and three after scikit-learn's, so that a change of load during the
+    // run shows as spread rather than as a ratio.
+    let mut ours = Vec::new();
+    let mut sweep_times = Vec::new();
+    let mut run_ours = |ours: &mut Vec<f64>, sweep_times: &mut Vec<f64>| {
+        for _ in 0..3 {
+            let mut timed = Timed {
+                inner: &mut e,
+                sweeps: 0.0,
+                stats: 0.0,
+            };
+            let t0 = Instant::now();
+            let path = lars_path(&mut timed, &y, None, &opts).unwrap();
+            let total = t0.elapsed().as_secs_f64();
+            ours.push(total);
+            sweep_times.push(timed.sweeps);
+            println!(
+                "  path: {} steps, {} sweeps ({} refreshes), {total:.2} s = sweeps {:.2} s ({:.1} ms each) + column stats {:.2} s + the rest {:.2} s",
+                path.breakpoints.len() - 1,
+                path.sweeps,
+                path.refreshes,
+                timed.sweeps,
+                timed.sweeps / path.sweeps as f64 * 1e3,
+                timed.stats,
+                total - timed.sweeps - timed.stats
+            );
+            if ours.len() == 3 {
+                return path.entering_order();
+            }
+        }
+        Vec::new()
+    };
+    let order = run_ours(&mut ours, &mut sweep_times);
+    let theirs = std::env::var("CTSID_SKLEARN_PYTHON")
+        .ok()
+        .map(|python| sklearn_path(&python, &f, &b, &y, 200));
+    run_ours(&mut ours, &mut sweep_times);
+    let med = median(&ours);
     println!(
-        "25000 x 12376 LARS path: {} steps, {} sweeps ({} refreshes), {:.2} s incl. column stats (engine build {:.2} s); target < 3.4 s (10x scikit-learn's 34 s): {}",
-        path.breakpoints.len() - 1,
-        path.sweeps,
-        path.refreshes,
-        t_path,
-        t_build,
-        if t_path < 3.4 { "met" } else { "NOT met" }
+        "25000 x 12376 LARS path, 200 steps incl. column stats: ctsid {} s (median {med:.2} s)",
+        fmt_times(&ours)
     );
+    match theirs {
+        Some(Ok((times, their_order))) => {
+            let agree = order
+                .iter()
+                .zip(&their_order)
+                .take_while(|(a, b)| a == b)
+                .count();
+            let ratio = median(&times) / med;
+            // What one sweep per step allows: every sweep at the arithmetic limit, the rest of
+            // the path (column statistics, active-set algebra) as measured.
+            let floor = med - median(&sweep_times) + 201.0 * limit;
+            println!(
+                "  scikit-learn lars_path on the same standardised columns: {} s (median {:.2} s); the first {agree} of {} entering candidates agree",
+                fmt_times(&times),
+                median(&times),
+                order.len().min(their_order.len())
+            );
+            println!(
+                "  ratio scikit-learn / ctsid: {ratio:.1}x (target >= 10): {}",
+                if ratio >= 10.0 { "met" } else { "NOT met" }
+            );
+            println!(
+                "  ceiling with one sweep per step: every sweep at the arithmetic limit would give {floor:.2} s, ratio {:.1}x",
+                median(&times) / floor
+            );
+        }
+        Some(Err(e)) => println!("  scikit-learn run failed: {e}"),
+        None => {
+            println!("  (scikit-learn not run: benches/cpu_report.sh sets CTSID_SKLEARN_PYTHON)")
+        }
+    }
     let opts = PathOptions {
         method: Method::LassoLars,
         ..opts

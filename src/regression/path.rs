@@ -207,8 +207,26 @@ fn min_pos(it: impl Iterator<Item = f64>) -> f64 {
     it.filter(|x| *x > 0.0).fold(f64::MAX, f64::min)
 }
 
+/// `a . b` over eight partial sums: a single running sum is a dependency chain the compiler
+/// may not reorder, and the path's dot products over the active columns (k x n per step) were a
+/// fifth of a 200-step path at 25,000 samples.
 pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| x * y).sum()
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut part = [0.0f64; 8];
+    let (ac, bc) = (a.chunks_exact(8), b.chunks_exact(8));
+    let tail: f64 = ac
+        .remainder()
+        .iter()
+        .zip(bc.remainder())
+        .map(|(x, y)| x * y)
+        .sum();
+    for (x, y) in ac.zip(bc) {
+        for l in 0..8 {
+            part[l] += x[l] * y[l];
+        }
+    }
+    part.iter().sum::<f64>() + tail
 }
 
 pub(super) struct Standardiser<'a> {
@@ -621,11 +639,21 @@ fn lars_steps(
         }
         ls.iter_mut().for_each(|x| *x *= aa);
         // u = X~_A ls, parallel over sample chunks (O(n k) per step).
+        // Four columns per pass over the chunk: a quarter of the loads and stores of u.
         u.par_chunks_mut(4096).enumerate().for_each(|(c, uc)| {
             uc.iter_mut().for_each(|x| *x = 0.0);
-            let off = c * 4096;
-            for (col, l) in xa.iter().zip(&ls) {
-                let len = uc.len();
+            let (off, len) = (c * 4096, uc.len());
+            let mut q = 0;
+            while q + 4 <= xa.len() {
+                let (c0, c1) = (&xa[q][off..off + len], &xa[q + 1][off..off + len]);
+                let (c2, c3) = (&xa[q + 2][off..off + len], &xa[q + 3][off..off + len]);
+                let (l0, l1, l2, l3) = (ls[q], ls[q + 1], ls[q + 2], ls[q + 3]);
+                for i in 0..len {
+                    uc[i] += l0 * c0[i] + l1 * c1[i] + l2 * c2[i] + l3 * c3[i];
+                }
+                q += 4;
+            }
+            for (col, l) in xa[q..].iter().zip(&ls[q..]) {
                 uc.iter_mut()
                     .zip(&col[off..off + len])
                     .for_each(|(ui, xi)| *ui += l * xi);

@@ -565,7 +565,42 @@ pub fn simd_level() -> &'static str {
 }
 
 /// Adds one block's `sum_i w_i (x_ij - mean_j)^2` to `acc[j]` (f64; for column statistics).
+///
+/// The centring is exact (no `sum w x^2 - sw m^2`, which cancels for columns far from zero); the
+/// sums run over eight partial sums so that the loop vectorises, with AVX2 where the CPU has it
+/// (the scalar loop took 260 ms of a 4 s LARS path at 25,000 x 12,376).
 pub fn centred_block(
+    plan: &Plan,
+    zb: &[f64],
+    bsz: usize,
+    s: &mut Scratch<f64>,
+    mean: &[f64],
+    acc: &mut [f64],
+) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if simd_level() == "avx2" && bsz % 8 == 0 {
+            #[target_feature(enable = "avx2,fma")]
+            unsafe fn avx2(
+                plan: &Plan,
+                zb: &[f64],
+                bsz: usize,
+                s: &mut Scratch<f64>,
+                mean: &[f64],
+                acc: &mut [f64],
+            ) {
+                centred_block_impl(plan, zb, bsz, s, mean, acc)
+            }
+            // SAFETY: the CPU has AVX2 + FMA (simd_level checked it).
+            unsafe { avx2(plan, zb, bsz, s, mean, acc) };
+            return;
+        }
+    }
+    centred_block_impl(plan, zb, bsz, s, mean, acc)
+}
+
+#[inline(always)]
+fn centred_block_impl(
     plan: &Plan,
     zb: &[f64],
     bsz: usize,
@@ -591,12 +626,25 @@ pub fn centred_block(
             let j = f.child_start as usize + t;
             let m = mean[j];
             let zk = &zb[k * bsz..(k + 1) * bsz];
-            let mut sum = 0.0;
-            for i in 0..bsz {
-                let d = me[i] * zk[i] - m;
-                sum += w[i] * d * d;
+            let mut part = [0.0f64; 8];
+            if bsz % 8 == 0 {
+                for ((x, z), wc) in me
+                    .chunks_exact(8)
+                    .zip(zk.chunks_exact(8))
+                    .zip(w.chunks_exact(8))
+                {
+                    for l in 0..8 {
+                        let d = x[l] * z[l] - m;
+                        part[l] += wc[l] * d * d;
+                    }
+                }
+            } else {
+                for i in 0..bsz {
+                    let d = me[i] * zk[i] - m;
+                    part[0] += w[i] * d * d;
+                }
             }
-            acc[j] += sum;
+            acc[j] += part.iter().sum::<f64>();
         }
     }
 }
