@@ -579,7 +579,7 @@ pub fn centred_block(
 ) {
     #[cfg(target_arch = "x86_64")]
     {
-        if simd_level() == "avx2" && bsz % 8 == 0 {
+        if simd_level() == "avx2" && bsz.is_multiple_of(8) {
             #[target_feature(enable = "avx2,fma")]
             unsafe fn avx2(
                 plan: &Plan,
@@ -627,7 +627,7 @@ fn centred_block_impl(
             let m = mean[j];
             let zk = &zb[k * bsz..(k + 1) * bsz];
             let mut part = [0.0f64; 8];
-            if bsz % 8 == 0 {
+            if bsz.is_multiple_of(8) {
                 for ((x, z), wc) in me
                     .chunks_exact(8)
                     .zip(zk.chunks_exact(8))
