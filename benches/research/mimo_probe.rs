@@ -8,16 +8,11 @@ fn main() {
     let mt: usize = a[2].parse().unwrap();
     let eta: f64 = a.get(3).map(|s| s.parse().unwrap()).unwrap_or(0.0);
     let plant = Plant::mimo();
-    let runs = dataset(&plant, 30, 1000, 0.01, eta, 1).unwrap();
+    // The configuration of `ctsid demo mimo`: 40 runs, 25 for training, 15 for the test.
+    let runs = dataset(&plant, 40, 1000, 0.01, eta, 1).unwrap();
     let rs = records(&runs, &plant.input_names(), &plant.output_names(), 0.01).unwrap();
-    let ids: Vec<String> = (0..30).map(|i| i.to_string()).collect();
-    let split = Split::new(
-        (0..25).collect(),
-        Some(vec![25, 26]),
-        (27..30).collect(),
-        &ids,
-    )
-    .unwrap();
+    let ids: Vec<String> = (0..40).map(|i| i.to_string()).collect();
+    let split = Split::new((0..25).collect(), None, (25..40).collect(), &ids).unwrap();
     let mut s = Settings::new(plant.output_names(), plant.input_names(), d);
     s.orders = Orders::Fixed(vec![3, 3, 3]);
     s.max_terms = mt;
@@ -27,6 +22,21 @@ fn main() {
     s.weighting = std::env::var("NOWEIGHT").is_err();
     let t = std::time::Instant::now();
     let id = identify(&rs, &split, &s).unwrap();
+    if let Some(r) = &id.refinement {
+        println!("{}", r.message);
+        println!("fit runs {:?}, gate runs {:?}", r.fit_runs, r.gate_runs);
+        println!("train NRMSE {:?} -> {:?}", r.train_before, r.train_after);
+        println!(
+            "gate NRMSE {:?} -> {:?}",
+            r.validation_before, r.validation_after
+        );
+        for (a, b) in r.derivative_fit.iter().zip(&r.refined) {
+            println!("derivative fit: {a}\nrefined:        {b}");
+        }
+        for t in &r.completion {
+            println!("completion: {t:?}");
+        }
+    }
     for o in &id.model.outputs {
         println!("{} terms: {}", o.terms.len(), o.to_text());
     }

@@ -12,7 +12,8 @@
 //! The local error is estimated by step doubling: each step is taken once with `h` and twice with
 //! `h/2`; their difference over `2^5 - 1` estimates the error of the two-half-step result, which
 //! is the one kept. This costs three Radau steps per step but needs no embedded formula and is
-//! reliable for stiff components (both results damp them).
+//! reliable for stiff components (both results damp them). Forward sensitivities, when asked
+//! for, are carried through the full step alone (one multi-column solve per step).
 //!
 //! # Landing points
 //! Output is produced exactly at the requested times; the integrator also stops exactly at every
@@ -455,7 +456,7 @@ struct Sens<'a> {
     pjac: ParamJacobian<'a>,
     /// `dx/dp` at the current time, row-major `n x q`.
     s: Vec<f64>,
-    /// Stage increments of the two half steps of the step being taken (3n each), which the
+    /// Stage increments of the full step of the step being taken (3n), which the
     /// sensitivities follow.
     zs: Vec<f64>,
     /// Scratch of `propagate`, reused across steps: stage Jacobians, stage parameter
@@ -617,20 +618,19 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
     }
 
     /// Carries the sensitivities through one accepted Radau step from `(t, x0)` of length `h`
-    /// with converged stage increments `z`: the exact derivative of the discrete step.
+    /// with converged stage increments `z`: the exact derivative of that discrete step.
     ///
     /// Differentiating the stage equations `Y_i = x0 + h sum_j a_ij f(Y_j, p)` gives the linear
     /// system `dY_i - h sum_j a_ij J_j dY_j = S0 + h sum_j a_ij f_p,j` with the Jacobians at the
     /// stages themselves (not the simplified-Newton one), and `S1 = dY_3` (stiffly accurate).
-    /// One 3n x 3n factorisation serves every column. `half` (0 or 1) picks the stage
-    /// increments kept in `zs`.
-    fn propagate(&mut self, t: f64, x0: &[f64], h: f64, half: usize) -> bool {
+    /// One 3n x 3n factorisation serves every column. The stage increments are those kept in
+    /// `zs`.
+    fn propagate(&mut self, t: f64, x0: &[f64], h: f64) -> bool {
         let Some(mut sens) = self.sens.take() else {
             return true;
         };
-        let m = 3 * self.n;
         let zs = std::mem::take(&mut sens.zs);
-        let ok = self.propagate_with(&mut sens, t, x0, h, &zs[half * m..(half + 1) * m]);
+        let ok = self.propagate_with(&mut sens, t, x0, h, &zs);
         sens.zs = zs;
         self.sens = Some(sens);
         ok
@@ -751,6 +751,18 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 Some(lu) => self.radau_step(t, x, hh, &lu),
                 None => StepOutcome::NoConvergence,
             };
+            // The sensitivities follow the full step's stages (left in the scratch by the
+            // converged step): one 3n x 3n solve per step instead of one per half step. They
+            // are then the derivative of the full-step map, which differs from the kept
+            // two-half-step result by the local error: immaterial to the Gauss-Newton
+            // directions they serve, and half of an identification's simulation time.
+            let m = 3 * n;
+            if matches!(full, StepOutcome::Ok(_)) {
+                if let Some(sens) = self.sens.as_mut() {
+                    sens.zs.resize(m, 0.0);
+                    sens.zs.copy_from_slice(&self.scratch[..m]);
+                }
+            }
             let lu_half = match full {
                 StepOutcome::Ok(_) => self.factors(0.5 * hh, &jac),
                 StepOutcome::NoConvergence => None,
@@ -759,25 +771,12 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 Some(lu) => self.radau_step(t, x, 0.5 * hh, lu),
                 None => StepOutcome::NoConvergence,
             };
-            // Stage increments of the two half steps (left in the scratch by each converged
-            // step), kept for the sensitivities.
-            let m = 3 * n;
-            let keep_stages = |it: &mut Self, half: usize| {
-                if let Some(sens) = it.sens.as_mut() {
-                    sens.zs.resize(2 * m, 0.0);
-                    sens.zs[half * m..(half + 1) * m].copy_from_slice(&it.scratch[..m]);
-                }
-            };
             let result = match (full, half1) {
                 (StepOutcome::Ok(xf), StepOutcome::Ok(xm)) => {
-                    keep_stages(self, 0);
                     // The second half step reuses the first one's Newton matrix.
                     let lu = lu_half.as_ref().expect("factored above");
                     match self.radau_step(t + 0.5 * hh, &xm, 0.5 * hh, lu) {
-                        StepOutcome::Ok(xh) => {
-                            keep_stages(self, 1);
-                            Some((xf, xm, xh))
-                        }
+                        StepOutcome::Ok(xh) => Some((xf, xh)),
                         StepOutcome::NoConvergence => None,
                     }
                 }
@@ -788,7 +787,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                     stats.1 += 1;
                     *h = 0.25 * hh;
                 }
-                Some((xf, xm, xh)) => {
+                Some((xf, xh)) => {
                     let mut err = 0.0;
                     for k in 0..n {
                         let e = (xh[k] - xf[k]) / 31.0 / self.scale(x, &xh, k);
@@ -805,8 +804,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                     if err <= 1.0 {
                         stats.0 += 1;
                         if self.sens.is_some() {
-                            let ok = self.propagate(t, x, 0.5 * hh, 0)
-                                && self.propagate(t + 0.5 * hh, &xm, 0.5 * hh, 1);
+                            let ok = self.propagate(t, x, hh);
                             if !ok {
                                 return Err(Error::Diverged {
                                     run: self.opts.run.clone(),
@@ -977,13 +975,14 @@ pub fn simulate<S: System + ?Sized, I: Input + ?Sized>(
 /// writes (row-major `dim x n_params`), followed by the `dim` initial states. Returned row-major
 /// `[time][state][column]` with `n_params + dim` columns.
 ///
-/// They are the exact derivatives of the discrete solution (the same accepted steps, each
-/// differentiated through its stage equations) when [`System::jacobian`] is exact, as it is for
-/// compiled models (the trait's default uses forward differences, and so then do the stage
-/// Jacobians here), so a Jacobian built from them is consistent
-/// with the simulation the cost is measured on: what forward differences of whole simulations
-/// approximate, at the price of one small linear solve per column and step instead of one
-/// simulation per column.
+/// They follow the same accepted steps as the states, each differentiated through its stage
+/// equations (with the full step's stages, while the states keep the two half steps of the
+/// step-doubling estimate: the two differ by the local error, far below what a Gauss-Newton
+/// direction resolves, and one solve per step instead of two halves an identification's
+/// simulation time), exact when [`System::jacobian`] is, as it is for compiled models (the
+/// trait's default uses forward differences, and so then do the stage Jacobians here): what
+/// forward differences of whole simulations approximate, at the price of one small linear
+/// solve per column and step instead of one simulation per column.
 pub fn simulate_sensitivities<S: System + ?Sized, I: Input + ?Sized>(
     sys: &S,
     input: &I,
