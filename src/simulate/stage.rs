@@ -308,12 +308,54 @@ impl ChainLu {
         })
     }
 
+    /// [`ChainLu::solve_many`] for one right-hand side (every Newton iteration), written out:
+    /// the general loops over q = 1 column, their slices and the reduced solve's copies were
+    /// a third of a two-state model's simulation (Silverbox).
     fn solve(&self, b: &[f64], x: &mut [f64]) {
         x.copy_from_slice(b);
-        // The reduced solve's scratch is taken out: `solve_many` borrows the rest of the work.
-        let mut scratch = std::mem::take(&mut self.work.borrow_mut().2);
-        self.solve_many(x, 1, &mut scratch);
-        self.work.borrow_mut().2 = scratch;
+        let (n, nc) = (self.n, self.chains.len());
+        let bm = self.bp[1.min(self.bp.len() - 1)];
+        let mul = |m: &M3, v: [f64; 3], i: usize| m[i][0] * v[0] + m[i][1] * v[1] + m[i][2] * v[2];
+        let mut work = self.work.borrow_mut();
+        let (r, _, w) = &mut *work;
+        r.clear();
+        r.resize(3 * nc, 0.0);
+        for (o, &(off, len)) in self.chains.iter().enumerate() {
+            let top = off + len - 1;
+            for i in 0..3 {
+                r[3 * o + i] = x[i * n + top];
+                x[i * n + top] = 0.0;
+            }
+            for s in (off..top).rev() {
+                let c = [x[s + 1], x[n + s + 1], x[2 * n + s + 1]];
+                for i in 0..3 {
+                    x[i * n + s] += mul(&bm, c, i);
+                }
+            }
+        }
+        for o in 0..nc {
+            let mut t = [0.0; 3];
+            for (j, tj) in t.iter_mut().enumerate() {
+                for &(s, gs) in &self.g[j * nc + o] {
+                    *tj += gs * x[j * n + s];
+                }
+            }
+            for i in 0..3 {
+                r[3 * o + i] += mul(&bm, t, i);
+            }
+        }
+        w.clear();
+        w.resize(3 * nc, 0.0);
+        self.lu.solve(r, w);
+        for (o, &(off, len)) in self.chains.iter().enumerate() {
+            let wo = [w[3 * o], w[3 * o + 1], w[3 * o + 2]];
+            for k in 0..len {
+                let p = &self.bp[len - 1 - k];
+                for i in 0..3 {
+                    x[i * n + off + k] += mul(p, wo, i);
+                }
+            }
+        }
     }
 
     /// Solves for `q` right-hand sides, `b` row-major `3n x q` (row `i n + s`: stage i, state
@@ -450,6 +492,15 @@ mod tests {
         dense.solve_many(&mut bd, q, &mut scratch);
         for (c, d) in bc.iter().zip(&bd) {
             assert!((c - d).abs() < 1e-10 * (1.0 + d.abs()), "{c} vs {d}");
+        }
+        // The single right-hand side (Newton's) has its own loops: column 1 of the above.
+        let b1: Vec<f64> = (0..3 * n).map(|r| b[r * q + 1]).collect();
+        let (mut xc, mut xd) = (vec![0.0; 3 * n], vec![0.0; 3 * n]);
+        chain.solve(&b1, &mut xc);
+        dense.solve(&b1, &mut xd);
+        for r in 0..3 * n {
+            assert!((xc[r] - xd[r]).abs() < 1e-10 * (1.0 + xd[r].abs()));
+            assert!((xc[r] - bd[r * q + 1]).abs() < 1e-10 * (1.0 + xd[r].abs()));
         }
         // A Jacobian that breaks a chain (an entry off the shift) is factored densely.
         let mut broken = jacs[0].clone();
