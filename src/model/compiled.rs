@@ -286,9 +286,11 @@ impl CompiledModel {
     ) {
         let q = coefs.len();
         out.iter_mut().for_each(|v| *v = 0.0);
-        let mut z = Vec::with_capacity(x.len() + u.len());
-        z.extend_from_slice(x);
-        z.extend_from_slice(u);
+        let mut buf = Buf::new(x.len() + u.len());
+        let z = buf.get();
+        z[..x.len()].copy_from_slice(x);
+        z[x.len()..].copy_from_slice(u);
+        let z = &*z;
         for (col, &k) in coefs.iter().enumerate() {
             let mut rest = k;
             let mut i = 0;
@@ -312,15 +314,8 @@ impl CompiledModel {
     /// The state derivative: the chains of integrators closed by the right-hand sides.
     pub(crate) fn rhs_unchecked(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
         // The solver calls this several times per step: no allocation for the usual sizes.
-        let nz = self.n_state + self.n_inputs;
-        let mut stack = [0.0f64; 32];
-        let mut heap = Vec::new();
-        let z: &mut [f64] = if nz <= stack.len() {
-            &mut stack[..nz]
-        } else {
-            heap.resize(nz, 0.0);
-            &mut heap
-        };
+        let mut buf = Buf::new(self.n_state + self.n_inputs);
+        let z = buf.get();
         z[..x.len()].copy_from_slice(x);
         z[x.len()..x.len() + u.len()].copy_from_slice(u);
         let z = &*z;
@@ -332,25 +327,60 @@ impl CompiledModel {
         }
     }
 
+    /// [`CompiledModel::jacobians_unchecked`] without the input part.
+    pub(crate) fn state_jacobian_unchecked(&self, x: &[f64], u: &[f64], jx: &mut [f64]) {
+        let mut ju = Buf::new(self.n_state * self.n_inputs);
+        self.jacobians_unchecked(x, u, jx, ju.get());
+    }
+
     /// Jacobian of [`CompiledModel::rhs`] with respect to the state (row-major n x n) and to the
     /// inputs (row-major n x n_u).
     pub(crate) fn jacobians_unchecked(&self, x: &[f64], u: &[f64], jx: &mut [f64], ju: &mut [f64]) {
         let n = self.n_state;
         let nu = self.n_inputs;
-        let mut z = Vec::with_capacity(n + nu);
-        z.extend_from_slice(x);
-        z.extend_from_slice(u);
+        let (mut zb, mut gb) = (Buf::new(n + nu), Buf::new(n + nu));
+        let z = zb.get();
+        z[..n].copy_from_slice(x);
+        z[n..].copy_from_slice(u);
+        let z = &*z;
         jx.iter_mut().for_each(|v| *v = 0.0);
         ju.iter_mut().for_each(|v| *v = 0.0);
-        let mut g = vec![0.0; n + nu];
+        let g = gb.get();
         for (i, (&ord, &o)) in self.orders.iter().zip(&self.offsets).enumerate() {
             for k in 0..ord - 1 {
                 jx[(o + k) * n + o + k + 1] = 1.0;
             }
-            self.grad_output_unchecked(i, &z, &mut g);
+            self.grad_output_unchecked(i, z, g);
             let row = o + ord - 1;
             jx[row * n..row * n + n].copy_from_slice(&g[..n]);
             ju[row * nu..row * nu + nu].copy_from_slice(&g[n..]);
+        }
+    }
+}
+
+/// A zeroed work vector on the stack when it is short (the solver evaluates right-hand sides and
+/// Jacobians several times per step; their allocations were a tenth of a small model's
+/// simulation), on the heap otherwise.
+pub(crate) struct Buf {
+    stack: [f64; 32],
+    heap: Vec<f64>,
+    len: usize,
+}
+
+impl Buf {
+    pub(crate) fn new(len: usize) -> Buf {
+        Buf {
+            stack: [0.0; 32],
+            heap: if len > 32 { vec![0.0; len] } else { Vec::new() },
+            len,
+        }
+    }
+
+    pub(crate) fn get(&mut self) -> &mut [f64] {
+        if self.len <= 32 {
+            &mut self.stack[..self.len]
+        } else {
+            &mut self.heap
         }
     }
 }

@@ -109,8 +109,7 @@ impl System for CompiledModel {
         )
     }
     fn jacobian(&self, x: &[f64], u: &[f64], jac: &mut [f64]) {
-        let mut ju = vec![0.0; self.n_state() * CompiledModel::n_inputs(self)];
-        self.jacobians_unchecked(x, u, jac, &mut ju);
+        self.state_jacobian_unchecked(x, u, jac);
     }
 }
 
