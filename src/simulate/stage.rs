@@ -229,7 +229,10 @@ pub(super) struct ChainLu {
     /// The nonzero entries (state, value) of the chains' top rows of the stage Jacobians,
     /// `[stage * chains + chain]`: a model's top row holds the few states its terms use, and
     /// scanning whole rows made every solve O(chains n).
-    g: Vec<Vec<(usize, f64)>>,
+    /// Flat: row `r` (= stage * chains + chain) is `g[g_start[r]..g_start[r + 1]]` (one
+    /// allocation per factorisation instead of one per row: the sensitivities factor at every step).
+    g: Vec<(usize, f64)>,
+    g_start: Vec<usize>,
     /// Factors of `I - M`, unknowns ordered chain-major (`3 o + i`).
     lu: DenseLu,
     /// Work space of the solves (the reduced right-hand sides, the top rows' sums, the reduced
@@ -252,14 +255,11 @@ impl ChainLu {
         for p in 1..=longest {
             bp.push(mat_mul(&bp[p - 1], &b));
         }
-        let mut g = vec![0.0; 3 * nc * n];
-        for (j, jac) in jacs.iter().enumerate() {
-            for (o, &(off, len)) in chains.iter().enumerate() {
-                let top = off + len - 1;
-                g[(j * nc + o) * n..(j * nc + o + 1) * n]
-                    .copy_from_slice(&jac[top * n..(top + 1) * n]);
-            }
-        }
+        // The top row of chain o at stage j: row `top` of that stage's Jacobian.
+        let top_row = |j: usize, o: usize| {
+            let top = chains[o].0 + chains[o].1 - 1;
+            &jacs[j][top * n..(top + 1) * n]
+        };
         let m = 3 * nc;
         let mut mat = vec![0.0; m * m];
         for o in 0..nc {
@@ -267,7 +267,7 @@ impl ChainLu {
                 // v[j][l] = sum_k g_o^j[off + k] (B^(len-1-k))_jl
                 let mut v = [[0.0; 3]; 3];
                 for (j, vj) in v.iter_mut().enumerate() {
-                    let row = &g[(j * nc + o) * n..(j * nc + o + 1) * n];
+                    let row = top_row(j, o);
                     for k in 0..len {
                         let gk = row[off + k];
                         if gk != 0.0 {
@@ -288,21 +288,22 @@ impl ChainLu {
             }
         }
         let lu = DenseLu::factor(m, mat)?;
-        let g = g
-            .chunks_exact(n)
-            .map(|row| {
-                row.iter()
-                    .enumerate()
-                    .filter(|(_, v)| **v != 0.0)
-                    .map(|(s, v)| (s, *v))
-                    .collect()
-            })
-            .collect();
+        let mut g = Vec::new();
+        let mut g_start = Vec::with_capacity(3 * nc + 1);
+        for j in 0..3 {
+            for o in 0..nc {
+                g_start.push(g.len());
+                let row = top_row(j, o).iter().enumerate();
+                g.extend(row.filter(|(_, v)| **v != 0.0).map(|(s, v)| (s, *v)));
+            }
+        }
+        g_start.push(g.len());
         Some(ChainLu {
             n,
             chains: chains.to_vec(),
             bp,
             g,
+            g_start,
             lu,
             work: Default::default(),
         })
@@ -336,7 +337,7 @@ impl ChainLu {
         for o in 0..nc {
             let mut t = [0.0; 3];
             for (j, tj) in t.iter_mut().enumerate() {
-                for &(s, gs) in &self.g[j * nc + o] {
+                for &(s, gs) in &self.g[self.g_start[j * nc + o]..self.g_start[j * nc + o + 1]] {
                     *tj += gs * x[j * n + s];
                 }
             }
@@ -395,7 +396,7 @@ impl ChainLu {
             t.iter_mut().for_each(|v| *v = 0.0);
             for j in 0..3 {
                 let tj = &mut t[j * q..(j + 1) * q];
-                for &(s, gs) in &self.g[j * nc + o] {
+                for &(s, gs) in &self.g[self.g_start[j * nc + o]..self.g_start[j * nc + o + 1]] {
                     let cs = &b[row(j, s)..row(j, s) + q];
                     tj.iter_mut().zip(cs).for_each(|(a, c)| *a += gs * c);
                 }
