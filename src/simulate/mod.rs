@@ -412,6 +412,9 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     chains: Option<Vec<(usize, usize)>>,
     /// The Jacobian rows that are not a chain's unit shift: the chains' last rows, or all.
     free_rows: Vec<usize>,
+    /// State vectors of finished steps, reused by the next ones (three per step were a fifth
+    /// of a simulation's allocations).
+    spare: Vec<Vec<f64>>,
 }
 
 /// The last few LU factors by (step, Jacobian), oldest dropped first.
@@ -602,10 +605,9 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
             // estimate still judges the result.
             let stalled = norm >= 0.5 * prev_norm && norm < 0.02;
             if norm < 1e-3 || stalled {
-                let mut x1 = vec![0.0; n];
-                for k in 0..n {
-                    x1[k] = x0[k] + z[2 * n + k];
-                }
+                let mut x1 = self.spare.pop().unwrap_or_default();
+                x1.clear();
+                x1.extend((0..n).map(|k| x0[k] + z[2 * n + k]));
                 return StepOutcome::Ok(x1);
             }
             if norm > prev_norm && iter >= 2 {
@@ -774,9 +776,14 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 (StepOutcome::Ok(xf), StepOutcome::Ok(xm)) => {
                     // The second half step reuses the first one's Newton matrix.
                     let lu = lu_half.as_ref().expect("factored above");
-                    match self.radau_step(t + 0.5 * hh, &xm, 0.5 * hh, lu) {
+                    let second = self.radau_step(t + 0.5 * hh, &xm, 0.5 * hh, lu);
+                    self.spare.push(xm);
+                    match second {
                         StepOutcome::Ok(xh) => Some((xf, xh)),
-                        StepOutcome::NoConvergence => None,
+                        StepOutcome::NoConvergence => {
+                            self.spare.push(xf);
+                            None
+                        }
                     }
                 }
                 _ => None,
@@ -792,6 +799,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                         let e = (xh[k] - xf[k]) / 31.0 / self.scale(x, &xh, k);
                         err += e * e;
                     }
+                    self.spare.push(xf);
                     let err = (err / n as f64).sqrt();
                     let err = if err.is_finite() { err } else { f64::INFINITY };
                     // Standard controller for an order-5 estimate, with a safety factor.
@@ -813,7 +821,8 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                             }
                         }
                         t = if last { b } else { t + hh };
-                        *x = xh;
+                        let old = std::mem::replace(x, xh);
+                        self.spare.push(old);
                         if let Some(e) = self.diverged(t, x) {
                             return Err(e);
                         }
@@ -832,6 +841,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                                 return Err(e);
                             }
                         }
+                        self.spare.push(xh);
                     }
                 }
             }
@@ -1092,6 +1102,7 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
             _ => (0..n).collect(),
         },
         chains: sys.chains(),
+        spare: Vec::new(),
     };
     let mut x = x0.to_vec();
     if let Some(e) = it.diverged(times[0], &x) {
