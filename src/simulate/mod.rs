@@ -415,6 +415,9 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     /// State vectors of finished steps, reused by the next ones (three per step were a fifth
     /// of a simulation's allocations).
     spare: Vec<Vec<f64>>,
+    /// The input at the three stage times of the step being iterated (`3 x n_inputs`): every
+    /// Newton iteration evaluates the right-hand side at the same three times.
+    stage_u: Vec<f64>,
 }
 
 /// The last few LU factors by (step, Jacobian), oldest dropped first.
@@ -471,11 +474,6 @@ struct Sens<'a> {
 }
 
 impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
-    fn f(&mut self, t: f64, x: &[f64], out: &mut [f64]) {
-        self.input.eval(t, &mut self.u);
-        self.sys.rhs(x, &self.u, out);
-    }
-
     fn scale(&self, x0: &[f64], x1: &[f64], k: usize) -> f64 {
         self.opts.atol + self.opts.rtol * x0[k].abs().max(x1[k].abs())
     }
@@ -556,10 +554,32 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         lu: &StageLu,
         buf: &mut [f64],
     ) -> StepOutcome {
+        let c = self.rk.c;
+        let nu = self.u.len();
+        let mut su = std::mem::take(&mut self.stage_u);
+        su.resize(3 * nu, 0.0);
+        for i in 0..3 {
+            self.input.eval(t + c[i] * h, &mut su[i * nu..(i + 1) * nu]);
+        }
+        let outcome = self.radau_newton(x0, h, lu, buf, &su);
+        self.stage_u = su;
+        outcome
+    }
+
+    /// The simplified Newton iterations of [`Integrator::radau_iterate`], with the inputs at
+    /// the stage times `su` (`3 x n_inputs`).
+    fn radau_newton(
+        &mut self,
+        x0: &[f64],
+        h: f64,
+        lu: &StageLu,
+        buf: &mut [f64],
+        su: &[f64],
+    ) -> StepOutcome {
         let n = self.n;
         let m = 3 * n;
         let a = self.rk.a;
-        let c = self.rk.c;
+        let nu = su.len() / 3;
         // Stage increments Z_i, started at zero (a predictor from the previous step would save
         // iterations, but zero is robust after breakpoints).
         let (z, rest) = buf.split_at_mut(m);
@@ -573,7 +593,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 for k in 0..n {
                     xs[k] = x0[k] + z[i * n + k];
                 }
-                self.f(t + c[i] * h, xs, out);
+                self.sys.rhs(xs, &su[i * nu..(i + 1) * nu], out);
                 fz[i * n..(i + 1) * n].copy_from_slice(out);
             }
             for i in 0..3 {
@@ -1103,6 +1123,7 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
         },
         chains: sys.chains(),
         spare: Vec::new(),
+        stage_u: Vec::new(),
     };
     let mut x = x0.to_vec();
     if let Some(e) = it.diverged(times[0], &x) {
