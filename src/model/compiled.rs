@@ -299,7 +299,7 @@ impl CompiledModel {
                 i += 1;
             }
             let row = self.offsets[i] + self.orders[i] - 1;
-            out[row * q + col] = self.terms[i][rest].basis(&z, &self.eps);
+            out[row * q + col] = self.terms[i][rest].basis(z, &self.eps);
         }
     }
 
