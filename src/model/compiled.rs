@@ -287,10 +287,7 @@ impl CompiledModel {
         let q = coefs.len();
         out.iter_mut().for_each(|v| *v = 0.0);
         let mut buf = Buf::new(x.len() + u.len());
-        let z = buf.get();
-        z[..x.len()].copy_from_slice(x);
-        z[x.len()..].copy_from_slice(u);
-        let z = &*z;
+        let z = buf.concat(x, u);
         for (col, &k) in coefs.iter().enumerate() {
             let mut rest = k;
             let mut i = 0;
@@ -315,10 +312,7 @@ impl CompiledModel {
     pub(crate) fn rhs_unchecked(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
         // The solver calls this several times per step: no allocation for the usual sizes.
         let mut buf = Buf::new(self.n_state + self.n_inputs);
-        let z = buf.get();
-        z[..x.len()].copy_from_slice(x);
-        z[x.len()..x.len() + u.len()].copy_from_slice(u);
-        let z = &*z;
+        let z = buf.concat(x, u);
         for (i, (&n, &o)) in self.orders.iter().zip(&self.offsets).enumerate() {
             for k in 0..n - 1 {
                 dx[o + k] = x[o + k + 1];
@@ -339,10 +333,7 @@ impl CompiledModel {
         let n = self.n_state;
         let nu = self.n_inputs;
         let (mut zb, mut gb) = (Buf::new(n + nu), Buf::new(n + nu));
-        let z = zb.get();
-        z[..n].copy_from_slice(x);
-        z[n..].copy_from_slice(u);
-        let z = &*z;
+        let z = zb.concat(x, u);
         jx.iter_mut().for_each(|v| *v = 0.0);
         ju.iter_mut().for_each(|v| *v = 0.0);
         let g = gb.get();
@@ -368,6 +359,7 @@ pub(crate) struct Buf {
 }
 
 impl Buf {
+    #[inline(always)]
     pub(crate) fn new(len: usize) -> Buf {
         Buf {
             stack: [0.0; 32],
@@ -376,11 +368,23 @@ impl Buf {
         }
     }
 
+    #[inline(always)]
     pub(crate) fn get(&mut self) -> &mut [f64] {
         if self.len <= 32 {
             &mut self.stack[..self.len]
         } else {
             &mut self.heap
         }
+    }
+
+    /// `x` then `u` (their lengths sum to the buffer's), element by element: a few states are
+    /// copied faster by a loop than by a call to `memcpy`.
+    #[inline(always)]
+    pub(crate) fn concat(&mut self, x: &[f64], u: &[f64]) -> &[f64] {
+        let z = self.get();
+        for (d, v) in z.iter_mut().zip(x.iter().chain(u)) {
+            *d = *v;
+        }
+        z
     }
 }

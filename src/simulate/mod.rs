@@ -586,15 +586,15 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         let (fz, rest) = rest.split_at_mut(m);
         let (rhs, rest) = rest.split_at_mut(m);
         let (dz, rest) = rest.split_at_mut(m);
-        let (xs, out) = rest.split_at_mut(n);
+        let xs = &mut rest[..n];
         let mut prev_norm = f64::INFINITY;
         for iter in 0..12 {
             for i in 0..3 {
                 for k in 0..n {
                     xs[k] = x0[k] + z[i * n + k];
                 }
-                self.sys.rhs(xs, &su[i * nu..(i + 1) * nu], out);
-                fz[i * n..(i + 1) * n].copy_from_slice(out);
+                self.sys
+                    .rhs(xs, &su[i * nu..(i + 1) * nu], &mut fz[i * n..(i + 1) * n]);
             }
             for i in 0..3 {
                 for k in 0..n {
