@@ -464,183 +464,223 @@ impl RecordSet {
             .trim(csv::Trim::All)
             .flexible(false)
             .from_reader(reader);
-        let header: Vec<String> = rdr
-            .headers()
-            .map_err(|e| Error::Csv {
-                path: label.into(),
-                row: 1,
-                message: e.to_string(),
-            })?
-            .iter()
-            .map(|s| s.to_string())
-            .collect();
-        if header.iter().all(|h| h.is_empty()) {
-            return Err(Error::InvalidData(format!(
-                "{label}: empty file (no header row naming the columns)"
-            )));
-        }
-        let find = |name: &str| -> Result<usize> {
-            let mut at = header.iter().enumerate().filter(|(_, h)| *h == name);
-            match (at.next(), at.next()) {
-                (Some((i, _)), None) => Ok(i),
-                (Some((i, _)), Some((j, _))) => Err(Error::InvalidData(format!(
-                    "{label}: column '{name}' appears twice in the header (columns {} and {}); rename one",
-                    i + 1,
-                    j + 1
-                ))),
-                _ => Err(Error::MissingColumn {
-                    path: label.into(),
-                    column: name.into(),
-                    available: crate::util::clip(&header.join(", "), 400),
-                }),
-            }
+        let at = locate_columns(&mut rdr, label, spec)?;
+        let runs = read_rows(&mut rdr, label, spec, &at)?;
+        let tau = match spec.time_column.as_deref() {
+            Some(tname) => tau_from_times(&runs, spec.tau, tname, label, at.run.is_some())?,
+            None => spec.tau,
         };
-        if spec.columns.is_empty() {
-            return Err(Error::param("columns", "name at least one column to load"));
+        finish(tau, runs, spec, label)
+    }
+}
+
+/// Where the channels, the run id and the time stamps are in a file's rows.
+struct Columns {
+    channels: Vec<usize>,
+    run: Option<usize>,
+    time: Option<usize>,
+}
+
+/// Reads the header and finds the columns `spec` names (each exactly once).
+fn locate_columns<R: std::io::Read>(
+    rdr: &mut csv::Reader<R>,
+    label: &str,
+    spec: &CsvSpec,
+) -> Result<Columns> {
+    let header: Vec<String> = rdr
+        .headers()
+        .map_err(|e| Error::Csv {
+            path: label.into(),
+            row: 1,
+            message: e.to_string(),
+        })?
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    if header.iter().all(|h| h.is_empty()) {
+        return Err(Error::InvalidData(format!(
+            "{label}: empty file (no header row naming the columns)"
+        )));
+    }
+    let find = |name: &str| -> Result<usize> {
+        let mut at = header.iter().enumerate().filter(|(_, h)| *h == name);
+        match (at.next(), at.next()) {
+            (Some((i, _)), None) => Ok(i),
+            (Some((i, _)), Some((j, _))) => Err(Error::InvalidData(format!(
+                "{label}: column '{name}' appears twice in the header (columns {} and {}); rename one",
+                i + 1,
+                j + 1
+            ))),
+            _ => Err(Error::MissingColumn {
+                path: label.into(),
+                column: name.into(),
+                available: crate::util::clip(&header.join(", "), 400),
+            }),
         }
-        let cols: Vec<usize> = spec
+    };
+    if spec.columns.is_empty() {
+        return Err(Error::param("columns", "name at least one column to load"));
+    }
+    Ok(Columns {
+        channels: spec
             .columns
             .iter()
             .map(|c| find(c))
-            .collect::<Result<_>>()?;
-        let run_col = spec.run_column.as_deref().map(find).transpose()?;
-        let time_col = spec.time_column.as_deref().map(find).transpose()?;
+            .collect::<Result<_>>()?,
+        run: spec.run_column.as_deref().map(find).transpose()?,
+        time: spec.time_column.as_deref().map(find).transpose()?,
+    })
+}
 
-        let mut runs: Vec<Acc> = Vec::new();
-        let mut index: std::collections::HashMap<String, usize> = Default::default();
-        let parse = |s: &str, row: usize, col: &str| -> Result<f64> {
-            match s.parse::<f64>() {
-                Ok(v) if first_unusable(&[v]).is_none() => Ok(v),
-                // Squares and low powers of larger values overflow f64.
-                Ok(v) if v.is_finite() => Err(Error::ValueTooLarge {
-                    path: label.into(),
-                    row,
-                    column: col.into(),
-                    value: v,
-                }),
-                _ => Err(Error::NonFinite {
-                    path: label.into(),
-                    row,
-                    column: col.into(),
-                    value: crate::util::clip(s, 60),
-                }),
-            }
-        };
-        for (i, rec) in rdr.records().enumerate() {
-            let row = i + 2;
-            let rec = rec.map_err(|e| Error::Csv {
-                path: label.into(),
-                row,
-                message: e.to_string(),
-            })?;
-            let id = run_col
-                .map(|c| rec[c].to_string())
-                .unwrap_or_else(|| "0".into());
-            // An empty id is a lost cell, not a run: as one it would pull the row out of its
-            // run and blame the time column for the gap.
-            if let (Some(c), true) = (&spec.run_column, id.is_empty()) {
-                return Err(Error::InvalidData(format!(
-                    "{label}: row {row}, column '{c}': empty run id; give every row its run"
-                )));
-            }
-            let k = *index.entry(id.clone()).or_insert_with(|| {
-                runs.push(Acc {
-                    id: id.clone(),
-                    channels: vec![Vec::new(); cols.len()],
-                    times: Vec::new(),
-                    rows: Vec::new(),
-                });
-                runs.len() - 1
+/// A cell as a finite number that its squares cannot overflow, or the error naming it.
+fn parse_cell(s: &str, label: &str, row: usize, col: &str) -> Result<f64> {
+    match s.parse::<f64>() {
+        Ok(v) if first_unusable(&[v]).is_none() => Ok(v),
+        // Squares and low powers of larger values overflow f64.
+        Ok(v) if v.is_finite() => Err(Error::ValueTooLarge {
+            path: label.into(),
+            row,
+            column: col.into(),
+            value: v,
+        }),
+        _ => Err(Error::NonFinite {
+            path: label.into(),
+            row,
+            column: col.into(),
+            value: crate::util::clip(s, 60),
+        }),
+    }
+}
+
+/// The data rows, gathered into runs by their run id in the order the ids first appear.
+fn read_rows<R: std::io::Read>(
+    rdr: &mut csv::Reader<R>,
+    label: &str,
+    spec: &CsvSpec,
+    at: &Columns,
+) -> Result<Vec<Acc>> {
+    let mut runs: Vec<Acc> = Vec::new();
+    let mut index: std::collections::HashMap<String, usize> = Default::default();
+    for (i, rec) in rdr.records().enumerate() {
+        let row = i + 2;
+        let rec = rec.map_err(|e| Error::Csv {
+            path: label.into(),
+            row,
+            message: e.to_string(),
+        })?;
+        let id = at
+            .run
+            .map(|c| rec[c].to_string())
+            .unwrap_or_else(|| "0".into());
+        // An empty id is a lost cell, not a run: as one it would pull the row out of its
+        // run and blame the time column for the gap.
+        if let (Some(c), true) = (&spec.run_column, id.is_empty()) {
+            return Err(Error::InvalidData(format!(
+                "{label}: row {row}, column '{c}': empty run id; give every row its run"
+            )));
+        }
+        let k = *index.entry(id.clone()).or_insert_with(|| {
+            runs.push(Acc {
+                id: id.clone(),
+                channels: vec![Vec::new(); at.channels.len()],
+                times: Vec::new(),
+                rows: Vec::new(),
             });
-            let acc = &mut runs[k];
-            for (c, &col) in cols.iter().enumerate() {
-                acc.channels[c].push(parse(&rec[col], row, &spec.columns[c])?);
-            }
-            if let Some(tc) = time_col {
-                acc.times
-                    .push(parse(&rec[tc], row, spec.time_column.as_deref().unwrap())?);
-            }
-            acc.rows.push(row);
+            runs.len() - 1
+        });
+        let acc = &mut runs[k];
+        for (c, &col) in at.channels.iter().enumerate() {
+            acc.channels[c].push(parse_cell(&rec[col], label, row, &spec.columns[c])?);
         }
-        if runs.is_empty() {
-            return Err(Error::InvalidData(format!("{label}: no data rows")));
+        if let (Some(tc), Some(tname)) = (at.time, spec.time_column.as_deref()) {
+            acc.times.push(parse_cell(&rec[tc], label, row, tname)?);
         }
+        acc.rows.push(row);
+    }
+    if runs.is_empty() {
+        return Err(Error::InvalidData(format!("{label}: no data rows")));
+    }
+    Ok(runs)
+}
 
-        let mut tau = spec.tau;
-        if let Some(tname) = spec.time_column.as_deref() {
-            for r in &runs {
-                for w in 1..r.times.len() {
-                    let (a, b) = (r.times[w - 1], r.times[w]);
-                    if b <= a {
-                        return Err(Error::TimeNotIncreasing {
-                            path: label.into(),
-                            row: r.rows[w],
-                            column: tname.into(),
-                            prev: a,
-                            value: b,
-                            hint: if run_col.is_some() {
-                                format!(
-                                    "within run '{}' times must increase: is the run id used twice, or the rows out of order?",
-                                    r.id
-                                )
-                            } else {
-                                "sort the rows or give a run column".into()
-                            },
-                        });
-                    }
-                }
-            }
-            // The first run with two samples gives the step: its (lower) median step to judge
-            // uniformity by, so that one odd step is blamed on its own row, then its mean step,
-            // which carries every digit of the stamps, as tau.
-            let Some(first) = runs.iter().find(|r| r.times.len() >= 2) else {
-                if tau.is_none() {
-                    return Err(Error::NoTimeStep {
-                        path: label.into(),
-                        column: tname.into(),
-                    });
-                }
-                return finish(tau, runs, spec, label);
-            };
-            let mut steps: Vec<f64> = first.times.windows(2).map(|w| w[1] - w[0]).collect();
-            steps.sort_by(f64::total_cmp);
-            let median = steps[(steps.len() - 1) / 2];
-            for r in &runs {
-                // Time stamps far from zero (Unix time) carry only so many digits: a step
-                // is uniform when it agrees to 1e-6 relative or to a few units in the last
-                // place of the stamps themselves.
-                let big = r.times.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-                let tol = (TAU_RTOL * median).max(4.0 * big * f64::EPSILON);
-                for w in 1..r.times.len() {
-                    let step = r.times[w] - r.times[w - 1];
-                    // Compare absolute times with the grid, so slow drift is caught too.
-                    let expect = r.times[0] + w as f64 * median;
-                    if (step - median).abs() > tol && (r.times[w] - expect).abs() > tol * w as f64 {
-                        return Err(Error::TimeNonUniform {
-                            path: label.into(),
-                            row: r.rows[w],
-                            column: tname.into(),
-                            step,
-                            tau: median,
-                        });
-                    }
-                }
-            }
-            let n = first.times.len();
-            let mean = (first.times[n - 1] - first.times[0]) / (n - 1) as f64;
-            match tau {
-                Some(t) if ((t - mean) / t).abs() > TAU_RTOL => {
-                    return Err(Error::TauMismatch {
-                        given: t,
-                        from_time: mean,
-                        column: tname.into(),
-                    })
-                }
-                None => tau = Some(mean),
-                _ => {}
+/// The sampling step from the time stamps of column `tname`: they must increase within each
+/// run and be uniform (to [`TAU_RTOL`] or the stamps' own digits), and agree with a `given`
+/// step. `given` when no run has two samples; an error when neither says the step.
+fn tau_from_times(
+    runs: &[Acc],
+    given: Option<f64>,
+    tname: &str,
+    label: &str,
+    has_run_column: bool,
+) -> Result<Option<f64>> {
+    for r in runs {
+        for w in 1..r.times.len() {
+            let (a, b) = (r.times[w - 1], r.times[w]);
+            if b <= a {
+                return Err(Error::TimeNotIncreasing {
+                    path: label.into(),
+                    row: r.rows[w],
+                    column: tname.into(),
+                    prev: a,
+                    value: b,
+                    hint: if has_run_column {
+                        format!(
+                            "within run '{}' times must increase: is the run id used twice, or the rows out of order?",
+                            r.id
+                        )
+                    } else {
+                        "sort the rows or give a run column".into()
+                    },
+                });
             }
         }
-        finish(tau, runs, spec, label)
+    }
+    // The first run with two samples gives the step: its (lower) median step to judge
+    // uniformity by, so that one odd step is blamed on its own row, then its mean step,
+    // which carries every digit of the stamps, as tau.
+    let Some(first) = runs.iter().find(|r| r.times.len() >= 2) else {
+        if given.is_none() {
+            return Err(Error::NoTimeStep {
+                path: label.into(),
+                column: tname.into(),
+            });
+        }
+        return Ok(given);
+    };
+    let mut steps: Vec<f64> = first.times.windows(2).map(|w| w[1] - w[0]).collect();
+    steps.sort_by(f64::total_cmp);
+    let median = steps[(steps.len() - 1) / 2];
+    for r in runs {
+        // Time stamps far from zero (Unix time) carry only so many digits: a step
+        // is uniform when it agrees to 1e-6 relative or to a few units in the last
+        // place of the stamps themselves.
+        let big = r.times.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let tol = (TAU_RTOL * median).max(4.0 * big * f64::EPSILON);
+        for w in 1..r.times.len() {
+            let step = r.times[w] - r.times[w - 1];
+            // Compare absolute times with the grid, so slow drift is caught too.
+            let expect = r.times[0] + w as f64 * median;
+            if (step - median).abs() > tol && (r.times[w] - expect).abs() > tol * w as f64 {
+                return Err(Error::TimeNonUniform {
+                    path: label.into(),
+                    row: r.rows[w],
+                    column: tname.into(),
+                    step,
+                    tau: median,
+                });
+            }
+        }
+    }
+    let n = first.times.len();
+    let mean = (first.times[n - 1] - first.times[0]) / (n - 1) as f64;
+    match given {
+        Some(t) if ((t - mean) / t).abs() > TAU_RTOL => Err(Error::TauMismatch {
+            given: t,
+            from_time: mean,
+            column: tname.into(),
+        }),
+        Some(t) => Ok(Some(t)),
+        None => Ok(Some(mean)),
     }
 }
 
