@@ -412,8 +412,8 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     chains: Option<Vec<(usize, usize)>>,
     /// The Jacobian rows that are not a chain's unit shift: the chains' last rows, or all.
     free_rows: Vec<usize>,
-    /// State vectors of finished steps, reused by the next ones (three per step were a fifth
-    /// of a simulation's allocations).
+    /// State vectors of finished steps, reused by the next ones (three per step; `perf` of the
+    /// EMPS benchmark named this the largest allocation site).
     spare: Vec<Vec<f64>>,
     /// The input at the three stage times of the step being iterated (`3 x n_inputs`): every
     /// Newton iteration evaluates the right-hand side at the same three times.
