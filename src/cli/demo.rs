@@ -55,6 +55,9 @@ pub struct EtcArgs {
 pub struct MimoArgs {
     #[arg(long, value_delimiter = ',', default_values_t = vec![2usize, 4, 6])]
     pub degrees: Vec<usize>,
+    /// Candidate orders of every output, chosen by the order search; one value fixes them.
+    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 2, 3, 4])]
+    pub orders: Vec<usize>,
     /// Engines to time, e.g. `cpu,gpu`.
     #[arg(long, value_delimiter = ',', default_value = "cpu")]
     pub engines: Vec<EngineChoice>,
@@ -97,6 +100,7 @@ pub fn run(a: DemoArgs) -> Result<()> {
             }
             let o = mimo::MimoOptions {
                 degrees: m.degrees,
+                orders: m.orders,
                 engines: m.engines,
                 noise: m.noise,
                 seed: m.seed,

@@ -20,6 +20,9 @@ pub struct MimoOptions {
     pub noise: f64,
     pub seed: u64,
     pub degrees: Vec<usize>,
+    /// Candidate orders of every output, chosen by identify's order search (one value fixes
+    /// them).
+    pub orders: Vec<usize>,
     pub engines: Vec<EngineChoice>,
     /// Structure search (identify's default unless given).
     pub method: Option<crate::regression::Method>,
@@ -38,6 +41,7 @@ impl Default for MimoOptions {
             noise: 0.0,
             seed: 1,
             degrees: vec![2, 4, 6],
+            orders: vec![1, 2, 3, 4],
             engines: vec![EngineChoice::Cpu],
             method: None,
             out: None,
@@ -73,10 +77,19 @@ pub fn run(o: &MimoOptions) -> Result<String> {
     for eq in &truth.outputs {
         let _ = writeln!(out, "    {}", eq.to_text());
     }
+    let mut per_output = Table::new(&[
+        "degree",
+        "output",
+        "order (truth 3)",
+        "true terms found",
+        "extra terms",
+        "test NRMSE vs truth",
+    ]);
     let mut summary = Table::new(&[
         "degree",
         "candidates / output",
         "engine",
+        "orders",
         "time (s)",
         "true terms found",
         "extra terms",
@@ -96,7 +109,10 @@ pub fn run(o: &MimoOptions) -> Result<String> {
             if let Some(m) = o.method {
                 s.method = m;
             }
-            s.orders = Orders::Fixed(vec![3; outputs.len()]);
+            s.orders = match o.orders.as_slice() {
+                [n] => Orders::Fixed(vec![*n; outputs.len()]),
+                list => Orders::Search(list.to_vec()),
+            };
             s.engine = engine;
             s.progress = o.progress;
             let t = std::time::Instant::now();
@@ -109,21 +125,36 @@ pub fn run(o: &MimoOptions) -> Result<String> {
             let secs = t.elapsed().as_secs_f64();
             let (mut found, mut total, mut extra, mut worst) = (0, 0, 0, 0.0f64);
             let _ = writeln!(out, "\n## d = {d}, engine {}\n", id.outputs[0].engine);
+            let mut nr = Vec::new();
             for i in 0..outputs.len() {
                 let (rows, ex) = coefficient_errors(&id.model, &truth, i);
+                let hit = rows.iter().filter(|r| r.2 != 0.0).count();
                 total += rows.len();
-                found += rows.iter().filter(|r| r.2 != 0.0).count();
+                found += hit;
                 extra += ex.len();
                 worst = rows.iter().map(|r| r.3.abs()).fold(worst, f64::max);
                 let _ = writeln!(out, "    {}", id.model.outputs[i].to_text());
+                nr.push(format!("{:.2} %", 100.0 * nrmse_vs_truth(&id, &runs, i).2));
+                per_output.row(vec![
+                    d.to_string(),
+                    outputs[i].clone(),
+                    id.model.outputs[i].order.to_string(),
+                    format!("{hit} / {}", rows.len()),
+                    ex.len().to_string(),
+                    nr[i].clone(),
+                ]);
             }
-            let nr: Vec<String> = (0..outputs.len())
-                .map(|i| format!("{:.2} %", 100.0 * nrmse_vs_truth(&id, &runs, i).2))
+            let orders: Vec<String> = id
+                .model
+                .outputs
+                .iter()
+                .map(|e| e.order.to_string())
                 .collect();
             summary.row(vec![
                 d.to_string(),
                 crate::basis::count(11, d).unwrap_or(0).to_string(),
                 id.outputs[0].engine.clone(),
+                orders.join(", "),
                 format!("{secs:.2}"),
                 if beyond > 0 {
                     format!("{found} / {total} ({beyond} of degree > {d})")
@@ -136,10 +167,16 @@ pub fn run(o: &MimoOptions) -> Result<String> {
             ]);
         }
     }
-    let _ = writeln!(out, "\n## Summary\n\n{}", summary.markdown());
+    let _ = writeln!(
+        out,
+        "\n## Summary\n\n{}\n## Per output\n\n{}",
+        summary.markdown(),
+        per_output.markdown()
+    );
     if let Some(dir) = &o.out {
         write_file(dir, "mimo_report.md", &out)?;
         write_file(dir, "mimo_summary.csv", &summary.csv())?;
+        write_file(dir, "mimo_outputs.csv", &per_output.csv())?;
     }
     Ok(out)
 }
