@@ -6,7 +6,9 @@
 
 use ctsid::demo::{coefficient_errors, nrmse_vs_truth, records};
 use ctsid::identify::{identify, Orders, Selection, Settings, Split};
-use ctsid::plants::{dataset, Plant};
+use ctsid::model::{Model, OutputEquation, Term};
+use ctsid::plants::mimo::MimoPlant;
+use ctsid::plants::{dataset, write_csv, Dynamics, Plant};
 use ctsid::regression::EngineChoice;
 
 #[test]
@@ -97,4 +99,121 @@ fn mimo_orders_are_chosen_on_free_run_simulation() {
     assert!(simulated);
     // The case this selection exists for: the derivative profiles alone choose wrong here.
     assert_ne!(paper, vec![3, 3, 3]);
+}
+
+/// A 2-input 3-output record of our own (not the built-in plant): outputs of orders 2, 3 and 1
+/// coupled through products, 20 runs at `noise`, written as CSV and identified by `ctsid
+/// identify` with the orders searched (1..4 each, chosen on free-run simulation) at d = 3.
+/// Returns the true model and the model file written.
+fn own_record_through_identify(noise: f64) -> (Model, Model) {
+    let t = Term::new;
+    let truth = Model::new(
+        &["u1", "u2"],
+        vec![
+            OutputEquation::new(
+                "a",
+                2,
+                vec![
+                    t(&[("a", 1)], -4.0),
+                    t(&[("a_d1", 1)], -3.0),
+                    t(&[("u1", 1)], 5.0),
+                    t(&[("b", 1), ("c", 1)], 0.5),
+                ],
+            ),
+            OutputEquation::new(
+                "b",
+                3,
+                vec![
+                    t(&[("b", 1)], -6.0),
+                    t(&[("b_d1", 1)], -11.0),
+                    t(&[("b_d2", 1)], -6.0),
+                    t(&[("u2", 1)], 10.0),
+                    t(&[("a", 1), ("u1", 1)], 1.0),
+                ],
+            ),
+            OutputEquation::new(
+                "c",
+                1,
+                vec![
+                    t(&[("c", 1)], -2.0),
+                    t(&[("u2", 1)], 3.0),
+                    t(&[("a", 2)], -0.5),
+                ],
+            ),
+        ],
+        Some(0.01),
+    );
+    let plant = Plant {
+        name: "own".into(),
+        dynamics: Dynamics::Mimo(MimoPlant {
+            model: truth.clone(),
+            compiled: truth.compile().unwrap(),
+        }),
+        excitation: Plant::mimo().excitation,
+    };
+    let runs = dataset(&plant, 20, 1000, 0.01, noise, 11).unwrap();
+    let dir = std::env::temp_dir().join(format!("ctsid-mimo-csv-{}-{noise}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("own.csv");
+    let out = dir.join("own.model.json");
+    write_csv(&plant, &runs, csv.to_str().unwrap(), false).unwrap();
+    let t0 = std::time::Instant::now();
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_ctsid"))
+        .args(["identify", csv.to_str().unwrap()])
+        .args([
+            "--output",
+            "a,b,c",
+            "--input",
+            "u1,u2",
+            "--run-column",
+            "run",
+        ])
+        .args(["--time-column", "t", "--degree", "3", "--orders", "1..4"])
+        .args([
+            "--train", "0-13", "--test", "14-19", "--engine", "cpu", "--quiet",
+        ])
+        .args(["-o", out.to_str().unwrap()])
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    eprintln!(
+        "noise {noise}: identified in {:.1} s",
+        t0.elapsed().as_secs_f64()
+    );
+    let found = Model::read(out.to_str().unwrap()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    (truth, found)
+}
+
+/// Noise-free: the true orders and exactly the true terms. At 1 % noise: the true orders; the
+/// terms are printed (measured: every one but `a*u1` in b's equation, for which b*u1, u1*u2 and
+/// three smaller terms stand in, and two small extras in a's: the losses at noise that issue 21
+/// item 2 is about).
+#[test]
+fn mimo_csv_record_of_mixed_orders_through_identify() {
+    let (truth, found) = own_record_through_identify(0.0);
+    let orders: Vec<usize> = found.outputs.iter().map(|o| o.order).collect();
+    assert_eq!(orders, vec![2, 3, 1], "{found}");
+    for i in 0..3 {
+        let (rows, extra) = coefficient_errors(&found, &truth, i);
+        assert!(extra.is_empty(), "output {i}: extra {extra:?}\n{found}");
+        for (term, want, got, rel) in rows {
+            assert!(
+                rel.abs() < 1e-3,
+                "output {i}: {term}: {got} vs {want}\n{found}"
+            );
+        }
+    }
+    let (_, found) = own_record_through_identify(0.01);
+    let orders: Vec<usize> = found.outputs.iter().map(|o| o.order).collect();
+    assert_eq!(orders, vec![2, 3, 1], "{found}");
+    for i in 0..3 {
+        let (rows, extra) = coefficient_errors(&found, &truth, i);
+        eprintln!("1 % noise, output {i}: {rows:?}, extra {extra:?}");
+    }
 }
