@@ -521,28 +521,39 @@ impl Prepared<'_> {
     /// magnitude off, and least squares would bend every coefficient towards them.
     fn fit(&self, i: usize, ord: &[usize], fit_runs: &[usize]) -> Result<crate::regression::Model> {
         let (f, y, w0, _) = self.design(i, ord, fit_runs);
+        self.fit_on(i, ord, fit_runs, (&f, &y, &w0))
+    }
+
+    /// [`Prepared::fit`] on the given features, label and confidence weights of `fit_runs`.
+    fn fit_on(
+        &self,
+        i: usize,
+        ord: &[usize],
+        fit_runs: &[usize],
+        (f, y, w0): (&Features, &[f64], &[f64]),
+    ) -> Result<crate::regression::Model> {
         let label = derivative_name(&self.settings.outputs[i], ord[i]);
         let floor = if self.settings.weighting {
-            self.settings.label_floor * self.label_floor(i, ord, fit_runs, &y, &w0)
+            self.settings.label_floor * self.label_floor(i, ord, fit_runs, y, w0)
         } else {
             0.0
         };
         let reg = self.regression(i, w0.iter().filter(|w| **w > 0.0).count(), floor)?;
-        let named = self.named_columns(&f);
-        let mut w = w0.clone();
-        let mut model = reg.fit_with_columns(&f, &named, &y, &label, Some(&w))?;
+        let named = self.named_columns(f);
+        let mut w = w0.to_vec();
+        let mut model = reg.fit_with_columns(f, &named, y, &label, Some(&w))?;
         for _ in 0..ROBUST_ITERATIONS {
-            let pred = model.predict(&f)?;
+            let pred = model.predict(f)?;
             let r: Vec<f64> = y.iter().zip(&pred).map(|(a, b)| a - b).collect();
             let abs: Vec<f64> = r
                 .iter()
-                .zip(&w0)
+                .zip(w0)
                 .filter(|(_, w)| **w > 0.0)
                 .map(|(r, w)| (r * w.sqrt()).abs())
                 .collect();
             // The scale never drops below 1e-6 of the label's spread: on noise-free data the MAD
             // is rounding, and bisquare weights on rounding would discard good samples.
-            let label_rms = (y.iter().zip(&w0).map(|(v, w)| w * v * v).sum::<f64>()
+            let label_rms = (y.iter().zip(w0).map(|(v, w)| w * v * v).sum::<f64>()
                 / w0.iter().sum::<f64>().max(1e-300))
             .sqrt();
             let scale =
@@ -559,7 +570,7 @@ impl Prepared<'_> {
                     w0[s] * (1.0 - u * u).powi(2)
                 };
             }
-            model = reg.fit_with_columns(&f, &named, &y, &label, Some(&w))?;
+            model = reg.fit_with_columns(f, &named, y, &label, Some(&w))?;
         }
         Ok(model)
     }
@@ -817,77 +828,8 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
             c.clone()
         }
         Orders::Search(cands) => {
-            let mut ord = vec![*cands.iter().max().unwrap(); ny];
-            // Candidates already scored, by output and orders: a sweep that revisits an output
-            // whose neighbours kept their orders asks for the same fits again.
-            let mut scored: std::collections::HashMap<(usize, Vec<usize>), Candidate> =
-                Default::default();
-            for sweep in 0..3 {
-                let mut changed = false;
-                for i in 0..ny {
-                    let orders: Vec<Vec<usize>> = cands
-                        .iter()
-                        .map(|&n| {
-                            let mut o = ord.clone();
-                            o[i] = n;
-                            o
-                        })
-                        .collect();
-                    // Candidate orders are independent fits: score them in parallel, report in order.
-                    let fresh: Vec<Candidate> = orders
-                        .par_iter()
-                        .filter(|o| !scored.contains_key(&(i, o.to_vec())))
-                        .map(|o| {
-                            let prep = prep_for(o);
-                            if settings.selection != Selection::Simulation {
-                                return candidate(prep, i, o, split);
-                            }
-                            if ny > 1 {
-                                return mimo_candidate(prep, &outputs, i, o, split);
-                            }
-                            let mut c = candidate(prep, i, o, split)?;
-                            simulation_score(prep, &outputs, split, i, &mut c)?;
-                            Ok(c)
-                        })
-                        .collect::<Result<_>>()?;
-                    for c in fresh {
-                        scored.insert((i, c.orders.clone()), c);
-                    }
-                    let list: Vec<Candidate> = orders
-                        .iter()
-                        .map(|o| scored[&(i, o.clone())].clone())
-                        .collect();
-                    for c in &list {
-                        say(format!(
-                            "output '{}' order {}: validation p50/p95/p100 = {}/{}/{}, {} terms",
-                            settings.outputs[i],
-                            c.order,
-                            num4(c.validation.p50()),
-                            num4(c.validation.p95()),
-                            num4(c.validation.p100()),
-                            c.n_terms
-                        ));
-                        if let Some(p) = &c.simulation {
-                            say(format!("output '{}' order {}: free-run p50/p95/p100 = {}/{}/{} on the gate runs", settings.outputs[i], c.order, num4(p.p50()), num4(p.p95()), num4(p.p100())));
-                        }
-                    }
-                    let profiles: Vec<Profile> = list.iter().map(Candidate::chosen_on).collect();
-                    let pick = eta_rule(&profiles, settings.eta).ok_or_else(|| {
-                        Error::Numerical(format!(
-                            "no candidate order of '{}' could be scored",
-                            settings.outputs[i]
-                        ))
-                    })?;
-                    if list[pick].order != ord[i] {
-                        changed = true;
-                        ord[i] = list[pick].order;
-                    }
-                    candidates[i] = list;
-                }
-                if !changed || ny == 1 || sweep == 2 {
-                    break;
-                }
-            }
+            let (ord, lists) = search_orders(settings, &outputs, split, cands, &prep_for)?;
+            candidates = lists;
             ord
         }
     };
@@ -995,6 +937,110 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         weighting,
         refinement,
     })
+}
+
+/// The coordinate search over candidate orders (see the module docs): every output starts at
+/// the largest candidate, then each in turn takes the order the eta-rule picks with the others
+/// fixed, until a sweep changes nothing (at most three sweeps). Returns the orders and every
+/// output's candidates at the final orders of the others.
+fn search_orders<'p, 'a: 'p>(
+    settings: &Settings,
+    outputs: &[usize],
+    split: &Split,
+    cands: &[usize],
+    prep_for: &(dyn Fn(&[usize]) -> &'p Prepared<'a> + Sync),
+) -> Result<(Vec<usize>, Vec<Vec<Candidate>>)> {
+    let ny = outputs.len();
+    let mut ord = vec![*cands.iter().max().unwrap(); ny];
+    let mut candidates: Vec<Vec<Candidate>> = vec![Vec::new(); ny];
+    // Candidates already scored, by output and orders: a sweep that revisits an output whose
+    // neighbours kept their orders asks for the same fits again.
+    let mut scored: std::collections::HashMap<(usize, Vec<usize>), Candidate> = Default::default();
+    for sweep in 0..3 {
+        let mut changed = false;
+        for i in 0..ny {
+            let orders: Vec<Vec<usize>> = cands
+                .iter()
+                .map(|&n| {
+                    let mut o = ord.clone();
+                    o[i] = n;
+                    o
+                })
+                .collect();
+            // Candidate orders are independent fits: score them in parallel, report in order.
+            let fresh: Vec<Candidate> = orders
+                .par_iter()
+                .filter(|o| !scored.contains_key(&(i, o.to_vec())))
+                .map(|o| score_candidate(prep_for(o), outputs, i, o, split))
+                .collect::<Result<_>>()?;
+            for c in fresh {
+                scored.insert((i, c.orders.clone()), c);
+            }
+            let list: Vec<Candidate> = orders
+                .iter()
+                .map(|o| scored[&(i, o.clone())].clone())
+                .collect();
+            report_candidates(settings, i, &list);
+            let profiles: Vec<Profile> = list.iter().map(Candidate::chosen_on).collect();
+            let pick = eta_rule(&profiles, settings.eta).ok_or_else(|| {
+                Error::Numerical(format!(
+                    "no candidate order of '{}' could be scored",
+                    settings.outputs[i]
+                ))
+            })?;
+            if list[pick].order != ord[i] {
+                changed = true;
+                ord[i] = list[pick].order;
+            }
+            candidates[i] = list;
+        }
+        if !changed || ny == 1 || sweep == 2 {
+            break;
+        }
+    }
+    Ok((ord, candidates))
+}
+
+/// Output `i` fitted at orders `ord` and scored as the selection asks.
+fn score_candidate(
+    prep: &Prepared,
+    outputs: &[usize],
+    i: usize,
+    ord: &[usize],
+    split: &Split,
+) -> Result<Candidate> {
+    if prep.settings.selection != Selection::Simulation {
+        return candidate(prep, i, ord, split);
+    }
+    if outputs.len() > 1 {
+        return mimo_candidate(prep, outputs, i, ord, split);
+    }
+    let mut c = candidate(prep, i, ord, split)?;
+    simulation_score(prep, outputs, split, i, &mut c)?;
+    Ok(c)
+}
+
+/// Progress lines: each candidate's derivative-domain profile and, where simulated, its
+/// free-run profile.
+fn report_candidates(settings: &Settings, i: usize, list: &[Candidate]) {
+    let Some(say) = settings.progress else { return };
+    let name = &settings.outputs[i];
+    let line = |p: &Profile| format!("{}/{}/{}", num4(p.p50()), num4(p.p95()), num4(p.p100()));
+    for c in list {
+        say(&format!(
+            "output '{name}' order {}: validation p50/p95/p100 = {}, {} terms",
+            c.order,
+            line(&c.validation),
+            c.n_terms
+        ));
+        if let Some(p) = &c.simulation {
+            say(&format!(
+                "output '{name}' order {}: free-run p50/p95/p100 = {} on the gate runs",
+                c.order,
+                line(p)
+            ));
+        }
+    }
 }
 
 /// Without a kept refinement the coefficients are the derivative fit's, and so are their
