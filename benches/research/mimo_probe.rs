@@ -19,6 +19,7 @@ fn main() {
     s.engine = ctsid::regression::EngineChoice::Cpu;
     s.refine = std::env::var("REFINE").is_ok();
     s.same_filter = std::env::var("NOSAME").is_err();
+    s.label_filter = std::env::var("LABELFILTER").is_ok();
     s.weighting = std::env::var("NOWEIGHT").is_err();
     let t = std::time::Instant::now();
     let id = identify(&rs, &split, &s).unwrap();
