@@ -6,10 +6,13 @@
 //! of 7), and the drag coefficient absorbs the damping (-1.0 instead of -0.8). Free-run
 //! simulation tells them apart: the missing damping shows as ringing on held-out runs.
 //!
-//! So after the refinement, each term the regression almost took (pruned from the chosen
-//! support, or entering the path after it; at most [`CANDIDATES`] per output, in that order) is
-//! tried: appended at its path coefficient, the model refined on the fit runs, and kept when its
-//! free runs on the gate runs (runs the refinement does not see) fit the measurement
+//! So after the refinement, each term the caller asks for is tried. Identify asks, per output,
+//! for up to [`CANDIDATES`] terms of a second fit whose regressors pass through the label's own
+//! filter (terms it takes that the model lacks, then its near misses: that fit is not
+//! attenuated, and it offers the MIMO plant's `y1^3`, which the default fit masks), then the
+//! default fit's near misses (pruned from the chosen support, or entering the path after it; at
+//! most [`CANDIDATES`]; [`near_misses`]). Each is appended at its path coefficient, the model
+//! refined on the fit runs, and kept when its free runs on the gate runs (runs the refinement does not see) fit the measurement
 //! significantly better. The test is on the change of the squared error,
 //! `dSSE = sum (s_b - y)^2 - (s_a - y)^2 = sum d (s_b + s_a - 2 y_true) - 2 sum d e`, with
 //! `d = s_b - s_a` and `e` the measurement noise: without a real gain the first sum is small and
@@ -73,7 +76,7 @@ pub struct Trial {
 /// The names of the terms the fit of one output almost took, best first, with the coefficient
 /// each had last on the path (pruned terms first, then those entering after the chosen
 /// breakpoint).
-fn near_misses(fit: &Fit) -> Vec<(String, f64)> {
+pub fn near_misses(fit: &Fit) -> Vec<(String, f64)> {
     let chosen = fit.diagnostics.chosen_breakpoint;
     let last_coef = |name: &str| {
         fit.path
@@ -411,15 +414,15 @@ fn screen(
         .collect()
 }
 
-/// Tries the near misses of every output's fit (see the module docs); the completed model and
-/// the trials. `refined` says that `model` is already refined on `fit_runs` (else it is refined
+/// Tries the terms `asked[i]` (name, starting coefficient) of every output `i`, in order (see
+/// the module docs); the completed model and the trials. `refined` says that `model` is already refined on `fit_runs` (else it is refined
 /// there first, so that a trial differs from it by its term alone); `noise[o]` is output o's
 /// measurement noise standard deviation; `smoothing` gives a new `sign` term its width. Refuses
-/// what [`super::refine::free_run_nrmse`] refuses on `gate_runs`. Panics when `fits` has more
-/// entries than `model` has outputs (`fits[i]` is output `i`'s), or `noise` fewer.
+/// what [`super::refine::free_run_nrmse`] refuses on `gate_runs`. Panics when `asked` has more
+/// entries than `model` has outputs, or `noise` fewer.
 pub fn complete(
     (model, refined): (&Model, bool),
-    fits: &[Fit],
+    asked: &[Vec<(String, f64)>],
     (fit_runs, gate_runs): (&[RunData], &[RunData]),
     noise: &[f64],
     opts: &RefineOptions,
@@ -449,16 +452,14 @@ pub fn complete(
     };
     let start = best.clone();
     let vars = model.variable_names();
-    let mut pending: Vec<(usize, String, f64)> = fits
-        .iter()
-        .enumerate()
-        .flat_map(|(i, fit)| {
-            near_misses(fit)
-                .into_iter()
-                .take(CANDIDATES)
-                .map(move |(n, c)| (i, n, c))
-        })
-        .collect();
+    let mut pending: Vec<(usize, String, f64)> = Vec::new();
+    for (i, list) in asked.iter().enumerate() {
+        for (n, c) in list {
+            if !pending.iter().any(|(j, m, _)| *j == i && m == n) {
+                pending.push((i, n.clone(), *c));
+            }
+        }
+    }
     // Best first: every pending candidate is tried against the current model, the most
     // significant one that passes is added, and the rest are tried again against the result
     // (a constant tried before the missing damping took part of its place).
