@@ -434,15 +434,7 @@ impl Prepared<'_> {
             if self.eqs[i].filtered.iter().any(|f| f.n == ord[i]) {
                 continue;
             }
-            let d0 = &self.eqs[i].outs[i][0];
-            let opts = DerivativeOptions {
-                states: Some(d0.states),
-                h: Some(d0.h),
-                adaptive: false,
-                end_blend: false,
-                exp_sum: false,
-                ..Default::default()
-            };
+            let opts = linear_smoother(&self.eqs[i].outs[i][0]);
             let f = label_filtered(
                 self.rs,
                 (outputs, &self.inputs),
@@ -924,44 +916,11 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let mut reports = Vec::new();
     let mut equations = Vec::new();
     let mut fits = Vec::new();
-    for i in 0..ny {
-        let (_, _, w, excluded) = prep.design(i, &ord, &split.train);
-        let reuse = candidates[i]
-            .iter_mut()
-            .find(|c| c.orders == ord)
-            .and_then(|c| c.model.take());
-        let m = match reuse {
-            Some(m) => m,
-            None => prep.fit(i, &ord, &split.train)?,
-        };
-        let test = if split.test.is_empty() {
-            None
-        } else {
-            let (e, l) = prep.residuals(&m, i, &ord, &split.test)?;
-            Some(Profile::new(&e, &l))
-        };
+    for (i, list) in candidates.iter_mut().enumerate() {
+        let (m, report) = final_fit(&prep, i, &ord, split, list)?;
         equations.push(equation_of(&m, &settings.outputs[i], ord[i]));
-        fits.push(m.clone());
-        reports.push(OutputReport {
-            name: settings.outputs[i].clone(),
-            candidates: std::mem::take(&mut candidates[i]),
-            order: ord[i],
-            equation: m.equation(),
-            test,
-            samples_used: w.iter().filter(|w| **w > 0.0).count(),
-            samples_excluded: excluded,
-            // A GPU that failed and fell back is said where the engine is named.
-            engine: std::iter::once(m.diagnostics.engine.clone())
-                .chain(
-                    m.diagnostics
-                        .notes
-                        .iter()
-                        .filter(|n| n.starts_with("GPU engine failed"))
-                        .cloned(),
-                )
-                .collect::<Vec<_>>()
-                .join("; "),
-        });
+        fits.push(m);
+        reports.push(report);
     }
     let input_names: Vec<&str> = settings.inputs.iter().map(String::as_str).collect();
     let mut model = ModelFile::new(&input_names, equations, Some(rs.tau));
@@ -1002,19 +961,14 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         _ => None,
     };
     if let Some(report) = refinement.as_mut() {
-        let unbiased = label_filtered_terms(&model, &mut prep, &outputs, &ord, split)?;
-        let asked: Vec<Vec<(String, f64)>> = fits
-            .iter()
-            .zip(unbiased)
-            .map(|(f, mut u)| {
-                u.extend(
-                    complete::near_misses(f)
-                        .into_iter()
-                        .take(complete::CANDIDATES),
-                );
-                u
-            })
-            .collect();
+        let mut asked = label_filtered_terms(&model, &mut prep, &outputs, &ord, split)?;
+        for (a, f) in asked.iter_mut().zip(&fits) {
+            a.extend(
+                complete::near_misses(f)
+                    .into_iter()
+                    .take(complete::CANDIDATES),
+            );
+        }
         model = complete_selected(&model, report, &prep, &outputs, split, &asked)?;
     }
     derivative_std_errors(&mut model, &prep, &ord, split)?;
@@ -1138,6 +1092,53 @@ fn report_candidates(settings: &Settings, i: usize, list: &[Candidate]) {
             ));
         }
     }
+}
+
+/// Output `i`'s final fit at the selected orders `ord` on all training runs (the search's own
+/// where it made one there) and its report, which takes the output's `candidates`.
+fn final_fit(
+    prep: &Prepared,
+    i: usize,
+    ord: &[usize],
+    split: &Split,
+    candidates: &mut Vec<Candidate>,
+) -> Result<(crate::regression::Model, OutputReport)> {
+    let (_, _, w, excluded) = prep.design(i, ord, &split.train);
+    let reuse = candidates
+        .iter_mut()
+        .find(|c| c.orders == ord)
+        .and_then(|c| c.model.take());
+    let m = match reuse {
+        Some(m) => m,
+        None => prep.fit(i, ord, &split.train)?,
+    };
+    let test = if split.test.is_empty() {
+        None
+    } else {
+        let (e, l) = prep.residuals(&m, i, ord, &split.test)?;
+        Some(Profile::new(&e, &l))
+    };
+    let report = OutputReport {
+        name: prep.settings.outputs[i].clone(),
+        candidates: std::mem::take(candidates),
+        order: ord[i],
+        equation: m.equation(),
+        test,
+        samples_used: w.iter().filter(|w| **w > 0.0).count(),
+        samples_excluded: excluded,
+        // A GPU that failed and fell back is said where the engine is named.
+        engine: std::iter::once(m.diagnostics.engine.clone())
+            .chain(
+                m.diagnostics
+                    .notes
+                    .iter()
+                    .filter(|n| n.starts_with("GPU engine failed"))
+                    .cloned(),
+            )
+            .collect::<Vec<_>>()
+            .join("; "),
+    };
+    Ok((m, report))
 }
 
 /// Without a kept refinement the coefficients are the derivative fit's, and so are their
@@ -1515,17 +1516,9 @@ fn equation_data(
             filtered: Vec::new(),
         });
     }
-    let d0 = &derivs[i][0];
     let opts = DerivativeOptions {
-        states: Some(d0.states),
-        h: Some(d0.h),
-        adaptive: false,
-        end_blend: false,
-        // One linear smoother for every signal of the equation: a parametric model for some
-        // runs of one channel would break that.
-        exp_sum: false,
         tune_runs: Some(train.to_vec()),
-        ..Default::default()
+        ..linear_smoother(&derivs[i][0])
     };
     let smooth = |c: usize, order: usize| -> Result<Vec<Derivatives>> {
         let runs: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[c].as_slice()).collect();
@@ -1554,6 +1547,20 @@ fn equation_data(
         ins,
         filtered,
     })
+}
+
+/// The linear smoother of an equation: the integrator-chain RTS smoother at the level `d0` was
+/// tuned to, with neither local adaptivity nor end blending, and no parametric model for some
+/// runs of a channel (one and the same linear filter for every signal of the equation).
+fn linear_smoother(d0: &Derivatives) -> DerivativeOptions {
+    DerivativeOptions {
+        states: Some(d0.states),
+        h: Some(d0.h),
+        adaptive: false,
+        end_blend: false,
+        exp_sum: false,
+        ..Default::default()
+    }
 }
 
 /// The regressor signals of an equation whose label is the n-th derivative estimate of the
