@@ -961,7 +961,20 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         _ => None,
     };
     if let Some(report) = refinement.as_mut() {
-        let mut asked = label_filtered_terms(&model, &mut prep, &outputs, &ord, split)?;
+        // A model that already simulates the gate runs below the refinement's skip level
+        // (noise-free data) gets no completion: the second fit would be wasted.
+        let gate = if report.kept {
+            &report.validation_after
+        } else {
+            &report.validation_before
+        };
+        let simulates =
+            !gate.is_empty() && refine::overall(gate) < settings.refine_options.skip_below;
+        let mut asked = if simulates {
+            vec![Vec::new(); ny]
+        } else {
+            label_filtered_terms(&model, &mut prep, &outputs, &ord, split)?
+        };
         for (a, f) in asked.iter_mut().zip(&fits) {
             a.extend(
                 complete::near_misses(f)
