@@ -961,27 +961,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         _ => None,
     };
     if let Some(report) = refinement.as_mut() {
-        // A model that already simulates the gate runs below the refinement's skip level
-        // (noise-free data) gets no completion: the second fit would be wasted.
-        let gate = if report.kept {
-            &report.validation_after
-        } else {
-            &report.validation_before
-        };
-        let simulates =
-            !gate.is_empty() && refine::overall(gate) < settings.refine_options.skip_below;
-        let mut asked = if simulates {
-            vec![Vec::new(); ny]
-        } else {
-            label_filtered_terms(&model, &mut prep, &outputs, &ord, split)?
-        };
-        for (a, f) in asked.iter_mut().zip(&fits) {
-            a.extend(
-                complete::near_misses(f)
-                    .into_iter()
-                    .take(complete::CANDIDATES),
-            );
-        }
+        let asked = completion_asks(&model, report, &mut prep, (&outputs, &ord), split, &fits)?;
         model = complete_selected(&model, report, &prep, &outputs, split, &asked)?;
     }
     derivative_std_errors(&mut model, &prep, &ord, split)?;
@@ -1218,6 +1198,39 @@ fn gate_split(prep: &Prepared, split: &Split) -> (Vec<usize>, Vec<usize>, &'stat
             ),
         },
     }
+}
+
+/// The terms the completion tries, per output: the label-filtered fit's ([`label_filtered_terms`])
+/// then the derivative fit's near misses. A model that already simulates the gate runs below the
+/// refinement's skip level (noise-free data) gets no completion: the second fit would be wasted.
+fn completion_asks(
+    model: &ModelFile,
+    report: &RefinementReport,
+    prep: &mut Prepared,
+    (outputs, ord): (&[usize], &[usize]),
+    split: &Split,
+    fits: &[crate::regression::Model],
+) -> Result<Vec<Vec<(String, f64)>>> {
+    let gate = if report.kept {
+        &report.validation_after
+    } else {
+        &report.validation_before
+    };
+    let simulates =
+        !gate.is_empty() && refine::overall(gate) < prep.settings.refine_options.skip_below;
+    let mut asked = if simulates {
+        vec![Vec::new(); ord.len()]
+    } else {
+        label_filtered_terms(model, prep, outputs, ord, split)?
+    };
+    for (a, f) in asked.iter_mut().zip(fits) {
+        a.extend(
+            complete::near_misses(f)
+                .into_iter()
+                .take(complete::CANDIDATES),
+        );
+    }
+    Ok(asked)
 }
 
 /// The terms each output's fit takes, beyond those of `model`, when its regressors pass through
