@@ -34,6 +34,9 @@ use crate::simulate::{free_run, SimOptions, INIT_WINDOW};
 /// Free runs on several runs, `[run][output][sample]`.
 type Sims = Vec<Vec<Vec<f64>>>;
 
+/// A candidate term of one output: (output, name, starting coefficient).
+type Move = (usize, String, f64);
+
 /// Most multiple-shooting iterations of a trial's refinement.
 pub const TRIAL_ITERATIONS: usize = 8;
 
@@ -331,7 +334,7 @@ fn run_normal(
 /// which would remove about 1 % of the gate error, cost 8 s each before the screen).
 fn screen(
     best: &Model,
-    (pending, replaces): (&[(usize, String, f64)], &[Option<usize>]),
+    (pending, replaces): (&[Move], &[Option<usize>]),
     vars: &[String],
     fit_runs: &[RunData],
     noise: &[f64],
@@ -480,7 +483,7 @@ struct Context<'a> {
 fn best_move(
     best: &Model,
     best_sims: &[Vec<Vec<f64>>],
-    pending: &[(usize, String, f64)],
+    pending: &[Move],
     replaces: &[Option<usize>],
     ctx: &Context,
     trials: &mut Vec<Trial>,
@@ -557,7 +560,7 @@ fn best_move(
 /// Every swap of a nonlinear monomial of `m` for a neighbour: the same monomial with one factor
 /// replaced by another variable of `vars`, not already a term of that output. Each as the move
 /// `(output, neighbour, 0)` and the index of the term it replaces.
-fn swaps(m: &Model, vars: &[String]) -> Vec<((usize, String, f64), Option<usize>)> {
+fn swaps(m: &Model, vars: &[String]) -> Vec<(Move, Option<usize>)> {
     let mut out = Vec::new();
     for (i, eq) in m.outputs.iter().enumerate() {
         let has = |ex: &std::collections::BTreeMap<String, u32>| {
@@ -587,7 +590,7 @@ fn swaps(m: &Model, vars: &[String]) -> Vec<((usize, String, f64), Option<usize>
                     let name = Term::new(&pairs, 1.0).monomial();
                     if !out
                         .iter()
-                        .any(|((j, n, _), _): &((usize, String, f64), _)| *j == i && *n == name)
+                        .any(|((j, n, _), _): &(Move, _)| *j == i && *n == name)
                     {
                         out.push(((i, name, 0.0), Some(k)));
                     }
@@ -636,7 +639,7 @@ pub fn complete(
     };
     let start = best.clone();
     let vars = model.variable_names();
-    let mut pending: Vec<(usize, String, f64)> = Vec::new();
+    let mut pending: Vec<Move> = Vec::new();
     for (i, list) in asked.iter().enumerate() {
         for (n, c) in list {
             if !pending.iter().any(|(j, m, _)| *j == i && m == n) {
