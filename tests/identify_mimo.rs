@@ -218,13 +218,16 @@ fn mimo_csv_record_of_mixed_orders_through_identify() {
     }
 }
 
-/// At 1 % noise (d = 4, the demo's 40 runs, orders fixed at 3): the derivative fit attenuates
-/// y1's coefficients and masks `y1^3`; the completion tries the terms of the fit whose
-/// regressors pass through the label's own filter, finds `y1^3`, and every output simulates the
-/// test runs within 2 % of the noise-free truth (measured 0.24 / 0.20 / 0.63 % with the orders
-/// searched; 8.25 / 0.81 / 1.96 % before).
+/// At 1 % noise (d = 4, the demo's 40 runs, orders fixed at 3), every true term of the three
+/// outputs is found, each coefficient within 5 %, with at most one extra term, and every output
+/// simulates the test runs within 2 % of the noise-free truth. The derivative fit alone
+/// attenuates y1's coefficients and masks `y1^3` (found by the completion among the terms of the
+/// fit through the label's own filter), and it keeps y3's `u1*y2_d1*y3` for the true
+/// `u1*y2*y2_d1` (y2 and y3 move together; the completion's swaps tell them apart on held-out
+/// free runs). Measured: 18 / 18, no extra term, 0.18 / 0.19 / 0.25 % (17 / 18 and 0.21 / 0.20
+/// / 0.61 % without the swaps, 8.25 / 0.81 / 1.96 % without the completion's filtered terms).
 #[test]
-fn mimo_plant_at_one_percent_noise_simulates_within_two_percent_of_truth() {
+fn mimo_plant_at_one_percent_noise_finds_every_true_term() {
     let plant = Plant::mimo();
     let (inputs, outputs) = (plant.input_names(), plant.output_names());
     let truth = plant.true_model(Some(0.01)).unwrap();
@@ -236,14 +239,19 @@ fn mimo_plant_at_one_percent_noise_simulates_within_two_percent_of_truth() {
     s.orders = Orders::Fixed(vec![3; 3]);
     s.engine = EngineChoice::Cpu;
     let id = identify(&rs, &split, &s).unwrap();
-    let (rows, _) = coefficient_errors(&id.model, &truth, 0);
-    for (term, want, got, rel) in rows {
-        assert!(
-            rel.abs() < 0.05,
-            "y1: {term}: {got} vs {want}\n{}",
-            id.model
-        );
+    let mut extras = Vec::new();
+    for i in 0..3 {
+        let (rows, extra) = coefficient_errors(&id.model, &truth, i);
+        for (term, want, got, rel) in rows {
+            assert!(
+                rel.abs() < 0.05,
+                "output {i}: {term}: {got} vs {want}\n{}",
+                id.model
+            );
+        }
+        extras.extend(extra);
     }
+    assert!(extras.len() <= 1, "extra terms {extras:?}\n{}", id.model);
     for i in 0..3 {
         let (_, _, pooled, diverged) = nrmse_vs_truth(&id, &runs, i);
         assert_eq!(diverged, 0);

@@ -339,7 +339,7 @@ fn screen(
     fit_runs: &[RunData],
     noise: &[f64],
     smoothing: &dyn Fn(&mut Model),
-) -> Vec<Option<f64>> {
+) -> Vec<Option<(f64, f64)>> {
     use nalgebra::{DMatrix, DVector};
     use rayon::prelude::*;
     let mut aug = best.clone();
@@ -372,7 +372,7 @@ fn screen(
     );
     smoothing(&mut aug);
     let Ok(c) = aug.compile() else {
-        return vec![Some(0.0); pending.len()];
+        return vec![Some((0.0, 0.0)); pending.len()];
     };
     let coef = c.coefficients();
     let cand: Vec<usize> = index.iter().flatten().copied().collect();
@@ -385,7 +385,7 @@ fn screen(
         .collect();
     let Some(parts) = parts else {
         // No linearisation: every candidate goes to the full trial.
-        return vec![Some(0.0); pending.len()];
+        return vec![Some((0.0, 0.0)); pending.len()];
     };
     let q = cols.len();
     let (mut a, mut b, mut rr, mut rows) = (DMatrix::zeros(q, q), DVector::zeros(q), 0.0, 0);
@@ -455,7 +455,7 @@ fn screen(
                 Some(_) => r0 - r1 >= SWAP_SCREEN,
                 None => e0 > 0.0 && e1.sqrt() <= (1.0 - 0.5 * MIN_GAIN) * e0.sqrt(),
             };
-            pass.then(|| step[set.len() - 1])
+            pass.then(|| (step[set.len() - 1], r0 - r1))
         })
         .collect()
 }
@@ -464,6 +464,9 @@ fn screen(
 /// linearised screen must predict for a swap to be tried: a noise-only drop is chi-square with
 /// one degree of freedom, so 25 is five standard deviations.
 pub const SWAP_SCREEN: f64 = 25.0;
+
+/// Most swaps refined per round: those with the largest drop the screen predicts.
+pub const SWAP_TRIALS: usize = 3;
 
 /// Most swaps (a term for a neighbour, see [`swaps`]) kept in one completion.
 pub const MAX_SWAPS: usize = 3;
@@ -491,7 +494,7 @@ fn best_move(
     if pending.is_empty() {
         return None;
     }
-    let screened = screen(
+    let mut screened = screen(
         best,
         (pending, replaces),
         ctx.vars,
@@ -499,6 +502,16 @@ fn best_move(
         ctx.noise,
         ctx.smoothing,
     );
+    // Swaps are many (every factor of every nonlinear term, each for every variable): only the
+    // few the linearisation expects most of go on to a refinement.
+    let mut swaps: Vec<(usize, f64)> = (0..pending.len())
+        .filter(|&k| replaces[k].is_some())
+        .filter_map(|k| screened[k].map(|(_, drop)| (k, drop)))
+        .collect();
+    swaps.sort_by(|a, b| b.1.total_cmp(&a.1));
+    for &(k, _) in swaps.iter().skip(SWAP_TRIALS) {
+        screened[k] = None;
+    }
     let round: Vec<(Trial, Option<(Model, Sims)>)> = pending
         .iter()
         .zip(replaces)
@@ -507,7 +520,7 @@ fn best_move(
             (None, _) => (screened_out(best, *i, name), None),
             // A swap starts where the linearisation put the new term (the replaced one's
             // coefficient does not carry over to another monomial).
-            (Some(l), Some(_)) if *l != 0.0 => {
+            (Some((l, _)), Some(_)) if *l != 0.0 => {
                 let m = (*i, name.as_str(), *l, *rep);
                 try_term(
                     best,
@@ -558,9 +571,17 @@ fn best_move(
 }
 
 /// Every swap of a nonlinear monomial of `m` for a neighbour: the same monomial with one factor
-/// replaced by another variable of `vars`, not already a term of that output. Each as the move
+/// replaced by a variable of the same kind (the same derivative of another output, or another
+/// input: outputs driven by the same inputs move together, and a fit on derivative labels
+/// confuses what moves together), not already a term of that output. Each as the move
 /// `(output, neighbour, 0)` and the index of the term it replaces.
 fn swaps(m: &Model, vars: &[String]) -> Vec<(Move, Option<usize>)> {
+    // The kind of each variable: Some(k) for the k-th derivative of an output, None for an input.
+    let kind = |v: &str| -> Option<usize> {
+        m.outputs.iter().find_map(|o| {
+            (0..o.order).find(|&k| crate::model::derivative_name(&o.name, k) == v)
+        })
+    };
     let mut out = Vec::new();
     for (i, eq) in m.outputs.iter().enumerate() {
         let has = |ex: &std::collections::BTreeMap<String, u32>| {
@@ -573,7 +594,7 @@ fn swaps(m: &Model, vars: &[String]) -> Vec<(Move, Option<usize>)> {
                 continue;
             }
             for v in t.exponents.keys() {
-                for w in vars.iter().filter(|w| *w != v) {
+                for w in vars.iter().filter(|w| *w != v && kind(w) == kind(v)) {
                     let mut ex = t.exponents.clone();
                     match ex.get_mut(v) {
                         Some(e) if *e > 1 => *e -= 1,
