@@ -1286,9 +1286,10 @@ fn complete_selected(
     let (completed, trials) = completion_trials(model, report, prep, outputs, split, asked)?;
     for t in trials.iter().filter(|t| t.kept) {
         if let Some(p) = prep.settings.progress {
-            let what = match &t.replaced {
-                Some(r) => format!("{} in place of {r} in '{}'", t.term, t.output),
-                None => format!("{} added to '{}'", t.term, t.output),
+            let what = match (&t.replaced, t.removed) {
+                (_, true) => format!("{} removed from '{}'", t.term, t.output),
+                (Some(r), _) => format!("{} in place of {r} in '{}'", t.term, t.output),
+                (None, _) => format!("{} added to '{}'", t.term, t.output),
             };
             p(&format!(
                 "completion on simulation error: {what} (gate runs better by {:.1} noise standard deviations)",
