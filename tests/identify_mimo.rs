@@ -11,19 +11,41 @@ use ctsid::plants::mimo::MimoPlant;
 use ctsid::plants::{dataset, write_csv, Dynamics, Plant};
 use ctsid::regression::EngineChoice;
 
-#[test]
-fn mimo_plant_at_degree_four_gives_exactly_the_true_equations() {
+/// The plant's truth, its runs (`n_runs` of 1000 samples, the first `n_train` train, the rest
+/// test) and identify's model at d = 4 with the orders fixed at 3 on the CPU engine.
+fn fixed_orders_fit(
+    n_runs: usize,
+    n_train: usize,
+    noise: f64,
+    seed: u64,
+) -> (
+    Model,
+    Vec<ctsid::plants::Run>,
+    ctsid::identify::Identification,
+) {
     let plant = Plant::mimo();
     let (inputs, outputs) = (plant.input_names(), plant.output_names());
     let truth = plant.true_model(Some(0.01)).unwrap();
-    let runs = dataset(&plant, 16, 1000, 0.01, 0.0, 7).unwrap();
+    let runs = dataset(&plant, n_runs, 1000, 0.01, noise, seed).unwrap();
     let rs = records(&runs, &inputs, &outputs, 0.01).unwrap();
-    let ids: Vec<String> = (0..16).map(|i| i.to_string()).collect();
-    let split = Split::new((0..12).collect(), None, (12..16).collect(), &ids).unwrap();
-    let mut s = Settings::new(outputs.clone(), inputs.clone(), 4);
+    let ids: Vec<String> = (0..n_runs).map(|i| i.to_string()).collect();
+    let split = Split::new(
+        (0..n_train).collect(),
+        None,
+        (n_train..n_runs).collect(),
+        &ids,
+    )
+    .unwrap();
+    let mut s = Settings::new(outputs, inputs, 4);
     s.orders = Orders::Fixed(vec![3; 3]);
     s.engine = EngineChoice::Cpu;
     let id = identify(&rs, &split, &s).unwrap();
+    (truth, runs, id)
+}
+
+#[test]
+fn mimo_plant_at_degree_four_gives_exactly_the_true_equations() {
+    let (truth, runs, id) = fixed_orders_fit(16, 12, 0.0, 7);
     for i in 0..3 {
         let (rows, extra) = coefficient_errors(&id.model, &truth, i);
         assert!(
@@ -228,17 +250,7 @@ fn mimo_csv_record_of_mixed_orders_through_identify() {
 /// / 0.61 % without the swaps, 8.25 / 0.81 / 1.96 % without the completion's filtered terms).
 #[test]
 fn mimo_plant_at_one_percent_noise_finds_every_true_term() {
-    let plant = Plant::mimo();
-    let (inputs, outputs) = (plant.input_names(), plant.output_names());
-    let truth = plant.true_model(Some(0.01)).unwrap();
-    let runs = dataset(&plant, 40, 1000, 0.01, 0.01, 1).unwrap();
-    let rs = records(&runs, &inputs, &outputs, 0.01).unwrap();
-    let ids: Vec<String> = (0..40).map(|i| i.to_string()).collect();
-    let split = Split::new((0..25).collect(), None, (25..40).collect(), &ids).unwrap();
-    let mut s = Settings::new(outputs.clone(), inputs.clone(), 4);
-    s.orders = Orders::Fixed(vec![3; 3]);
-    s.engine = EngineChoice::Cpu;
-    let id = identify(&rs, &split, &s).unwrap();
+    let (truth, runs, id) = fixed_orders_fit(40, 25, 0.01, 1);
     let mut extras = Vec::new();
     for i in 0..3 {
         let (rows, extra) = coefficient_errors(&id.model, &truth, i);
