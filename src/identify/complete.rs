@@ -279,22 +279,40 @@ fn try_term(
         .degree
         .max(m.outputs[i].terms.last().map_or(0, |t| t.degree() as usize));
     smoothing(&mut m);
-    if m.validate().is_err() {
-        return (trial, None);
-    }
-    let Some(refined) = refine(&m, fit_runs, opts).ok().map(|r| r.model) else {
-        return (trial, None);
-    };
-    let Some(sims) = simulations(&refined, gate_runs) else {
-        return (trial, None);
-    };
-    (trial.z, trial.change) = significance(best_sims, &sims, gate_runs, noise);
-    trial.gate_after = gate_nrmse(&sims, gate_runs);
+    let judged = judge(
+        &mut trial,
+        &m,
+        best_sims,
+        (fit_runs, gate_runs),
+        noise,
+        opts,
+    );
     let floor = noise_floor(gate_runs, noise);
-    trial.kept = trial.z >= Z_KEEP
+    trial.kept = judged.is_some()
+        && trial.z >= Z_KEEP
         && trial.change >= MIN_CHANGE
         && excess(trial.gate_after, floor) <= (1.0 - MIN_GAIN) * excess(trial.gate_before, floor);
-    (trial, Some((refined, sims)))
+    (trial, judged)
+}
+
+/// The changed model `m` refined on the fit runs and simulated on the gate runs: fills the
+/// trial's significance, change and gate error against `best_sims` (the keep rule is the
+/// caller's); the refined model and its free runs, `None` where it cannot be refined or
+/// simulated.
+fn judge(
+    trial: &mut Trial,
+    m: &Model,
+    best_sims: &[Vec<Vec<f64>>],
+    (fit_runs, gate_runs): (&[RunData], &[RunData]),
+    noise: &[f64],
+    opts: &RefineOptions,
+) -> Option<(Model, Sims)> {
+    m.validate().ok()?;
+    let refined = refine(m, fit_runs, opts).ok()?.model;
+    let sims = simulations(&refined, gate_runs)?;
+    (trial.z, trial.change) = significance(best_sims, &sims, gate_runs, noise);
+    trial.gate_after = gate_nrmse(&sims, gate_runs);
+    Some((refined, sims))
 }
 
 /// `best` without the terms `drop` (output, term index), refined on the fit runs and judged on
@@ -306,7 +324,7 @@ fn try_removal(
     drop: &[(usize, usize)],
     ctx: &Context,
 ) -> (Trial, Option<(Model, Sims)>) {
-    let (fit_runs, gate_runs) = ctx.runs;
+    let gate_runs = ctx.runs.1;
     let mut m = best.clone();
     let mut names = Vec::new();
     // Highest index first, so that the others keep their places.
@@ -332,21 +350,12 @@ fn try_removal(
         gate_after: f64::INFINITY,
         kept: false,
     };
-    if m.validate().is_err() {
-        return (trial, None);
-    }
-    let Some(refined) = refine(&m, fit_runs, ctx.opts).ok().map(|r| r.model) else {
-        return (trial, None);
-    };
-    let Some(sims) = simulations(&refined, gate_runs) else {
-        return (trial, None);
-    };
-    (trial.z, trial.change) = significance(best_sims, &sims, gate_runs, ctx.noise);
-    trial.gate_after = gate_nrmse(&sims, gate_runs);
+    let judged = judge(&mut trial, &m, best_sims, ctx.runs, ctx.noise, ctx.opts);
     let floor = noise_floor(gate_runs, ctx.noise);
-    trial.kept = trial.z > -Z_KEEP
+    trial.kept = judged.is_some()
+        && trial.z > -Z_KEEP
         && excess(trial.gate_after, floor) <= (1.0 + MIN_GAIN) * excess(trial.gate_before, floor);
-    (trial, Some((refined, sims)))
+    (trial, judged)
 }
 
 /// Pruning: the terms whose removal the screen expects the fit runs not to notice, removed
