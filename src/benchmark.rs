@@ -3,7 +3,8 @@
 //! workflow for all of them, so that no benchmark gets a model written by hand:
 //!
 //! 1. **Nominal**: `identify` at degree 1 (a linear model, order searched 1 to 3) on the
-//!    training runs, orders chosen on the validation runs.
+//!    training runs, orders chosen on the validation runs; the inputs are read between samples
+//!    by a cubic spline ([`INPUT_INTERPOLATION`]), which every model after it keeps.
 //! 2. **Discover in rounds**: `discover` against the current model on the same runs; when it
 //!    adds effects and lowers the validation NRMSE, the augmented model is the next round's
 //!    nominal; the rounds stop when the gates refuse (nothing added), when a round does not
@@ -20,12 +21,19 @@ use crate::discover::benchmarks::columns;
 use crate::discover::{discover, Options};
 use crate::error::{Error, Result};
 use crate::identify::Split;
-use crate::model::Model;
+use crate::model::{Interpolation, Model};
 use crate::records::{RecordSet, Run};
 use crate::simulate::{free_run, run_data, SimOptions};
 
 /// Most discover rounds.
 pub const MAX_ROUNDS: usize = 3;
+
+/// How every benchmark's models read the input between samples: a natural cubic spline. The
+/// same for all records (measured, `ctsid benchmark NAME` with each; docs/benchmarks.md): the
+/// Silverbox's input is band-limited noise and multisines up to 200 Hz sampled at 610 Hz, where
+/// straight lines cut the peaks (arrow full 0.927 mV linear, 0.393 cubic, 11.2 hold in a
+/// separate output-error fit); EMPS 6.27 / 6.28 / 6.45 mm, tanks 0.724 / 0.724 / 0.739 V.
+pub const INPUT_INTERPOLATION: Interpolation = Interpolation::Cubic;
 
 /// The benchmarks `ctsid benchmark` knows.
 pub const NAMES: [&str; 3] = ["silverbox", "emps", "tanks"];
@@ -315,6 +323,7 @@ pub fn run(b: &Benchmark) -> Result<Outcome> {
         .inputs([b.input.clone()])
         .degree(1)
         .orders(1..=3)
+        .input_interpolation(INPUT_INTERPOLATION)
         .fit(&b.records, &fit_split)?;
     let nominal = id.model.clone();
     let identify_seconds = started.elapsed().as_secs_f64();

@@ -220,6 +220,25 @@ fn unparsable_json_names_line_and_column() {
 }
 
 #[test]
+fn input_interpolation_is_optional_written_when_not_linear_and_checked() {
+    let text = r#"{"format": "ctsid-model/2", "inputs": ["u"], "input_interpolation": "cubic",
+      "outputs": [{"name": "y", "order": 1, "terms": [{"exponents": {"u": 1}, "coefficient": 1}]}]}"#;
+    let m = Model::from_json_str(text, "m.json").unwrap();
+    assert_eq!(m.input_interpolation, ctsid::model::Interpolation::Cubic);
+    assert!(m
+        .to_json_string()
+        .unwrap()
+        .contains("\"input_interpolation\": \"cubic\""));
+    // Absent means linear, and a linear model's file does not carry the key.
+    assert!(!siso()
+        .to_json_string()
+        .unwrap()
+        .contains("input_interpolation"));
+    let e = err_of(&text.replace("\"cubic\"", "\"spline\""));
+    assert!(e.contains("spline") && e.contains("cubic"), "{e}");
+}
+
+#[test]
 fn unknown_format_is_refused() {
     let e = err_of(
         r#"{"format":"ctsid-model/9","inputs":[],"outputs":[{"name":"y","order":1,"terms":[]}]}"#,

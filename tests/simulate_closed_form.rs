@@ -169,6 +169,83 @@ fn interpolated_input_is_integrated_exactly_between_samples() {
     }
 }
 
+#[test]
+fn model_files_read_their_inputs_by_their_interpolation() {
+    // y' = u: y(t_k) is the integral of the reconstruction, known in closed form for each: the
+    // trapezoid sum (linear), the left Riemann sum (hold), and for the natural cubic spline
+    // the trapezoid sum less h^3/24 (M_{k-1} + M_k) per interval.
+    use ctsid::model::Interpolation;
+    let h = 0.01;
+    let t = grid(200, h);
+    let u: Vec<f64> = t
+        .iter()
+        .map(|&s| (40.0 * s).sin() + 0.3 * (90.0 * s).cos())
+        .collect();
+    let run = |interp| {
+        let mut model = Model::new(
+            &["u"],
+            vec![OutputEquation::new(
+                "y",
+                1,
+                vec![Term::new(&[("u", 1)], 1.0)],
+            )],
+            Some(h),
+        );
+        model.input_interpolation = interp;
+        let text = model.to_json_string().unwrap();
+        let back = Model::from_json_str(&text, "m.json").unwrap();
+        assert_eq!(back.input_interpolation, interp, "{text}");
+        let tr = simulate_model(
+            &back.compile().unwrap(),
+            &[0.0],
+            &t,
+            std::slice::from_ref(&u),
+            &SimOptions::default(),
+        )
+        .unwrap();
+        (0..t.len())
+            .map(|k| tr.state(k).unwrap()[0])
+            .collect::<Vec<f64>>()
+    };
+    let (lin, hold, cub) = (
+        run(Interpolation::Linear),
+        run(Interpolation::Hold),
+        run(Interpolation::Cubic),
+    );
+    // The spline's second derivatives, from the same continuity equations written densely.
+    let n = u.len();
+    let mut a = DMatrix::<f64>::identity(n, n);
+    let mut r = DVector::<f64>::zeros(n);
+    for i in 1..n - 1 {
+        a[(i, i - 1)] = h;
+        a[(i, i)] = 4.0 * h;
+        a[(i, i + 1)] = h;
+        r[i] = 6.0 * (u[i + 1] - 2.0 * u[i] + u[i - 1]) / h;
+    }
+    let m = a.lu().solve(&r).unwrap();
+    let (mut tl, mut th, mut tc) = (0.0, 0.0, 0.0);
+    for k in 1..n {
+        tl += 0.5 * h * (u[k - 1] + u[k]);
+        th += h * u[k - 1];
+        tc += 0.5 * h * (u[k - 1] + u[k]) - h.powi(3) / 24.0 * (m[k - 1] + m[k]);
+        assert!((lin[k] - tl).abs() < 1e-10, "linear, k = {k}");
+        assert!(
+            (hold[k] - th).abs() < 1e-10,
+            "hold, k = {k}: {} vs {th}",
+            hold[k]
+        );
+        assert!(
+            (cub[k] - tc).abs() < 1e-9,
+            "cubic, k = {k}: {} vs {tc}",
+            cub[k]
+        );
+    }
+    assert!(
+        (cub[n - 1] - lin[n - 1]).abs() > 1e-5,
+        "the three must differ here"
+    );
+}
+
 /// |t - t_c| with the corner reported, or hidden.
 struct Kink {
     tc: f64,

@@ -3,6 +3,7 @@
 use clap::Args;
 use ctsid::identify::split::parse_list;
 use ctsid::identify::{identify, Orders, Settings, Split};
+use ctsid::model::Interpolation;
 use ctsid::regression::EngineChoice;
 use ctsid::report::compare::write_record_report;
 use ctsid::report::{write_file, Table};
@@ -62,6 +63,15 @@ pub struct IdentifyArgs {
     /// sat relu.
     #[arg(long)]
     pub term: Vec<String>,
+    /// How the inputs are read between samples when the model is simulated: linear, cubic
+    /// (a natural spline, for band-limited inputs sampled a few times their bandwidth) or hold
+    /// (zero-order hold); written into the model file.
+    #[arg(long, default_value = "linear", value_parser = parse_interpolation)]
+    pub input_interpolation: Interpolation,
+}
+
+fn parse_interpolation(text: &str) -> std::result::Result<Interpolation, String> {
+    text.parse()
 }
 
 fn parse_orders(text: &str) -> Result<Vec<usize>> {
@@ -97,6 +107,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     s.method = a.method.into();
     s.progress = super::show_progress(a.quiet);
     s.terms = a.term.clone();
+    s.input_interpolation = a.input_interpolation;
     s.validate()?;
     a.segment.check()?;
     let mut columns = a.output.clone();

@@ -19,8 +19,9 @@ pub fn run(a: ShowArgs) -> Result<()> {
         .tau
         .map_or("not recorded".into(), |t| format!("{t} s"));
     outln!(
-        "\ninputs: {}; identified at tau = {tau}",
-        model.inputs.join(", ")
+        "\ninputs: {} (read between samples: {}); identified at tau = {tau}",
+        model.inputs.join(", "),
+        model.input_interpolation.name()
     )?;
     let mut unknown = false;
     for o in &model.outputs {

@@ -89,6 +89,13 @@ impl Identifier {
         self
     }
 
+    /// How the sampled inputs are read between samples when the model is simulated (default:
+    /// [`Interpolation::Linear`](crate::model::Interpolation)); written into the model.
+    pub fn input_interpolation(mut self, i: crate::model::Interpolation) -> Self {
+        self.settings.input_interpolation = i;
+        self
+    }
+
     /// Which engine runs the sparse regression's sweeps (default: automatic).
     pub fn engine(mut self, engine: EngineChoice) -> Self {
         self.settings.engine = engine;

@@ -147,6 +147,9 @@ pub struct Settings {
     pub refine_options: refine::RefineOptions,
     /// What the eta-rule compares across candidate orders (see [`Selection`]).
     pub selection: Selection,
+    /// How the models read the sampled inputs between samples when simulated (refinement,
+    /// scoring, and the model file's `input_interpolation`); linear by default.
+    pub input_interpolation: crate::model::Interpolation,
     /// Named candidate terms beside the monomials, in the expression language of
     /// [`crate::model::expr`] (`sign(y_d1)`, `abs(y_d1)*y_d1`), for every output; a term that
     /// reads a derivative at or above an equation's order is left out of that equation.
@@ -187,6 +190,7 @@ impl Settings {
             refine: true,
             refine_options: refine::RefineOptions::default(),
             terms: Vec::new(),
+            input_interpolation: crate::model::Interpolation::Linear,
         }
     }
 
@@ -925,6 +929,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let input_names: Vec<&str> = settings.inputs.iter().map(String::as_str).collect();
     let mut model = ModelFile::new(&input_names, equations, Some(rs.tau));
     model.degree = settings.degree;
+    model.input_interpolation = settings.input_interpolation;
     prep.sign_smoothing(&mut model, &split.train);
     model.validate()?;
     // A single-output search already refined the selected order while scoring it (on at most
@@ -1745,6 +1750,7 @@ fn scoring_model(
         Some(prep.rs.tau),
     );
     model.degree = prep.settings.degree;
+    model.input_interpolation = prep.settings.input_interpolation;
     prep.sign_smoothing(&mut model, train);
     model.validate()?;
     Ok((model, exogenous))

@@ -8,7 +8,7 @@
 //! exact derivatives of the very right-hand side the simulation integrates.
 
 use super::expr::Expr;
-use super::{Model, Var};
+use super::{Interpolation, Model, Var};
 use crate::error::{Error, Result};
 
 /// What a compiled term computes, without its coefficient.
@@ -79,6 +79,7 @@ pub struct CompiledModel {
     names: Vec<String>,
     /// Smoothing width of `sign` per slot of z (0: exact).
     eps: Vec<f64>,
+    interpolation: Interpolation,
 }
 
 impl CompiledModel {
@@ -134,6 +135,7 @@ impl CompiledModel {
             terms,
             names,
             eps,
+            interpolation: m.input_interpolation,
         })
     }
 
@@ -148,6 +150,11 @@ impl CompiledModel {
     }
     pub fn orders(&self) -> &[usize] {
         &self.orders
+    }
+    /// How the model reads sampled inputs between their samples (the file's
+    /// `input_interpolation`).
+    pub fn input_interpolation(&self) -> Interpolation {
+        self.interpolation
     }
     /// Offset of output `i` in the state vector. Panics when `i` is not below
     /// [`CompiledModel::n_outputs`].

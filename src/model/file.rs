@@ -240,10 +240,64 @@ pub struct Model {
     /// starts with; a variable not listed gets the exact sign.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub sign_smoothing: BTreeMap<String, f64>,
+    /// How the sampled inputs are read between their samples when the model is simulated on a
+    /// record; part of the model, since its input coefficients were fitted through it.
+    #[serde(skip_serializing_if = "Interpolation::is_linear")]
+    pub input_interpolation: Interpolation,
     pub outputs: Vec<OutputEquation>,
     /// The sections of [`SECTIONS`], kept verbatim.
     #[serde(flatten, skip_serializing_if = "Map::is_empty")]
     pub extra: Map<String, Value>,
+}
+
+/// How a sampled input is reconstructed between its samples.
+///
+/// `linear` (straight lines, the default) suits any record; `cubic` (the natural cubic spline
+/// through the samples) suits band-limited inputs such as multisines and filtered noise, whose
+/// peaks straight lines cut off when the sampling is only a few times the input's bandwidth;
+/// `hold` (each sample held until the next, a zero-order hold) is what a digital controller or
+/// a generator without a reconstruction filter applies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Interpolation {
+    #[default]
+    Linear,
+    Cubic,
+    Hold,
+}
+
+impl Interpolation {
+    /// Every reconstruction, in the order the names are listed in messages.
+    pub const ALL: [Interpolation; 3] = [
+        Interpolation::Linear,
+        Interpolation::Cubic,
+        Interpolation::Hold,
+    ];
+
+    /// The name used in model files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Interpolation::Linear => "linear",
+            Interpolation::Cubic => "cubic",
+            Interpolation::Hold => "hold",
+        }
+    }
+
+    fn is_linear(&self) -> bool {
+        *self == Interpolation::Linear
+    }
+}
+
+impl std::str::FromStr for Interpolation {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        Interpolation::ALL
+            .into_iter()
+            .find(|i| i.name() == s)
+            .ok_or_else(|| {
+                format!("unknown input interpolation '{s}' (known: linear, cubic, hold)")
+            })
+    }
 }
 
 /// `y_d0` is another name of output `y` itself: the one name of a variable, so that monomials
@@ -284,6 +338,8 @@ struct RawModel {
     inputs: Vec<String>,
     #[serde(default)]
     sign_smoothing: BTreeMap<String, f64>,
+    #[serde(default)]
+    input_interpolation: Interpolation,
     outputs: Vec<RawOutput>,
     #[serde(flatten)]
     extra: Map<String, Value>,
@@ -512,6 +568,7 @@ impl Model {
             degree: largest_degree(&outputs),
             inputs: inputs.iter().map(|s| s.to_string()).collect(),
             sign_smoothing: BTreeMap::new(),
+            input_interpolation: Interpolation::Linear,
             outputs,
             extra: Map::new(),
         }
@@ -581,7 +638,7 @@ impl Model {
         }
         if let Some(k) = raw.extra.keys().find(|k| !SECTIONS.contains(&k.as_str())) {
             return Err(err(format!(
-                "unknown key \"{k}\" at the top level (known: format, tau, degree, inputs, sign_smoothing, outputs, {})",
+                "unknown key \"{k}\" at the top level (known: format, tau, degree, inputs, sign_smoothing, input_interpolation, outputs, {})",
                 SECTIONS.join(", ")
             )));
         }
@@ -600,6 +657,7 @@ impl Model {
             degree,
             inputs: raw.inputs,
             sign_smoothing: raw.sign_smoothing,
+            input_interpolation: raw.input_interpolation,
             outputs,
             extra: raw.extra,
         };

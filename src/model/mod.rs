@@ -22,6 +22,9 @@
 //! `sign_smoothing` gives, per variable, the width `w` over which `sign(x)` of an argument
 //! starting with that variable is smoothed to `x / sqrt(x^2 + w^2)` for the integrator: a
 //! model simulates the same wherever it is read. A variable not listed gets the exact sign.
+//! `input_interpolation` (`linear` when absent, `cubic` or `hold`; [`Interpolation`]) says how
+//! the sampled inputs of a record are read between their samples when the model is simulated:
+//! the input coefficients were fitted through that reconstruction.
 //!
 //! What this module assumes and guarantees:
 //! - `tau` and `degree` may be omitted in a hand-written file (`degree` is then the largest
@@ -43,6 +46,6 @@ mod file;
 pub use compiled::CompiledModel;
 pub use expr::Expr;
 pub use file::{
-    derivative_name, Model, Origin, OutputEquation, Term, Var, FORMAT, FORMAT_V1, MAX_EXPONENT,
-    MAX_ORDER, SECTIONS,
+    derivative_name, Interpolation, Model, Origin, OutputEquation, Term, Var, FORMAT, FORMAT_V1,
+    MAX_EXPONENT, MAX_ORDER, SECTIONS,
 };

@@ -33,9 +33,11 @@ use nalgebra::{DMatrix, DVector};
 use crate::error::{Error, Result};
 use stage::StageLu;
 
+mod input;
 mod records;
 mod stage;
 use crate::model::CompiledModel;
+pub use input::SampledInput;
 pub use records::{run_data, RunResult, Simulation};
 
 /// The default forward-difference step of [`System::fd_step`] for a state of value `x`.
@@ -120,98 +122,6 @@ pub trait Input {
     fn eval(&self, t: f64, u: &mut [f64]);
     /// Appends the times strictly inside `(t0, t1)` where `u` is not smooth, in increasing order.
     fn breakpoints(&self, t0: f64, t1: f64, out: &mut Vec<f64>);
-}
-
-/// Samples interpolated linearly in time (constant beyond the ends).
-#[derive(Debug, Clone)]
-pub struct SampledInput {
-    t: Vec<f64>,
-    /// `values[channel][sample]`
-    values: Vec<Vec<f64>>,
-    /// `(t0, dt)` when the times are uniform to 1e-9 relative: the interval of `t` is then
-    /// computed instead of searched (the solver evaluates the input several times per step).
-    uniform: Option<(f64, f64)>,
-}
-
-impl SampledInput {
-    /// `t` strictly increasing; one vector of samples per channel, each as long as `t`.
-    pub fn new(t: Vec<f64>, values: Vec<Vec<f64>>) -> Result<SampledInput> {
-        if !t.windows(2).all(|w| w[1] > w[0]) {
-            return Err(Error::InvalidData(
-                "input sample times must increase strictly".into(),
-            ));
-        }
-        if values.iter().any(|v| v.len() != t.len()) {
-            return Err(Error::InvalidData(
-                "every input channel needs one value per sample time".into(),
-            ));
-        }
-        let uniform = (t.len() >= 2)
-            .then(|| {
-                let dt = (t[t.len() - 1] - t[0]) / (t.len() - 1) as f64;
-                let tol = 1e-9 * dt.abs().max(t[t.len() - 1].abs());
-                t.iter()
-                    .enumerate()
-                    .all(|(k, &s)| (s - (t[0] + k as f64 * dt)).abs() <= tol)
-                    .then_some((t[0], dt))
-            })
-            .flatten();
-        Ok(SampledInput { t, values, uniform })
-    }
-}
-
-impl Input for SampledInput {
-    fn n_inputs(&self) -> usize {
-        self.values.len()
-    }
-    fn eval(&self, t: f64, u: &mut [f64]) {
-        let n = self.t.len();
-        if n == 0 {
-            u.iter_mut().for_each(|v| *v = 0.0);
-            return;
-        }
-        if t <= self.t[0] || n == 1 {
-            for (c, v) in self.values.iter().enumerate() {
-                u[c] = v[0];
-            }
-            return;
-        }
-        if t >= self.t[n - 1] {
-            for (c, v) in self.values.iter().enumerate() {
-                u[c] = v[n - 1];
-            }
-            return;
-        }
-        // First sample time > t.
-        let k = match self.uniform {
-            Some((t0, dt)) => {
-                // The computed guess, corrected by a step either way for rounding.
-                let mut k = (((t - t0) / dt).floor() as usize + 1).clamp(1, n - 1);
-                while k > 1 && self.t[k - 1] > t {
-                    k -= 1;
-                }
-                while k < n - 1 && self.t[k] <= t {
-                    k += 1;
-                }
-                k
-            }
-            None => self.t.partition_point(|&s| s <= t),
-        };
-        let (t0, t1) = (self.t[k - 1], self.t[k]);
-        let w = (t - t0) / (t1 - t0);
-        for (c, v) in self.values.iter().enumerate() {
-            u[c] = v[k - 1] + w * (v[k] - v[k - 1]);
-        }
-    }
-    fn breakpoints(&self, t0: f64, t1: f64, out: &mut Vec<f64>) {
-        let a = self.t.partition_point(|&s| s <= t0);
-        for &s in &self.t[a..] {
-            if s >= t1 {
-                break;
-            }
-            out.push(s);
-        }
-    }
 }
 
 /// A constant input.
@@ -1169,7 +1079,8 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
     ))
 }
 
-/// Simulates a compiled model with inputs sampled at `times` (linear interpolation between them).
+/// Simulates a compiled model with inputs sampled at `times`, read between them as the model says
+/// ([`CompiledModel::input_interpolation`]).
 ///
 /// `inputs[channel][sample]`; the result has the model's state at every sample time.
 pub fn simulate_model(
@@ -1179,7 +1090,11 @@ pub fn simulate_model(
     inputs: &[Vec<f64>],
     opts: &SimOptions,
 ) -> Result<Trajectory> {
-    let input = SampledInput::new(times.to_vec(), inputs.to_vec())?;
+    let input = SampledInput::with_interpolation(
+        times.to_vec(),
+        inputs.to_vec(),
+        model.input_interpolation(),
+    )?;
     simulate(model, &input, x0, times, opts)
 }
 
@@ -1200,7 +1115,11 @@ pub fn simulate_model_sensitivities(
             format!("index {k} for a model of {n_coef} terms"),
         ));
     }
-    let input = SampledInput::new(times.to_vec(), inputs.to_vec())?;
+    let input = SampledInput::with_interpolation(
+        times.to_vec(),
+        inputs.to_vec(),
+        model.input_interpolation(),
+    )?;
     let pjac = |x: &[f64], u: &[f64], out: &mut [f64]| {
         model.coefficient_jacobian_unchecked(x, u, coefs, out)
     };
