@@ -655,10 +655,8 @@ impl Prepared {
 /// simulate`), since many candidate models are compared on many runs.
 fn gate_options() -> SimOptions {
     SimOptions {
-        rtol: 1e-6,
-        atol: 1e-9,
         max_steps_per_interval: 2000,
-        ..SimOptions::default()
+        ..SimOptions::fitting()
     }
 }
 

@@ -150,11 +150,7 @@ fn term_of(name: &str, vars: &[String], coefficient: f64) -> Option<Term> {
 fn simulations(m: &Model, runs: &[RunData]) -> Option<Sims> {
     use rayon::prelude::*;
     let c = m.compile().ok()?;
-    let opts = SimOptions {
-        rtol: 1e-6,
-        atol: 1e-9,
-        ..Default::default()
-    };
+    let opts = SimOptions::fitting();
     runs.par_iter()
         .map(|r| free_run(&c, r, INIT_WINDOW, &opts).ok())
         .collect()
@@ -409,9 +405,7 @@ fn run_normal(
     use nalgebra::{DMatrix, DVector};
     let opts = SimOptions {
         run: r.id.clone(),
-        rtol: 1e-6,
-        atol: 1e-9,
-        ..Default::default()
+        ..SimOptions::fitting()
     };
     let x0 = crate::simulate::initial_state(c, &r.t, &r.y, &r.u, INIT_WINDOW, &opts).ok()?;
     let (tr, sens) =

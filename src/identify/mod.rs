@@ -1476,11 +1476,7 @@ pub(crate) fn simulate_runs(
     runs: &[usize],
 ) -> Result<Vec<RunSimulation>> {
     let compiled = model.compile()?;
-    let opts = SimOptions {
-        rtol: 1e-6,
-        atol: 1e-9,
-        ..Default::default()
-    };
+    let opts = SimOptions::fitting();
     let out = runs
         .iter()
         .map(|&r| {
@@ -1789,11 +1785,7 @@ fn scoring_run(
 /// diverges), from the one initial-state convention ([`simulate::free_run`]).
 fn free_run_profile(model: &ModelFile, runs: &[refine::RunData]) -> Result<Profile> {
     let compiled = model.compile()?;
-    let opts = SimOptions {
-        rtol: 1e-6,
-        atol: 1e-9,
-        ..Default::default()
-    };
+    let opts = SimOptions::fitting();
     let (mut e, mut l) = (Vec::new(), Vec::new());
     for run in runs {
         let Ok(sim) = simulate::free_run(&compiled, run, INIT_WINDOW, &opts) else {

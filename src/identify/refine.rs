@@ -88,8 +88,8 @@ impl Default for RefineOptions {
             max_iterations: 25,
             polish_iterations: 8,
             tolerance: 1e-4,
-            rtol: 1e-7,
-            atol: 1e-9,
+            rtol: crate::simulate::FIT_RTOL,
+            atol: crate::simulate::FIT_ATOL,
             divergence_factor: 1e6,
             skip_below: 1e-3,
         }
@@ -718,11 +718,7 @@ pub fn free_run_nrmse(model: &Model, runs: &[RunData]) -> Result<Vec<f64>> {
     let compiled = model.compile()?;
     check_runs(&compiled, runs)?;
     let n_out = compiled.n_outputs();
-    let opts = SimOptions {
-        rtol: 1e-6,
-        atol: 1e-9,
-        ..Default::default()
-    };
+    let opts = SimOptions::fitting();
     let per_run: Vec<Vec<f64>> = runs
         .par_iter()
         .map(|r| match free_run(&compiled, r, INIT_WINDOW, &opts) {
