@@ -167,10 +167,10 @@ fn own_record_through_identify(noise: f64) -> (Model, Model) {
     );
     let plant = Plant {
         name: "own".into(),
-        dynamics: Dynamics::Mimo(MimoPlant {
+        dynamics: Dynamics::Mimo(Box::new(MimoPlant {
             model: truth.clone(),
             compiled: truth.compile().unwrap(),
-        }),
+        })),
         excitation: Plant::mimo().excitation,
     };
     let runs = dataset(&plant, 20, 1000, 0.01, noise, 11).unwrap();

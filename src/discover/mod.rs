@@ -34,6 +34,7 @@ pub mod cases;
 pub mod dictionary;
 
 pub mod fit;
+mod gates;
 pub mod weak;
 
 use std::collections::BTreeMap;
@@ -48,12 +49,17 @@ use crate::model::Expr;
 use crate::model::Origin;
 use crate::model::{derivative_name, Model, Term};
 use crate::plants::noise::percentile;
-use crate::plants::rng::Rng;
 use crate::records::RecordSet;
 use crate::simulate::{free_run, RunData, SimOptions, INIT_WINDOW};
 use crate::util::num4;
 use dictionary::{num, Effect, Scales};
 use fit::{Gram, Problem};
+use gates::{Bootstrapped, Refitter, Resampling, Selected};
+
+/// The error of a weak-form fit whose normal equations are singular.
+fn singular() -> Error {
+    Error::Numerical("discover: the weak-form normal equations are singular".into())
+}
 
 /// Settings of one discovery.
 #[derive(Debug, Clone)]
@@ -859,8 +865,6 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let late = block_is_late(&p, &o.train);
     let train = sum_grams(&blocks, ncol);
     let val = sum_grams(&block_grams(&p, &o.validation), ncol);
-    let numerr =
-        || Error::Numerical("discover: the weak-form normal equations are singular".into());
 
     // (a) compare and (b) localise.
     let nominal_model = p.model(&[], &[]);
@@ -869,7 +873,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let shares = coordinate_shares(&p, &o.train);
 
     // (c) regression.
-    let retune = pb.fit(&train, &[]).ok_or_else(numerr)?;
+    let retune = pb.fit(&train, &[]).ok_or_else(singular)?;
     let set = pb.forward(&train, n_eff, o.max_effects);
     // The closest single candidate, for the report when nothing passes.
     let best_single = (0..n_eff)
@@ -877,356 +881,66 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map(|x| x.0);
 
-    // Aliases on the training rows.
-    let alias_of = |k: usize| -> Vec<usize> {
-        (0..n_eff)
-            .filter(|&j| j != k)
-            .filter(|&j| {
-                fit::partial_correlation(&train, n_nom, n_nom + k, n_nom + j).abs() > fit::ALIAS
-            })
-            .collect()
-    };
-
-    // (d) block bootstrap: inclusion (of the effect or an alias) and intervals.
+    // (d) the gates of each effect, on block-bootstrap draws made once.
     let mut cand: Vec<usize> = set.clone();
     if cand.is_empty() {
         cand.extend(best_single);
     }
-    // The refits are drawn once: each resample's Gram matrix and the effects its forward
-    // selection takes. Inclusion and intervals of any candidate set are read from them.
-    let mut rng = Rng::new(o.seed ^ 0x6469_7363_6f76_6572);
-    let resamples: Vec<(Gram, Vec<usize>)> = (0..o.bootstrap)
-        .map(|_| {
-            let mut g = Gram::zeros(ncol);
-            for _ in 0..blocks.len() {
-                let b = (rng.next_u64() % blocks.len() as u64) as usize;
-                g.add(&blocks[b]);
-            }
-            let s = pb.forward(&g, n_eff, o.max_effects);
-            (g, s)
-        })
-        .collect();
-    let bootstrap = |cand: &[usize]| {
-        let aliases: Vec<Vec<usize>> = cand.iter().map(|&k| alias_of(k)).collect();
-        let mut hits = vec![0usize; cand.len()];
-        let mut samples: Vec<Vec<f64>> = vec![Vec::new(); cand.len()];
-        for (g, s) in &resamples {
-            for (i, &k) in cand.iter().enumerate() {
-                if s.contains(&k) || aliases[i].iter().any(|a| s.contains(a)) {
-                    hits[i] += 1;
-                }
-            }
-            if let Some(sol) = pb.fit(g, cand) {
-                for i in 0..cand.len() {
-                    samples[i].push(sol.coef[i]);
-                }
-            }
-        }
-        let inclusion: Vec<f64> = hits
-            .iter()
-            .map(|&h| h as f64 / o.bootstrap.max(1) as f64)
-            .collect();
-        let intervals: Vec<[f64; 2]> = samples
-            .iter()
-            .map(|s| [percentile(s, 2.5), percentile(s, 97.5)])
-            .collect();
-        (aliases, inclusion, intervals)
-    };
-    // Time invariance: an effect of the state acts the same in the first and the second half of
-    // every run; a sensor drift (a ramp in the measured y) shows in the residual as a force that
-    // grows along each run, and an offset fitted to it differs between the halves. Each half is
-    // fitted on its own blocks, with its own block bootstrap for the spread; z is the difference
-    // in units of its standard deviation.
-    let halves: [Vec<usize>; 2] = [
-        (0..blocks.len()).filter(|&b| !late[b]).collect(),
-        (0..blocks.len()).filter(|&b| late[b]).collect(),
-    ];
-    // Resamples only where the halves can be compared at all (see drift_z).
-    let comparable = halves.iter().all(|h| h.len() >= MIN_HALF_BLOCKS);
-    let mut half_rng = Rng::new(o.seed ^ 0x6861_6c76_6573);
-    let half_draws: Vec<[Gram; 2]> = (0..if comparable { o.bootstrap } else { 0 })
-        .map(|_| {
-            [0, 1].map(|h| {
-                let mut g = Gram::zeros(ncol);
-                for _ in 0..halves[h].len() {
-                    let b = halves[h][(half_rng.next_u64() % halves[h].len() as u64) as usize];
-                    g.add(&blocks[b]);
-                }
-                g
-            })
-        })
-        .collect();
-    let half_sums: [Gram; 2] =
-        [0, 1].map(|h| sum_grams(halves[h].iter().map(|&b| &blocks[b]), ncol));
-    // (early, late, z); z is NaN where the halves cannot be compared (too few blocks in one,
-    // a failed fit, no spread), and a NaN z never says "drifts".
-    let drift_z = |cand: &[usize]| -> Vec<Halves> {
-        let none = vec![(f64::NAN, f64::NAN, f64::NAN); cand.len()];
-        if !comparable {
-            return none;
-        }
-        let (Some(e), Some(l)) = (pb.fit(&half_sums[0], cand), pb.fit(&half_sums[1], cand)) else {
-            return none;
-        };
-        let mut samples: [Vec<Vec<f64>>; 2] =
-            [vec![Vec::new(); cand.len()], vec![Vec::new(); cand.len()]];
-        for d in &half_draws {
-            for (g, hs) in d.iter().zip(samples.iter_mut()) {
-                if let Some(sol) = pb.fit(g, cand) {
-                    for (v, c) in hs.iter_mut().zip(&sol.coef) {
-                        v.push(*c);
-                    }
-                }
-            }
-        }
-        let var = |v: &[f64]| {
-            if v.len() < 2 {
-                return f64::NAN;
-            }
-            let m = v.iter().sum::<f64>() / v.len() as f64;
-            v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (v.len() - 1) as f64
-        };
-        (0..cand.len())
-            .map(|i| {
-                let sd = (var(&samples[0][i]) + var(&samples[1][i])).sqrt();
-                let z = if sd > 0.0 {
-                    (e.coef[i] - l.coef[i]).abs() / sd
-                } else {
-                    f64::NAN
-                };
-                (e.coef[i], l.coef[i], z)
-            })
-            .collect()
-    };
-    let passes = |inc: f64, iv: &[f64; 2]| inc >= 0.8 && (iv[0] > 0.0 || iv[1] < 0.0);
-    let (mut aliases, mut inclusion, mut intervals) = bootstrap(&cand);
-    let mut dropped: Vec<String> = Vec::new();
+    let resampling = Resampling::new(&pb, &train, &blocks, &late, n_eff, o);
     let idx_nom: Vec<usize> = (0..n_nom).collect();
     let val_nominal = val.rr;
     let val_retuned = rss_at(&val, &idx_nom, &retune.delta);
-
     // The simulation gate compares structures at their best: each one refined on free-run error
     // of the training runs (coefficients and initial states) before it is scored on validation.
-    let vruns = p.runs(&o.validation);
-    let truns = p.runs(&o.train);
-    let fixed = p.fixed_mask();
+    let refitter = Refitter {
+        p: &p,
+        pb: &pb,
+        train: &train,
+        truns: p.runs(&o.train),
+        vruns: p.runs(&o.validation),
+        fixed: p.fixed_mask(),
+        gate: gate_options(),
+        iterations: o.refine_iterations,
+    };
     let retuned_model = refit(
         &p.model(&retune.delta, &[]),
-        &truns,
-        &fixed,
+        &refitter.truns,
+        &refitter.fixed,
         o.refine_iterations,
     );
-    let gate = gate_options();
+    let (vruns, gate) = (&refitter.vruns, &refitter.gate);
     let nt = p.theta0.len();
-    // A candidate set fitted on the weak form, then refined on free-run error.
-    let fit_refined = |set: &[usize]| -> Result<(_, Model)> {
-        let sol = pb.fit(&train, set).ok_or_else(numerr)?;
-        let pairs: Vec<(usize, f64)> = set.iter().copied().zip(sol.coef.iter().copied()).collect();
-        let m = refit(
-            &p.model(&sol.delta, &pairs),
-            &truns,
-            &fixed,
-            o.refine_iterations,
-        );
-        Ok((sol, m))
-    };
-    // Each of several effects must earn its place in simulation: refitted and refined without
-    // it, the model must be clearly worse on validation runs. Near an empty tank the smoother's
-    // bias looked like a friction bump to the regression and passed every other gate; without
-    // the bump the validation error was the same. The share of the validation free-run NRMSE
-    // each effect removes (NaN where the fit without it fails).
-    let simulation_shares = |cand: &[usize], model: &Model| -> Vec<f64> {
-        let with = mean_nrmse(model, &vruns, &gate);
-        (0..cand.len())
-            .map(|i| {
-                let mut rest = cand.to_vec();
-                rest.remove(i);
-                match fit_refined(&rest) {
-                    Ok((_, m)) => 1.0 - with / mean_nrmse(&m, &vruns, &gate),
-                    Err(_) => f64::NAN,
-                }
-            })
-            .collect()
-    };
-    // The gates are per effect: one that fails them is not named, and the others are judged
-    // without it (its share of the fit moves to them, so their intervals are refitted on the
-    // same resamples; their inclusion does not depend on it), with every gate applied again. In
-    // the tank case the forward selection added a bump near the empty tank after the outflow
-    // law; the bump held in 43 % of refits, and judging the two together refused the outflow.
-    // A check that every effect fails is left to the set's gates below.
-    // The last candidate set's time-invariance figures, for the set's gate after the loop.
-    let mut last_drift: Option<(Vec<usize>, Vec<Halves>)> = None;
-    let (cand_sol, cand_model, sim_shares) = loop {
-        let n = cand.len();
-        let some = |f: Vec<(usize, String)>| (!f.is_empty() && f.len() < n).then_some(f);
-        // The regression's gates first: bootstrap inclusion and interval, then time invariance
-        // (an empty selection leaves a single candidate: n > 1 implies a selection).
-        let regression = if n > 1 {
-            some(
-                (0..n)
-                    .filter(|&i| !passes(inclusion[i], &intervals[i]))
-                    .map(|i| {
-                        let why = format!(
-                            "inclusion {:.0} %, 95 % interval [{}, {}]",
-                            100.0 * inclusion[i],
-                            num(intervals[i][0]),
-                            num(intervals[i][1])
-                        );
-                        (i, why)
-                    })
-                    .collect(),
-            )
-            .or_else(|| {
-                let z = drift_z(&cand);
-                last_drift = Some((cand.clone(), z.clone()));
-                some(
-                    (0..n)
-                        .filter(|&i| drifts(z[i].0, z[i].1, z[i].2))
-                        .map(|i| {
-                            let why = format!(
-                                "first half of each training run {}, second half {}: not constant in time",
-                                num(z[i].0),
-                                num(z[i].1)
-                            );
-                            (i, why)
-                        })
-                        .collect(),
-                )
-            })
-        } else {
-            None
-        };
-        let fails = match regression {
-            Some(f) => f,
-            None => {
-                let (sol, model) = fit_refined(&cand)?;
-                // The refit on simulation error must tell the same story as the regression: an
-                // effect whose refined coefficient takes the sign its interval excludes is
-                // traded against the others (at 10 % noise a Stribeck hump beside Coulomb
-                // friction went from [0.27, 0.52] to -0.10).
-                let c = coefficients(&model);
-                let flipped = some(
-                    (0..n)
-                        .filter(|&i| contradicts(&intervals[i], c[nt + i]))
-                        .map(|i| {
-                            let why = format!(
-                                "95 % interval [{}, {}], refined on simulation error to {}",
-                                num(intervals[i][0]),
-                                num(intervals[i][1]),
-                                num(c[nt + i])
-                            );
-                            (i, why)
-                        })
-                        .collect(),
-                );
-                if let Some(f) = flipped {
-                    f
-                } else {
-                    let shares = if n > 1 {
-                        simulation_shares(&cand, &model)
-                    } else {
-                        Vec::new()
-                    };
-                    let weakest = (0..shares.len())
-                        .filter(|&i| shares[i] < MARGINAL_GAIN)
-                        .min_by(|&a, &b| shares[a].total_cmp(&shares[b]));
-                    match weakest {
-                        Some(i) => {
-                            let g = shares[i];
-                            let what = if g < 0.0 {
-                                format!(
-                                    "makes the validation free-run NRMSE {:.1} % worse",
-                                    -100.0 * g
-                                )
-                            } else {
-                                format!(
-                                    "removes only {:.1} % of the validation free-run NRMSE (< {:.0} %)",
-                                    100.0 * g,
-                                    100.0 * MARGINAL_GAIN
-                                )
-                            };
-                            vec![(i, format!("in simulation it {what}"))]
-                        }
-                        None => break (sol, model, shares),
-                    }
-                }
-            }
-        };
-        for (i, why) in &fails {
-            let e = &p.effects[cand[*i]];
-            dropped.push(format!("{} {} ({why})", e.family, e.formula));
-        }
-        cand = (0..n)
-            .filter(|i| fails.iter().all(|(j, _)| j != i))
-            .map(|i| cand[i])
-            .collect();
-        (aliases, inclusion, intervals) = bootstrap(&cand);
-    };
+    let selected = gates::select(&resampling, &refitter, cand)?;
+    let effect_failure = gates::effect_failure(&p, &resampling, &selected, set.is_empty());
+    let Selected {
+        cand,
+        sol: cand_sol,
+        model: cand_model,
+        shares: sim_shares,
+        boot,
+        dropped,
+        ..
+    } = selected;
+    let Bootstrapped {
+        aliases,
+        inclusion,
+        intervals,
+    } = boot;
     let idx_cand: Vec<usize> = (0..n_nom).chain(cand.iter().map(|&k| n_nom + k)).collect();
     let mut xc = cand_sol.delta.clone();
     xc.extend(&cand_sol.coef);
     let val_cand = rss_at(&val, &idx_cand, &xc);
     let residual_ratio = val_cand / val_nominal.min(val_retuned).max(1e-300);
-    let sim_nom = mean_nrmse(&nominal_model, &vruns, &gate);
-    let sim_ret = mean_nrmse(&retuned_model, &vruns, &gate);
-    let sim_cand = mean_nrmse(&cand_model, &vruns, &gate);
+    let sim_nom = mean_nrmse(&nominal_model, vruns, gate);
+    let sim_ret = mean_nrmse(&retuned_model, vruns, gate);
+    let sim_cand = mean_nrmse(&cand_model, vruns, gate);
     let simulation_ratio = sim_cand / sim_nom.min(sim_ret);
     let excl: Vec<bool> = intervals
         .iter()
         .map(|iv| iv[0] > 0.0 || iv[1] < 0.0)
         .collect();
-    let mut failed = None;
     let name_of = |k: usize| format!("{} {}", p.effects[k].family, p.effects[k].formula);
-    if set.is_empty() {
-        failed = Some("not selected by the information criterion on the training runs".to_string());
-    }
-    for (i, &k) in cand.iter().enumerate() {
-        if failed.is_some() {
-            break;
-        }
-        if inclusion[i] < 0.8 {
-            failed = Some(format!(
-                "{}: included in {:.0} % of block-bootstrap refits (< 80 %)",
-                name_of(k),
-                100.0 * inclusion[i]
-            ));
-        } else if !excl[i] {
-            failed = Some(format!(
-                "{}: 95 % interval [{}, {}] contains zero",
-                name_of(k),
-                num(intervals[i][0]),
-                num(intervals[i][1])
-            ));
-        }
-    }
-    let dz = match last_drift {
-        _ if failed.is_some() || set.is_empty() => Vec::new(),
-        Some((c, z)) if c == cand => z,
-        _ => drift_z(&cand),
-    };
-    for (i, &k) in cand.iter().enumerate().take(dz.len()) {
-        if failed.is_none() && drifts(dz[i].0, dz[i].1, dz[i].2) {
-            failed = Some(format!(
-                "{}: {} on the first half of each training run, {} on the second ({:.1} standard deviations apart): not constant in time (a sensor drift or a slowly changing condition?)",
-                name_of(k),
-                num(dz[i].0),
-                num(dz[i].1),
-                dz[i].2
-            ));
-        }
-    }
-    let refined = coefficients(&cand_model);
-    for (i, &k) in cand.iter().enumerate() {
-        if failed.is_none() && !set.is_empty() && contradicts(&intervals[i], refined[nt + i]) {
-            failed = Some(format!(
-                "{}: refined on simulation error to {}, the sign its 95 % interval [{}, {}] excludes",
-                name_of(k),
-                num(refined[nt + i]),
-                num(intervals[i][0]),
-                num(intervals[i][1])
-            ));
-        }
-    }
+    let (mut failed, dz) = effect_failure;
     if failed.is_none() && residual_ratio > 0.9 {
         failed = Some(format!(
             "validation residual only {:.1} % below the better of nominal and re-tuned (< 10 %)",

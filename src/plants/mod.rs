@@ -36,7 +36,8 @@ use throttle::{Throttle, ThrottleParams};
 #[derive(Debug, Clone)]
 pub enum Dynamics {
     Throttle(Throttle),
-    Mimo(MimoPlant),
+    /// Boxed: a compiled model is several times the throttle's size.
+    Mimo(Box<MimoPlant>),
 }
 
 /// Presets of the throttle.
@@ -96,7 +97,7 @@ impl Plant {
         ex.u_bar = MIMO_U_BAR;
         Plant {
             name: "mimo".into(),
-            dynamics: Dynamics::Mimo(MimoPlant::new()),
+            dynamics: Dynamics::Mimo(Box::default()),
             excitation: ex,
         }
     }
