@@ -231,7 +231,11 @@ fn monomial_exponents(t: &Term, vars: &[String]) -> Vec<(usize, u32)> {
     v
 }
 
-fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
+/// The checks of [`discover`]'s inputs that need no computation (see its docs): one output of
+/// order at least 1, a split of three non-empty lists that identify's rules accept, the
+/// channels present and varying over the training runs, and confidences only for nominal
+/// terms. Returns the record set's channel of the output and of each input.
+fn check_setup(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<(usize, Vec<usize>)> {
     nominal.validate()?;
     if nominal.outputs.len() != 1 {
         return Err(Error::param(
@@ -261,8 +265,6 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         o.test.clone(),
         &ids,
     )?;
-    let mut vars: Vec<String> = (0..n).map(|k| derivative_name(&eq.name, k)).collect();
-    vars.extend(nominal.inputs.iter().cloned());
     let yc = rs.channel_index(&eq.name)?;
     let uc: Vec<usize> = nominal
         .inputs
@@ -288,6 +290,15 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
             ));
         }
     }
+    Ok((yc, uc))
+}
+
+fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
+    let (yc, uc) = check_setup(rs, nominal, o)?;
+    let eq = &nominal.outputs[0];
+    let n = eq.order;
+    let mut vars: Vec<String> = (0..n).map(|k| derivative_name(&eq.name, k)).collect();
+    vars.extend(nominal.inputs.iter().cloned());
     let nom_exprs: Vec<Expr> = eq
         .terms
         .iter()
@@ -313,7 +324,6 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         ..DerivativeOptions::default()
     };
     let der = differentiate_runs(&ys, rs.tau, n, &tuning)?;
-    let nz = vars.len();
     let zhat: Vec<Vec<Vec<f64>>> = rs
         .runs
         .iter()
@@ -325,29 +335,7 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         })
         .collect();
     let top: Vec<Vec<f64>> = der.iter().map(|d| d.values[n].clone()).collect();
-    // Scales on the training runs.
-    let mut sd = vec![0.0; nz];
-    let mut median = vec![0.0; nz];
-    let mut p99 = vec![0.0; nz];
-    for v in 0..nz {
-        let all: Vec<f64> = o
-            .train
-            .iter()
-            .flat_map(|&r| zhat[r][v].iter().copied())
-            .collect();
-        let mean = all.iter().sum::<f64>() / all.len().max(1) as f64;
-        sd[v] = (all.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / all.len().max(1) as f64)
-            .sqrt()
-            .max(1e-12);
-        median[v] = percentile(&all, 50.0);
-        let abs: Vec<f64> = all.iter().map(|x| x.abs()).collect();
-        p99[v] = percentile(&abs, 99.0).max(1e-12);
-    }
-    let scales = Scales {
-        sd: sd.clone(),
-        median,
-        p99,
-    };
+    let scales = training_scales(&zhat, &o.train);
     // The nominal's monomials and its named terms: the dictionary offers neither again.
     let nom_monos: Vec<Vec<(usize, u32)>> = eq
         .terms
@@ -386,43 +374,7 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         let len = run.len();
         let w = weak::Windows::new(len, m, n, rs.tau);
         let y = ys[ri];
-        let sgn = |k: usize| if k.is_multiple_of(2) { 1.0 } else { -1.0 };
-        let label = w
-            .integrate(n, y)
-            .into_iter()
-            .map(|v| sgn(n) * v)
-            .collect::<Vec<f64>>();
-        // A column: exact integration by parts for a single state variable, else psi * phi(z_hat).
-        let column = |e: &Expr| -> Vec<f64> {
-            if let Some(mono) = e.monomial() {
-                if mono.len() == 1 && mono[0].1 == 1 {
-                    let v = mono[0].0;
-                    if v < n {
-                        return w.integrate(v, y).into_iter().map(|x| sgn(v) * x).collect();
-                    }
-                    return w.integrate(0, &zhat[ri][v]);
-                }
-            }
-            let mut z = vec![0.0; nz];
-            let phi: Vec<f64> = (0..len)
-                .map(|i| {
-                    for (v, zv) in z.iter_mut().enumerate() {
-                        *zv = zhat[ri][v][i];
-                    }
-                    e.eval(&z)
-                })
-                .collect();
-            w.integrate(0, &phi)
-        };
-        let nom_cols: Vec<Vec<f64>> = nom_exprs.iter().map(&column).collect();
-        let mut r = label;
-        for (c, th) in nom_cols.iter().zip(&theta0) {
-            for (ri_, v) in r.iter_mut().zip(c) {
-                *ri_ -= th * v;
-            }
-        }
-        let mut cols: Vec<Vec<f64>> = free.iter().map(|&j| nom_cols[j].clone()).collect();
-        cols.extend(effects.iter().map(|e| column(&e.expr)));
+        let (r, cols) = weak_rows(&w, y, &zhat[ri], n, (&nom_exprs, &theta0, &free), &effects);
         rows.push((r, cols));
         let t: Vec<f64> = (0..len).map(|i| i as f64 * rs.tau).collect();
         simruns.push(RunData {
@@ -434,7 +386,11 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
             x0: (0..n).map(|k| der[ri].values[k][0]).collect(),
         });
     }
-    let eps: Vec<f64> = sd.iter().map(|s| crate::identify::SIGN_WIDTH * s).collect();
+    let eps: Vec<f64> = scales
+        .sd
+        .iter()
+        .map(|s| crate::identify::SIGN_WIDTH * s)
+        .collect();
     Ok(Prepared {
         nominal: nominal.clone(),
         vars,
@@ -452,6 +408,81 @@ fn prepare(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Prepared> {
         eps,
         half_width: m,
     })
+}
+
+/// Each variable's standard deviation, median and 99th percentile of magnitude over the
+/// training runs (`zhat[run][variable][sample]`), floored at 1e-12.
+fn training_scales(zhat: &[Vec<Vec<f64>>], train: &[usize]) -> Scales {
+    let nz = zhat.first().map_or(0, |z| z.len());
+    let mut sd = vec![0.0; nz];
+    let mut median = vec![0.0; nz];
+    let mut p99 = vec![0.0; nz];
+    for v in 0..nz {
+        let all: Vec<f64> = train
+            .iter()
+            .flat_map(|&r| zhat[r][v].iter().copied())
+            .collect();
+        let mean = all.iter().sum::<f64>() / all.len().max(1) as f64;
+        sd[v] = (all.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / all.len().max(1) as f64)
+            .sqrt()
+            .max(1e-12);
+        median[v] = percentile(&all, 50.0);
+        let abs: Vec<f64> = all.iter().map(|x| x.abs()).collect();
+        p99[v] = percentile(&abs, 99.0).max(1e-12);
+    }
+    Scales { sd, median, p99 }
+}
+
+/// One run's weak-form rows: the label less the nominal's terms at their coefficients, and the
+/// columns of the free nominal terms and of the effects. A column is the exact integration by
+/// parts for a single state variable, else the window integral of `phi(z_hat)`.
+/// `nominal` is (every term's expression, its coefficient, the free terms).
+fn weak_rows(
+    w: &weak::Windows,
+    y: &[f64],
+    zhat: &[Vec<f64>],
+    n: usize,
+    nominal: (&[Expr], &[f64], &[usize]),
+    effects: &[Effect],
+) -> (Vec<f64>, Vec<Vec<f64>>) {
+    let (nom_exprs, theta0, free) = nominal;
+    let sgn = |k: usize| if k.is_multiple_of(2) { 1.0 } else { -1.0 };
+    let label = w
+        .integrate(n, y)
+        .into_iter()
+        .map(|v| sgn(n) * v)
+        .collect::<Vec<f64>>();
+    let column = |e: &Expr| -> Vec<f64> {
+        if let Some(mono) = e.monomial() {
+            if mono.len() == 1 && mono[0].1 == 1 {
+                let v = mono[0].0;
+                if v < n {
+                    return w.integrate(v, y).into_iter().map(|x| sgn(v) * x).collect();
+                }
+                return w.integrate(0, &zhat[v]);
+            }
+        }
+        let mut z = vec![0.0; zhat.len()];
+        let phi: Vec<f64> = (0..y.len())
+            .map(|i| {
+                for (v, zv) in z.iter_mut().enumerate() {
+                    *zv = zhat[v][i];
+                }
+                e.eval(&z)
+            })
+            .collect();
+        w.integrate(0, &phi)
+    };
+    let nom_cols: Vec<Vec<f64>> = nom_exprs.iter().map(&column).collect();
+    let mut r = label;
+    for (c, th) in nom_cols.iter().zip(theta0) {
+        for (ri, v) in r.iter_mut().zip(c) {
+            *ri -= th * v;
+        }
+    }
+    let mut cols: Vec<Vec<f64>> = free.iter().map(|&j| nom_cols[j].clone()).collect();
+    cols.extend(effects.iter().map(|e| column(&e.expr)));
+    (r, cols)
 }
 
 /// Drops candidates that the training data cannot tell from a simpler one: a column that is
