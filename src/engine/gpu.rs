@@ -285,97 +285,112 @@ fn plan_factors(
     Ok((fd, ts, nf, chunk))
 }
 
-fn shader_header(consts: &[(&str, u32)]) -> String {
-    consts
-        .iter()
-        .map(|(k, v)| format!("const {k}: u32 = {v}u;\n"))
-        .collect()
+/// What [`GpuEngine::new`] refuses before it looks for a device (see its docs).
+fn check_inputs(features: &Features, basis: &Basis) -> Result<()> {
+    features.check()?;
+    let n_s = features.n_samples;
+    let n_z = features.n_vars();
+    let n_c = basis.len();
+    if n_z != basis.n_vars() {
+        return Err(Error::param(
+            "features",
+            format!(
+                "{n_z} feature columns but the basis has {} variables",
+                basis.n_vars()
+            ),
+        ));
+    }
+    if n_s == 0 || n_c == 0 {
+        return Err(Error::param(
+            "features",
+            "the GPU engine needs at least one sample and one candidate",
+        ));
+    }
+    if n_s > u32::MAX as usize / 64 || n_c > u32::MAX as usize / 64 {
+        return Err(Error::param(
+            "features",
+            "more samples or candidates than the GPU engine indexes (u32)",
+        ));
+    }
+    if let Some(k) = features.data.iter().position(|x| !x.is_finite()) {
+        return Err(Error::InvalidData(format!(
+            "feature '{}' has a non-finite value at sample {}",
+            features.names[k / n_s],
+            k % n_s
+        )));
+    }
+
+    Ok(())
 }
 
-fn mib(b: u64) -> f64 {
-    b as f64 / 1048576.0
+/// The first Vulkan adapter by kind (discrete first; a software one only when `options` allows),
+/// opened with its own limits: (its description, limits, device, queue).
+fn open_device(
+    options: &GpuOptions,
+) -> Result<(wgpu::AdapterInfo, wgpu::Limits, wgpu::Device, wgpu::Queue)> {
+    let instance = new_instance();
+    let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
+    adapters.sort_by_key(|a| type_rank(device_type(a.get_info().device_type)));
+    let seen: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
+    let adapter = adapters
+        .into_iter()
+        .find(|a| options.allow_cpu_adapter || a.get_info().device_type != wgpu::DeviceType::Cpu)
+        .ok_or_else(|| {
+            if seen.is_empty() {
+                Error::NoGpu(
+                    "no Vulkan adapter found (is a Vulkan driver installed?); use --engine cpu"
+                        .into(),
+                )
+            } else {
+                Error::NoGpu(format!(
+                    "only CPU (software) Vulkan adapters found ({}); use --engine cpu",
+                    seen.join(", ")
+                ))
+            }
+        })?;
+    let info = adapter.get_info();
+    let limits = adapter.limits();
+    let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+        label: Some("ctsid"),
+        required_features: wgpu::Features::empty(),
+        required_limits: limits.clone(),
+        experimental_features: wgpu::ExperimentalFeatures::disabled(),
+        memory_hints: wgpu::MemoryHints::Performance,
+        trace: wgpu::Trace::Off,
+    }))
+    .map_err(|e| Error::Gpu(format!("cannot open {}: {e}", info.name)))?;
+
+    Ok((info, limits, device, queue))
 }
 
-impl GpuEngine {
-    /// Builds the engine for all candidates of `basis` on the rows of `features`. Refuses features
-    /// that fail [`Features::check`], a number of variables other than the basis's, no samples or
-    /// no candidates, more of either than u32 indexing allows (`u32::MAX / 64`), a feature value
-    /// that is not finite, and buffers beyond `options.memory_budget_bytes` or the adapter's
-    /// limits; [`Error::NoGpu`] when no Vulkan adapter (other than a software one, unless
-    /// `options.allow_cpu_adapter`) is found, [`Error::Gpu`] when the device cannot be opened, its
-    /// workgroup memory cannot hold the factor table, or the upload or setup fails.
-    pub fn new(features: &Features, basis: &Basis, options: GpuOptions) -> Result<GpuEngine> {
-        features.check()?;
-        let n_s = features.n_samples;
-        let n_z = features.n_vars();
-        let n_c = basis.len();
-        if n_z != basis.n_vars() {
-            return Err(Error::param(
-                "features",
-                format!(
-                    "{n_z} feature columns but the basis has {} variables",
-                    basis.n_vars()
-                ),
-            ));
-        }
-        if n_s == 0 || n_c == 0 {
-            return Err(Error::param(
-                "features",
-                "the GPU engine needs at least one sample and one candidate",
-            ));
-        }
-        if n_s > u32::MAX as usize / 64 || n_c > u32::MAX as usize / 64 {
-            return Err(Error::param(
-                "features",
-                "more samples or candidates than the GPU engine indexes (u32)",
-            ));
-        }
-        if let Some(k) = features.data.iter().position(|x| !x.is_finite()) {
-            return Err(Error::InvalidData(format!(
-                "feature '{}' has a non-finite value at sample {}",
-                features.names[k / n_s],
-                k % n_s
-            )));
-        }
+/// How the candidates and samples are laid out on the device: the factor table (degree `fd`,
+/// `ts` entries, `nf` factors per candidate in `nw` words), the sample blocks and the
+/// candidate windows one dispatch covers.
+struct Plan {
+    fd: usize,
+    ts: usize,
+    nf: usize,
+    nw: usize,
+    chunk: usize,
+    n_blocks: usize,
+    block_samples: usize,
+    window: usize,
+    /// (first candidate, count) of each window.
+    spans: Vec<(usize, usize)>,
+}
 
-        let instance = new_instance();
-        let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
-        adapters.sort_by_key(|a| type_rank(device_type(a.get_info().device_type)));
-        let seen: Vec<String> = adapters.iter().map(|a| a.get_info().name).collect();
-        let adapter = adapters
-            .into_iter()
-            .find(|a| {
-                options.allow_cpu_adapter || a.get_info().device_type != wgpu::DeviceType::Cpu
-            })
-            .ok_or_else(|| {
-                if seen.is_empty() {
-                    Error::NoGpu(
-                        "no Vulkan adapter found (is a Vulkan driver installed?); use --engine cpu"
-                            .into(),
-                    )
-                } else {
-                    Error::NoGpu(format!(
-                        "only CPU (software) Vulkan adapters found ({}); use --engine cpu",
-                        seen.join(", ")
-                    ))
-                }
-            })?;
-        let info = adapter.get_info();
-        let limits = adapter.limits();
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("ctsid"),
-            required_features: wgpu::Features::empty(),
-            required_limits: limits.clone(),
-            experimental_features: wgpu::ExperimentalFeatures::disabled(),
-            memory_hints: wgpu::MemoryHints::Performance,
-            trace: wgpu::Trace::Off,
-        }))
-        .map_err(|e| Error::Gpu(format!("cannot open {}: {e}", info.name)))?;
-
-        let sink = install_sink(&device);
-
-        // ---- plan ----
-        let degree = basis.degree();
+impl Plan {
+    /// The layout for `n_s` samples and `n_c` candidates of `n_z` variables up to `degree`
+    /// within the adapter's limits; refuses what they cannot hold.
+    fn new(
+        n_s: usize,
+        n_z: usize,
+        n_c: usize,
+        degree: usize,
+        info: &wgpu::AdapterInfo,
+        limits: &wgpu::Limits,
+        options: &GpuOptions,
+    ) -> Result<Plan> {
         let (fd, ts, nf, chunk) =
             plan_factors(n_z, degree, limits.max_compute_workgroup_storage_size)?;
         let nw = nf.div_ceil(2);
@@ -420,14 +435,52 @@ impl GpuEngine {
             .map(|s| (s, window.min(n_c - s)))
             .collect();
 
-        // ---- memory: estimate first, refuse with the numbers ----
+        Ok(Plan {
+            fd,
+            ts,
+            nf,
+            nw,
+            chunk,
+            n_blocks,
+            block_samples,
+            window,
+            spans,
+        })
+    }
+
+    /// Where each level (degree 0 to 3) of the factor table ends.
+    fn level_end(&self, n_z: usize) -> [u32; 4] {
+        let mut level_end = [0u32; 4];
+        for (l, e) in level_end.iter_mut().enumerate() {
+            *e = count(n_z, l.min(self.fd)).unwrap() as u32;
+        }
+        level_end
+    }
+
+    /// The device memory the layout needs, estimated before anything is allocated: refuses,
+    /// with the numbers, a total above `options.memory_budget_bytes` and a buffer beyond the
+    /// adapter's limits.
+    fn device_bytes(
+        &self,
+        n_s: usize,
+        n_z: usize,
+        n_c: usize,
+        info: &wgpu::AdapterInfo,
+        limits: &wgpu::Limits,
+        options: &GpuOptions,
+    ) -> Result<u64> {
+        let max_bind = limits.max_storage_buffer_binding_size;
         let sizes: [(&str, u64, bool); 8] = [
             ("features", (n_s * n_z * 4) as u64, true),
             ("sweep vector", (n_s * 4) as u64, true),
-            ("factor recipes", (ts * 4) as u64, true),
-            ("candidate codes", (n_c * nw * 4) as u64, true),
+            ("factor recipes", (self.ts * 4) as u64, true),
+            ("candidate codes", (n_c * self.nw * 4) as u64, true),
             ("means", (n_c * 4) as u64, true),
-            ("partial sums", (n_blocks * window * 8) as u64, true),
+            (
+                "partial sums",
+                (self.n_blocks * self.window * 8) as u64,
+                true,
+            ),
             ("results", (n_c * 8) as u64, false),
             ("read-back", (n_c * 8) as u64, false),
         ];
@@ -459,88 +512,77 @@ impl GpuEngine {
             }
         }
 
-        // ---- host-side tables ----
-        let fnames: Vec<String> = (0..n_z).map(|k| format!("z{k}")).collect();
-        let fbasis = Basis::new(&fnames, fd, Default::default())?;
-        debug_assert_eq!(fbasis.len(), ts);
-        let findex: HashMap<Code, u32> = fbasis
-            .codes()
-            .iter()
-            .enumerate()
-            .map(|(i, c)| (*c, i as u32))
-            .collect();
-        let recipe: Vec<u32> = (0..ts)
-            .map(|f| match (fbasis.parent(f), fbasis.last_var(f)) {
-                (Some(p), Some(v)) => p as u32 | ((v as u32) << 16),
-                _ => 0,
-            })
-            .collect();
-        let mut cand = vec![0u32; n_c * nw];
-        for (j, code) in basis.codes().iter().enumerate() {
-            let vars: Vec<usize> = code.vars().collect();
-            for (q, group) in vars.chunks(fd).enumerate() {
-                let g = group.iter().fold(Code::ONE, |c, &v| c.times(v));
-                let f = findex[&g];
-                cand[j * nw + q / 2] |= f << (16 * (q % 2));
-            }
-        }
-        let mut z32 = vec![0f32; n_s * n_z];
-        for k in 0..n_z {
-            for (i, &x) in features.column(k).iter().enumerate() {
-                z32[i * n_z + k] = x as f32;
-            }
-        }
-        let mut level_end = [0u32; 4];
-        for (l, e) in level_end.iter_mut().enumerate() {
-            *e = count(n_z, l.min(fd)).unwrap() as u32;
-        }
+        Ok(total)
+    }
+}
 
-        // ---- device objects, inside error scopes ----
-        let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
-        let val = device.push_error_scope(wgpu::ErrorFilter::Validation);
+/// The tables the shaders read: each factor's recipe (parent and last variable), each
+/// candidate's factors (two 16-bit indices per word), and the features as f32 row by row.
+#[allow(clippy::type_complexity)]
+fn host_tables(
+    features: &Features,
+    basis: &Basis,
+    plan: &Plan,
+) -> Result<(Vec<u32>, Vec<u32>, Vec<f32>)> {
+    let (n_s, n_z, n_c) = (features.n_samples, features.n_vars(), basis.len());
+    let (fd, ts, nw) = (plan.fd, plan.ts, plan.nw);
+    let fnames: Vec<String> = (0..n_z).map(|k| format!("z{k}")).collect();
+    let fbasis = Basis::new(&fnames, fd, Default::default())?;
+    debug_assert_eq!(fbasis.len(), ts);
+    let findex: HashMap<Code, u32> = fbasis
+        .codes()
+        .iter()
+        .enumerate()
+        .map(|(i, c)| (*c, i as u32))
+        .collect();
+    let recipe: Vec<u32> = (0..ts)
+        .map(|f| match (fbasis.parent(f), fbasis.last_var(f)) {
+            (Some(p), Some(v)) => p as u32 | ((v as u32) << 16),
+            _ => 0,
+        })
+        .collect();
+    let mut cand = vec![0u32; n_c * nw];
+    for (j, code) in basis.codes().iter().enumerate() {
+        let vars: Vec<usize> = code.vars().collect();
+        for (q, group) in vars.chunks(fd).enumerate() {
+            let g = group.iter().fold(Code::ONE, |c, &v| c.times(v));
+            let f = findex[&g];
+            cand[j * nw + q / 2] |= f << (16 * (q % 2));
+        }
+    }
+    let mut z32 = vec![0f32; n_s * n_z];
+    for k in 0..n_z {
+        for (i, &x) in features.column(k).iter().enumerate() {
+            z32[i * n_z + k] = x as f32;
+        }
+    }
 
-        let storage = |label: &str, bytes: &[u8]| {
-            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some(label),
-                contents: bytes,
-                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
-            })
-        };
-        let z_buf = storage("z", bytemuck::cast_slice(&z32));
-        let recipe_buf = storage("recipe", bytemuck::cast_slice(&recipe));
-        let cand_buf = storage("cand", bytemuck::cast_slice(&cand));
-        let plain = |label: &str, size: u64, usage: wgpu::BufferUsages| {
-            device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some(label),
-                size,
-                usage,
-                mapped_at_creation: false,
-            })
-        };
-        let st = wgpu::BufferUsages::STORAGE;
-        let v_buf = plain("v", (n_s * 4) as u64, st | wgpu::BufferUsages::COPY_DST);
-        let mean_buf = plain("mean", (n_c * 4) as u64, st | wgpu::BufferUsages::COPY_DST);
-        let partial_buf = plain("partial", (n_blocks * window * 8) as u64, st);
-        let out_buf = plain(
-            "out",
-            (n_c * 8) as u64,
-            st | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
-        );
-        let staging = plain(
-            "staging",
-            (n_c * 8) as u64,
-            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        );
+    Ok((recipe, cand, z32))
+}
 
+/// The compiled shaders: the sweep (and its centred mode) and the finalize pass, with their bind
+/// group layouts.
+struct Pipelines {
+    sweep_bgl: wgpu::BindGroupLayout,
+    finalize_bgl: wgpu::BindGroupLayout,
+    sweep_pipe: wgpu::ComputePipeline,
+    centred_pipe: wgpu::ComputePipeline,
+    finalize_pipe: wgpu::ComputePipeline,
+}
+
+impl Pipelines {
+    /// The shaders specialised (by a header of constants) to `plan` and `n_z` variables.
+    fn new(device: &wgpu::Device, plan: &Plan, n_z: usize, options: &GpuOptions) -> Pipelines {
+        let level_end = plan.level_end(n_z);
         let header = shader_header(&[
             ("WG", WG),
             ("R", R),
-            ("CHUNK", chunk as u32),
+            ("CHUNK", plan.chunk as u32),
             ("NZ", n_z as u32),
-            ("TS", ts as u32),
-            ("FD", fd as u32),
-            ("NF", nf as u32),
-            ("NW", nw as u32),
+            ("TS", plan.ts as u32),
+            ("FD", plan.fd as u32),
+            ("NF", plan.nf as u32),
+            ("NW", plan.nw as u32),
             ("LEVEL_END0", level_end[0]),
             ("LEVEL_END1", level_end[1]),
             ("LEVEL_END2", level_end[2]),
@@ -626,6 +668,105 @@ impl GpuEngine {
         let sweep_pipe = pipe(&sweep_bgl, &sweep_mod, "sweep");
         let centred_pipe = pipe(&sweep_bgl, &centred_mod, "centred");
         let finalize_pipe = pipe(&finalize_bgl, &finalize_mod, "finalize");
+
+        Pipelines {
+            sweep_bgl,
+            finalize_bgl,
+            sweep_pipe,
+            centred_pipe,
+            finalize_pipe,
+        }
+    }
+}
+
+fn shader_header(consts: &[(&str, u32)]) -> String {
+    consts
+        .iter()
+        .map(|(k, v)| format!("const {k}: u32 = {v}u;\n"))
+        .collect()
+}
+
+fn mib(b: u64) -> f64 {
+    b as f64 / 1048576.0
+}
+
+impl GpuEngine {
+    /// Builds the engine for all candidates of `basis` on the rows of `features`. Refuses features
+    /// that fail [`Features::check`], a number of variables other than the basis's, no samples or
+    /// no candidates, more of either than u32 indexing allows (`u32::MAX / 64`), a feature value
+    /// that is not finite, and buffers beyond `options.memory_budget_bytes` or the adapter's
+    /// limits; [`Error::NoGpu`] when no Vulkan adapter (other than a software one, unless
+    /// `options.allow_cpu_adapter`) is found, [`Error::Gpu`] when the device cannot be opened, its
+    /// workgroup memory cannot hold the factor table, or the upload or setup fails.
+    pub fn new(features: &Features, basis: &Basis, options: GpuOptions) -> Result<GpuEngine> {
+        check_inputs(features, basis)?;
+        let (n_s, n_z, n_c) = (features.n_samples, features.n_vars(), basis.len());
+
+        let (info, limits, device, queue) = open_device(&options)?;
+
+        let sink = install_sink(&device);
+
+        let plan = Plan::new(n_s, n_z, n_c, basis.degree(), &info, &limits, &options)?;
+        let Plan {
+            fd,
+            ts,
+            nf,
+            chunk,
+            n_blocks,
+            block_samples,
+            window,
+            ref spans,
+            ..
+        } = plan;
+
+        let total = plan.device_bytes(n_s, n_z, n_c, &info, &limits, &options)?;
+
+        let (recipe, cand, z32) = host_tables(features, basis, &plan)?;
+
+        // ---- device objects, inside error scopes ----
+        let oom = device.push_error_scope(wgpu::ErrorFilter::OutOfMemory);
+        let val = device.push_error_scope(wgpu::ErrorFilter::Validation);
+
+        let storage = |label: &str, bytes: &[u8]| {
+            device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            })
+        };
+        let z_buf = storage("z", bytemuck::cast_slice(&z32));
+        let recipe_buf = storage("recipe", bytemuck::cast_slice(&recipe));
+        let cand_buf = storage("cand", bytemuck::cast_slice(&cand));
+        let plain = |label: &str, size: u64, usage: wgpu::BufferUsages| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size,
+                usage,
+                mapped_at_creation: false,
+            })
+        };
+        let st = wgpu::BufferUsages::STORAGE;
+        let v_buf = plain("v", (n_s * 4) as u64, st | wgpu::BufferUsages::COPY_DST);
+        let mean_buf = plain("mean", (n_c * 4) as u64, st | wgpu::BufferUsages::COPY_DST);
+        let partial_buf = plain("partial", (n_blocks * window * 8) as u64, st);
+        let out_buf = plain(
+            "out",
+            (n_c * 8) as u64,
+            st | wgpu::BufferUsages::COPY_SRC | wgpu::BufferUsages::COPY_DST,
+        );
+        let staging = plain(
+            "staging",
+            (n_c * 8) as u64,
+            wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        );
+
+        let Pipelines {
+            sweep_bgl,
+            finalize_bgl,
+            sweep_pipe,
+            centred_pipe,
+            finalize_pipe,
+        } = Pipelines::new(&device, &plan, n_z, &options);
 
         // Bind groups list their resources in binding order: binding k is resources[k].
         let bind = |label: &str,
@@ -728,7 +869,7 @@ impl GpuEngine {
             chunk,
             n_blocks,
             block_samples,
-            windows: spans,
+            windows: spans.clone(),
             device_bytes: total,
         };
         let engine = GpuEngine {
