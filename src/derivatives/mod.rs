@@ -184,17 +184,13 @@ pub fn differentiate_with(
     Ok(differentiate_runs(&[y], tau, max_order, opts)?.remove(0))
 }
 
-/// Several runs of one record set, tuned jointly and smoothed separately. Refuses a tau that
-/// [`crate::records::check_tau`] refuses, a `max_order` above [`MAX_ORDER`], a number of states not
-/// above `max_order` or outside 2..=11, an empty run list, a run shorter than [`min_samples`], a
-/// NaN, infinite or too large sample, an `h` outside (0, 1e3], an `end_lambda` outside [1e-3, 1e3]
-/// when `end_blend` is on, and a `smooth_window` that is negative or not finite.
-pub fn differentiate_runs(
+/// What [`differentiate_runs`] refuses (see its docs); the number of smoother states.
+fn check_request(
     runs: &[&[f64]],
     tau: f64,
     max_order: usize,
     opts: &DerivativeOptions,
-) -> Result<Vec<Derivatives>> {
+) -> Result<usize> {
     crate::records::check_tau(tau)?;
     if max_order > MAX_ORDER {
         return Err(Error::param(
@@ -252,7 +248,49 @@ pub fn differentiate_runs(
         ));
     }
     crate::util::finite_nonneg("smooth_window", opts.smooth_window)?;
+    Ok(m)
+}
 
+/// Each run as its mean with zero derivatives and zero uncertainty: the result for a constant
+/// run, and the start every other run's estimates overwrite.
+fn constant_estimates(
+    runs: &[&[f64]],
+    means: &[f64],
+    tau: f64,
+    max_order: usize,
+    m: usize,
+) -> Vec<Derivatives> {
+    runs.iter()
+        .zip(means)
+        .map(|(y, &mu)| {
+            let n = y.len();
+            let mut values = vec![vec![0.0; n]; max_order + 1];
+            values[0] = vec![mu; n];
+            Derivatives {
+                tau,
+                values,
+                sigma: vec![vec![0.0; n]; max_order + 1],
+                noise_sd: 0.0,
+                h: 1.0,
+                states: m,
+                exp_terms: None,
+            }
+        })
+        .collect()
+}
+
+/// Several runs of one record set, tuned jointly and smoothed separately. Refuses a tau that
+/// [`crate::records::check_tau`] refuses, a `max_order` above [`MAX_ORDER`], a number of states not
+/// above `max_order` or outside 2..=11, an empty run list, a run shorter than [`min_samples`], a
+/// NaN, infinite or too large sample, an `h` outside (0, 1e3], an `end_lambda` outside [1e-3, 1e3]
+/// when `end_blend` is on, and a `smooth_window` that is negative or not finite.
+pub fn differentiate_runs(
+    runs: &[&[f64]],
+    tau: f64,
+    max_order: usize,
+    opts: &DerivativeOptions,
+) -> Result<Vec<Derivatives>> {
+    let m = check_request(runs, tau, max_order, opts)?;
     let means: Vec<f64> = runs
         .iter()
         .map(|y| y.iter().sum::<f64>() / y.len() as f64)
@@ -277,24 +315,7 @@ pub fn differentiate_runs(
         _ => live_y.clone(),
     };
 
-    let mut out: Vec<Derivatives> = runs
-        .iter()
-        .zip(&means)
-        .map(|(y, &mu)| {
-            let n = y.len();
-            let mut values = vec![vec![0.0; n]; max_order + 1];
-            values[0] = vec![mu; n];
-            Derivatives {
-                tau,
-                values,
-                sigma: vec![vec![0.0; n]; max_order + 1],
-                noise_sd: 0.0,
-                h: 1.0,
-                states: m,
-                exp_terms: None,
-            }
-        })
-        .collect();
+    let mut out = constant_estimates(runs, &means, tau, max_order, m);
     if live.is_empty() {
         return Ok(out);
     }
