@@ -367,6 +367,9 @@ fn open_device(
 /// `ts` entries, `nf` factors per candidate in `nw` words), the sample blocks and the
 /// candidate windows one dispatch covers.
 struct Plan {
+    /// Samples and candidates laid out.
+    n_s: usize,
+    n_c: usize,
     fd: usize,
     ts: usize,
     nf: usize,
@@ -436,6 +439,8 @@ impl Plan {
             .collect();
 
         Ok(Plan {
+            n_s,
+            n_c,
             fd,
             ts,
             nf,
@@ -462,13 +467,12 @@ impl Plan {
     /// adapter's limits.
     fn device_bytes(
         &self,
-        n_s: usize,
         n_z: usize,
-        n_c: usize,
-        info: &wgpu::AdapterInfo,
-        limits: &wgpu::Limits,
+        adapter: (&wgpu::AdapterInfo, &wgpu::Limits),
         options: &GpuOptions,
     ) -> Result<u64> {
+        let (info, limits) = adapter;
+        let (n_s, n_c) = (self.n_s, self.n_c);
         let max_bind = limits.max_storage_buffer_binding_size;
         let sizes: [(&str, u64, bool); 8] = [
             ("features", (n_s * n_z * 4) as u64, true),
@@ -719,7 +723,7 @@ impl GpuEngine {
             ..
         } = plan;
 
-        let total = plan.device_bytes(n_s, n_z, n_c, &info, &limits, &options)?;
+        let total = plan.device_bytes(n_z, (&info, &limits), &options)?;
 
         let (recipe, cand, z32) = host_tables(features, basis, &plan)?;
 
