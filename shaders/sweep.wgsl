@@ -1,6 +1,6 @@
 // Correlation sweep and centred sums of squares over candidate monomials, generated on the fly.
 //
-// The host prepends a block of `const` declarations (see src/engine/gpu.rs, `shader_header`):
+// The host prepends a block of `const` declarations (see src/engine/gpu/shader.rs):
 //   WG      invocations per workgroup
 //   R       candidates per invocation
 //   CHUNK   samples staged in workgroup memory at a time
@@ -11,6 +11,9 @@
 //   NW      u32 words per candidate (= ceil(NF / 2); 16-bit factor indices)
 //   MODE    0: raw sweep, sum_i x_ij v_i;  1: centred squares, sum_i v_i (x_ij - mean_j)^2
 //   LEVEL_END0..3  end (exclusive) of the factors of degree 0..3 in the table
+// and replaces the four `//@` lines below with the per-candidate code: R candidates per
+// invocation written out as scalars (f0_0, sc0, acc0, ...), or as loops over arrays (the shape
+// chosen by `KernelShape::scalar_code`; see docs/gpu.md for what each costs).
 //
 // How a monomial value is built: for the CHUNK samples in flight the workgroup tabulates every
 // monomial of degree <= FD ("factors") once, in workgroup memory. Each candidate is a product of
@@ -61,12 +64,55 @@ fn opaque(x: f32) -> f32 {
     return bitcast<f32>(bitcast<u32>(x) ^ P.zero);
 }
 
-fn level_end(l: u32) -> u32 {
-    switch l {
-        case 0u: { return LEVEL_END0; }
-        case 1u: { return LEVEL_END1; }
-        case 2u: { return LEVEL_END2; }
-        default: { return LEVEL_END3; }
+// Factor q of window candidate `local` (0, the factor 1, for padding candidates).
+fn factor_of(local: u32, q: u32) -> u32 {
+    if local >= P.window_len {
+        return 0u;
+    }
+    let j = P.window_start + local;
+    return (cand[j * NW + q / 2u] >> (16u * (q % 2u))) & 0xffffu;
+}
+
+// The mean that MODE 1 subtracts (0 for padding and in MODE 0).
+fn mean_of(local: u32) -> f32 {
+    if MODE == 1u && local < P.window_len {
+        return mean[P.window_start + local];
+    }
+    return 0.0;
+}
+
+// One sample-candidate pair: monomial value p, weight ws.
+fn pair(p: f32, ws: f32, mu: f32, acc: f32) -> f32 {
+    if MODE == 0u {
+        return fma(p, ws, acc);
+    }
+    let dlt = p - mu;
+    return fma(ws * dlt, dlt, acc);
+}
+
+// Kahan: adds a chunk's sum into (sum, compensation); the compensation carries the low-order
+// part lost by the sum.
+fn kahan(sc: vec2<f32>, acc: f32) -> vec2<f32> {
+    let y = acc - sc.y;
+    let tt = opaque(sc.x + y);
+    return vec2<f32>(tt, opaque(tt - sc.x) - y);
+}
+
+fn store(b: u32, local: u32, sc: vec2<f32>) {
+    if local < P.window_len {
+        partial[b * P.stride + local] = vec2<f32>(sc.x, -sc.y);
+    }
+}
+
+// Factors f0..f1 (one level of degree) of the CHUNK rows, each a lower factor times one
+// variable; the (sample, factor) pairs are spread over all invocations.
+fn build_level(t: u32, f0: u32, f1: u32) {
+    let width = f1 - f0;
+    for (var e = t; e < CHUNK * width; e += WG) {
+        let row = (e / width) * TS;
+        let f = f0 + e % width;
+        let rc = recipe[f];
+        tab[row + f] = tab[row + (rc & 0xffffu)] * tab[row + 1u + (rc >> 16u)];
     }
 }
 
@@ -78,46 +124,23 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid
     let s_begin = b * P.block_samples;
     let s_end = min(s_begin + P.block_samples, P.n_samples);
 
-    // Factor offsets of this invocation's candidates; padding candidates use factor 0 (= 1).
-    var fidx: array<u32, R * NF>;
-    var mu: array<f32, R>;
-    var sum: array<f32, R>;
-    var comp: array<f32, R>;
-    for (var r = 0u; r < R; r++) {
-        let local = tile0 + t + r * WG;
-        let ok = local < P.window_len;
-        let j = P.window_start + local;
-        for (var q = 0u; q < NF; q++) {
-            var f = 0u;
-            if ok {
-                f = (cand[j * NW + q / 2u] >> (16u * (q % 2u))) & 0xffffu;
-            }
-            fidx[r * NF + q] = f;
-        }
-        mu[r] = 0.0;
-        if MODE == 1u && ok {
-            mu[r] = mean[j];
-        }
-        sum[r] = 0.0;
-        comp[r] = 0.0;
-    }
+//@CANDIDATES
 
     for (var c0 = s_begin; c0 < s_end; c0 += CHUNK) {
         let ns = min(CHUNK, s_end - c0);
         // Degree 0 and 1 factors straight from Z; samples past the end become 0 with weight 0.
-        // (Loops are sample-outer so that no invocation divides by a runtime count.)
-        for (var s = 0u; s < CHUNK; s++) {
-            for (var k = t; k < LEVEL_END1; k += WG) {
-                var val = 0.0;
-                if s < ns {
-                    if k == 0u {
-                        val = 1.0;
-                    } else {
-                        val = z[(c0 + s) * NZ + (k - 1u)];
-                    }
+        for (var e = t; e < CHUNK * LEVEL_END1; e += WG) {
+            let s = e / LEVEL_END1;
+            let k = e % LEVEL_END1;
+            var val = 0.0;
+            if s < ns {
+                if k == 0u {
+                    val = 1.0;
+                } else {
+                    val = z[(c0 + s) * NZ + (k - 1u)];
                 }
-                tab[s * TS + k] = val;
             }
+            tab[s * TS + k] = val;
         }
         for (var s = t; s < CHUNK; s += WG) {
             var w = 0.0;
@@ -127,54 +150,20 @@ fn main(@builtin(local_invocation_id) lid: vec3<u32>, @builtin(workgroup_id) wid
             vv[s] = w;
         }
         workgroupBarrier();
-        // Degree 2..FD factors: each is a lower factor times one variable.
-        for (var l = 2u; l <= FD; l++) {
-            let f0 = level_end(l - 1u);
-            let f1 = level_end(l);
-            for (var s = 0u; s < CHUNK; s++) {
-                let row = s * TS;
-                for (var f = f0 + t; f < f1; f += WG) {
-                    let rc = recipe[f];
-                    tab[row + f] = tab[row + (rc & 0xffffu)] * tab[row + 1u + (rc >> 16u)];
-                }
-            }
+        // Degree 2..FD factors (FD is a constant: the barriers stay in uniform control flow).
+        if FD >= 2u {
+            build_level(t, LEVEL_END1, LEVEL_END2);
+            workgroupBarrier();
+        }
+        if FD >= 3u {
+            build_level(t, LEVEL_END2, LEVEL_END3);
             workgroupBarrier();
         }
 
-        var acc: array<f32, R>;
-        for (var r = 0u; r < R; r++) {
-            acc[r] = 0.0;
-        }
-        for (var s = 0u; s < CHUNK; s++) {
-            let row = s * TS;
-            let ws = vv[s];
-            for (var r = 0u; r < R; r++) {
-                var p = tab[row + fidx[r * NF]];
-                for (var q = 1u; q < NF; q++) {
-                    p = p * tab[row + fidx[r * NF + q]];
-                }
-                if MODE == 0u {
-                    acc[r] = fma(p, ws, acc[r]);
-                } else {
-                    let dlt = p - mu[r];
-                    acc[r] = fma(ws * dlt, dlt, acc[r]);
-                }
-            }
-        }
-        // Kahan: comp carries the low-order part lost by sum.
-        for (var r = 0u; r < R; r++) {
-            let y = acc[r] - comp[r];
-            let tt = opaque(sum[r] + y);
-            comp[r] = opaque(tt - sum[r]) - y;
-            sum[r] = tt;
-        }
+//@ACCUMULATE
+//@KAHAN
         workgroupBarrier();
     }
 
-    for (var r = 0u; r < R; r++) {
-        let local = tile0 + t + r * WG;
-        if local < P.window_len {
-            partial[b * P.stride + local] = vec2<f32>(sum[r], -comp[r]);
-        }
-    }
+//@STORE
 }

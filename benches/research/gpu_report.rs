@@ -14,16 +14,21 @@
 //! extrapolated to 200 steps (marked "extrap."); the GPU path's entering order is compared with
 //! the CPU f64 path's over the steps both ran.
 //!
+//! With `--shapes WGxR:FDs,...` it first times the sweep for each kernel shape (workgroup size,
+//! candidates per invocation, largest factor degree, `s` scalar or `a` array code; see
+//! `KernelShape`), each checked like the default; `--shapes-only` stops there.
+//!
 //! Usage: gpu_report [--samples N] [--sizes NZ:D,NZ:D,...] [--reps K] [--check K]
 //!                   [--peak PAIRS_PER_S] [--require-real-gpu] [--cpu-max-pairs P]
 //!                   [--cpu-path-budget S] [--steps N] [--no-bounds-checks]
+//!                   [--shapes WGxR:FDs,...] [--shapes-only]
 
 use std::time::Instant;
 
 use rayon::prelude::*;
 
 use ctsid::basis::{Basis, BasisLimits, Code};
-use ctsid::engine::gpu::{GpuEngine, GpuOptions};
+use ctsid::engine::gpu::{GpuEngine, GpuOptions, KernelShape};
 use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
 use ctsid::plants::rng::Rng;
 use ctsid::regression::{lars_path, Method, PathOptions};
@@ -86,6 +91,19 @@ fn main() {
     let require_real = args.iter().any(|a| a == "--require-real-gpu");
     let cpu_path_budget: f64 = arg(&args, "--cpu-path-budget", 60.0);
     let steps: usize = arg(&args, "--steps", 200);
+    let shapes: Vec<KernelShape> = arg(&args, "--shapes", String::new())
+        .split(',')
+        .filter(|x| !x.is_empty())
+        .map(|x| parse_shape(x).unwrap_or_else(|| panic!("--shapes: cannot read {x:?}")))
+        .collect();
+    let shapes_only = args.iter().any(|a| a == "--shapes-only");
+    let options = |kernel: KernelShape| GpuOptions {
+        allow_cpu_adapter: !require_real,
+        bounds_checks: !args.iter().any(|a| a == "--no-bounds-checks"),
+        kernel,
+        ..Default::default()
+    };
+    let mut shape_rows = Vec::new();
 
     let mut rows_out = Vec::new();
     let mut failed = false;
@@ -114,17 +132,41 @@ fn main() {
             }
         }
         let v: Vec<f64> = (0..n_s).map(|_| rng.uniform_in(-1.0, 1.0)).collect();
+        let pairs = (n_s * n_c) as f64;
+
+        for shape in &shapes {
+            let mut eng = match GpuEngine::new(&feats, &basis, options(*shape)) {
+                Ok(e) => e,
+                Err(e) => {
+                    shape_rows.push(format!("| {n_s} x {n_c} | {shape:?} | refused: {e} |||"));
+                    continue;
+                }
+            };
+            let mut out = vec![f64::NAN; n_c];
+            eng.sweep(&v, &mut out).expect("sweep");
+            let worst = worst_error(&out, &rows, n_z, &basis, &v, n_check);
+            failed |= worst >= 1e-5;
+            let med = median_time(reps, || eng.sweep(&v, &mut out).expect("sweep"));
+            let l = eng.layout();
+            shape_rows.push(format!(
+                "| {n_s} x {n_c} (n_z={n_z}, d={d}) | {}x{} FD {} (table {}, chunk {}) {} | {:.3} ms | {:.2e} | {worst:.1e} |",
+                shape.workgroup,
+                shape.per_invocation,
+                l.factor_degree,
+                l.table_len,
+                l.chunk,
+                if shape.scalar_code { "scalar" } else { "array" },
+                med * 1e3,
+                pairs / med,
+            ));
+            eprintln!("{}", shape_rows.last().unwrap());
+        }
+        if shapes_only {
+            continue;
+        }
 
         let t0 = Instant::now();
-        let mut eng = match GpuEngine::new(
-            &feats,
-            &basis,
-            GpuOptions {
-                allow_cpu_adapter: !require_real,
-                bounds_checks: !args.iter().any(|a| a == "--no-bounds-checks"),
-                ..Default::default()
-            },
-        ) {
+        let mut eng = match GpuEngine::new(&feats, &basis, options(KernelShape::default())) {
             Ok(e) => e,
             Err(e) => {
                 eprintln!("gpu_report: {e}");
@@ -139,28 +181,11 @@ fn main() {
             eng.layout()
         );
 
-        // Correctness on a spread subset (first, last, evenly spaced), every element checked.
         let mut out = vec![f64::NAN; n_c];
         let t1 = Instant::now();
         eng.sweep(&v, &mut out).expect("sweep");
         let first = t1.elapsed().as_secs_f64();
-        let step = (n_c / n_check.max(1)).max(1);
-        let mut idx: Vec<usize> = (0..n_c).step_by(step).collect();
-        if *idx.last().unwrap() != n_c - 1 {
-            idx.push(n_c - 1);
-        }
-        let sub: Vec<Code> = idx.iter().map(|&j| basis.code(j)).collect();
-        let (mut want, mut mag) = (vec![0.0; sub.len()], vec![0.0; sub.len()]);
-        naive_f64_sweep(&rows, n_z, &sub, &v, &mut want, Some(&mut mag));
-        let mut worst = 0.0f64;
-        for (k, &j) in idx.iter().enumerate() {
-            let rel = if out[j].is_finite() {
-                (out[j] - want[k]).abs() / mag[k].max(f64::MIN_POSITIVE)
-            } else {
-                f64::INFINITY
-            };
-            worst = worst.max(rel);
-        }
+        let worst = worst_error(&out, &rows, n_z, &basis, &v, n_check);
         let ok = worst < 1e-5;
         failed |= !ok;
 
@@ -182,7 +207,6 @@ fn main() {
         drop(eng);
 
         // The CPU engine, f32 and f64, same data, same process.
-        let pairs = (n_s * n_c) as f64;
         let mut cpu_cells = Vec::new();
         let mut order_ok = String::from("-");
         for prec in [Precision::F32, Precision::F64] {
@@ -250,6 +274,21 @@ fn main() {
             first * 1e3,
         ));
     }
+    if !shape_rows.is_empty() {
+        println!("\nKernel shapes ({n_s} samples; sweep: median of {reps}; max rel err vs f64 on {n_check} candidates)\n");
+        println!("| problem | shape | sweep | pairs/s | max rel err |");
+        println!("|---|---|---|---|---|");
+        for r in &shape_rows {
+            println!("{r}");
+        }
+    }
+    if shapes_only {
+        if failed {
+            eprintln!("gpu_report: correctness check FAILED (max rel err >= 1e-5)");
+            std::process::exit(1);
+        }
+        return;
+    }
     let threads = rayon::current_num_threads();
     println!("\nGPU engine report ({n_s} samples; sweeps: median of {reps}; paths: LassoLars, {steps} steps/terms at most, active-set work included; CPU engine on {threads} threads, same run; ratio = CPU time / GPU time)\n");
     println!("| problem | GPU sweep | of arithmetic limit ({peak:.2e} pairs/s) | GPU path | CPU f32 sweep / ratio | CPU f32 path / ratio | CPU f64 sweep / ratio | CPU f64 path / ratio | GPU vs CPU f64 active set | max rel err vs f64 | GPU setup / first sweep |");
@@ -261,6 +300,54 @@ fn main() {
         eprintln!("gpu_report: correctness check FAILED (max rel err >= 1e-5, or the GPU path's active set differs from the CPU f64 path's)");
         std::process::exit(1);
     }
+}
+
+/// `WGxR:FD` then `s` (scalar code) or `a` (arrays), e.g. `64x8:3s`.
+fn parse_shape(x: &str) -> Option<KernelShape> {
+    let (wg, rest) = x.split_once('x')?;
+    let (r, rest) = rest.split_once(':')?;
+    let scalar_code = match rest.chars().last()? {
+        's' => true,
+        'a' => false,
+        _ => return None,
+    };
+    Some(KernelShape {
+        workgroup: wg.parse().ok()?,
+        per_invocation: r.parse().ok()?,
+        max_factor_degree: rest[..rest.len() - 1].parse().ok()?,
+        scalar_code,
+    })
+}
+
+/// Largest |GPU - exact| / sum_i |x_ij v_i| over a spread subset of candidates (first, last,
+/// evenly spaced), every element checked.
+fn worst_error(
+    out: &[f64],
+    rows: &[f64],
+    n_z: usize,
+    basis: &Basis,
+    v: &[f64],
+    n_check: usize,
+) -> f64 {
+    let n_c = basis.len();
+    let step = (n_c / n_check.max(1)).max(1);
+    let mut idx: Vec<usize> = (0..n_c).step_by(step).collect();
+    if *idx.last().unwrap() != n_c - 1 {
+        idx.push(n_c - 1);
+    }
+    let sub: Vec<Code> = idx.iter().map(|&j| basis.code(j)).collect();
+    let (mut want, mut mag) = (vec![0.0; sub.len()], vec![0.0; sub.len()]);
+    naive_f64_sweep(rows, n_z, &sub, v, &mut want, Some(&mut mag));
+    let mut worst = 0.0f64;
+    for (k, &j) in idx.iter().enumerate() {
+        let rel = if out[j].is_finite() {
+            (out[j] - want[k]).abs() / mag[k].max(f64::MIN_POSITIVE)
+        } else {
+            f64::INFINITY
+        };
+        worst = worst.max(rel);
+    }
+    worst
 }
 
 fn median_time(reps: usize, mut f: impl FnMut()) -> f64 {

@@ -46,15 +46,71 @@ use crate::basis::{count, Basis, Code};
 use crate::engine::{ColumnStats, Features, SweepEngine};
 use crate::error::{Error, Result};
 
-/// Invocations per workgroup (64 is valid on every adapter and a multiple of every warp size).
-pub const WG: u32 = 64;
-/// Candidates per invocation.
-pub const R: u32 = 8;
-/// Candidates per workgroup tile.
-pub const TILE: u32 = WG * R;
+mod shader;
 
-const SWEEP_WGSL: &str = include_str!("../../shaders/sweep.wgsl");
-const FINALIZE_WGSL: &str = include_str!("../../shaders/finalize.wgsl");
+/// Invocations per workgroup of the finalize shader.
+const FINALIZE_WG: u32 = 64;
+
+/// The shape of the sweep kernel. The defaults are the measured best (docs/gpu.md, "Kernel
+/// shapes"); the other shapes exist to measure them (`benches/gpu_report.sh --shapes`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct KernelShape {
+    /// Invocations per workgroup: a multiple of 32 (every warp and wave size divides it), at most
+    /// the adapter's limit.
+    pub workgroup: u32,
+    /// Candidates per invocation (R), 1 to 32: each sample's weight and table row are loaded
+    /// once for R candidates.
+    pub per_invocation: u32,
+    /// Largest degree of the factors tabulated in workgroup memory, 1 to 3 (the plan may choose
+    /// less): a higher degree means fewer loads per pair and a larger table per workgroup.
+    pub max_factor_degree: usize,
+    /// Per-candidate state written out as scalars in the shader text (true) or as arrays that
+    /// the driver must unroll to keep in registers (false).
+    pub scalar_code: bool,
+}
+
+impl Default for KernelShape {
+    fn default() -> Self {
+        KernelShape {
+            workgroup: 64,
+            per_invocation: 8,
+            max_factor_degree: 3,
+            scalar_code: true,
+        }
+    }
+}
+
+impl KernelShape {
+    /// Candidates per workgroup tile.
+    fn tile(&self) -> usize {
+        (self.workgroup * self.per_invocation) as usize
+    }
+
+    fn check(&self, limits: &wgpu::Limits) -> Result<()> {
+        let max_wg = limits
+            .max_compute_invocations_per_workgroup
+            .min(limits.max_compute_workgroup_size_x);
+        if self.workgroup == 0 || !self.workgroup.is_multiple_of(32) || self.workgroup > max_wg {
+            return Err(Error::param(
+                "workgroup",
+                format!(
+                    "{} invocations: must be a multiple of 32 and at most {max_wg}",
+                    self.workgroup
+                ),
+            ));
+        }
+        if !(1..=32).contains(&self.per_invocation) || !(1..=3).contains(&self.max_factor_degree) {
+            return Err(Error::param(
+                "kernel shape",
+                format!(
+                    "{} candidates per invocation (1 to 32), factor degree {} (1 to 3)",
+                    self.per_invocation, self.max_factor_degree
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
 
 /// Settings of the GPU engine; the defaults suit real use, the `max_*` fields exist so tests can
 /// force several windows and blocks on tiny problems.
@@ -63,7 +119,7 @@ pub struct GpuOptions {
     /// Accept a CPU (software) adapter such as lavapipe. `--engine gpu` allows it; `auto` never
     /// gets here with one (see [`crate::engine::select`]).
     pub allow_cpu_adapter: bool,
-    /// Upper bound on candidates per window (rounded down to a multiple of [`TILE`]).
+    /// Upper bound on candidates per window (rounded down to a multiple of the kernel's tile, [`KernelShape`] workgroup x per invocation).
     pub max_window_candidates: Option<usize>,
     /// Upper bound on samples per block (the span of one Kahan-compensated f32 sum).
     pub max_block_samples: usize,
@@ -78,6 +134,8 @@ pub struct GpuOptions {
     /// Lower bound on samples per block; tests use it to force long compensated sums on
     /// adapters whose layout would otherwise cut the samples into short blocks.
     pub min_block_samples: usize,
+    /// The sweep kernel's shape (see [`KernelShape`]).
+    pub kernel: KernelShape,
 }
 
 impl Default for GpuOptions {
@@ -92,6 +150,7 @@ impl Default for GpuOptions {
             timeout: Duration::from_secs(300),
             bounds_checks: true,
             min_block_samples: 0,
+            kernel: KernelShape::default(),
         }
     }
 }
@@ -206,6 +265,8 @@ pub struct GpuLayout {
     pub windows: Vec<(usize, usize)>,
     /// Bytes of device memory the engine allocated.
     pub device_bytes: u64,
+    /// The sweep kernel's shape.
+    pub kernel: KernelShape,
 }
 
 #[derive(Default)]
@@ -257,10 +318,11 @@ fn plan_factors(
     n_z: usize,
     degree: usize,
     shared_bytes: u32,
+    shape: &KernelShape,
 ) -> Result<(usize, usize, usize, usize)> {
     let shared_floats = shared_bytes as usize / 4;
     let mut best: Option<(f64, usize, usize, usize, usize)> = None;
-    for fd in 1..=3usize.min(degree.max(1)) {
+    for fd in 1..=shape.max_factor_degree.min(degree.max(1)) {
         let ts = count(n_z, fd).unwrap_or(u64::MAX) as usize;
         if ts > 0xffff {
             continue;
@@ -272,7 +334,7 @@ fn plan_factors(
         let nf = degree.div_ceil(fd).max(1);
         // Per-pair cost: nf loads + one weight load shared by R candidates, plus building the
         // table (ts multiplies per sample) spread over a tile.
-        let cost = nf as f64 + 1.0 / R as f64 + ts as f64 / TILE as f64;
+        let cost = nf as f64 + 1.0 / shape.per_invocation as f64 + ts as f64 / shape.tile() as f64;
         if best.is_none_or(|b| cost < b.0) {
             best = Some((cost, fd, ts, nf, chunk));
         }
@@ -394,10 +456,17 @@ impl Plan {
         limits: &wgpu::Limits,
         options: &GpuOptions,
     ) -> Result<Plan> {
-        let (fd, ts, nf, chunk) =
-            plan_factors(n_z, degree, limits.max_compute_workgroup_storage_size)?;
+        let shape = &options.kernel;
+        shape.check(limits)?;
+        let (fd, ts, nf, chunk) = plan_factors(
+            n_z,
+            degree,
+            limits.max_compute_workgroup_storage_size,
+            shape,
+        )?;
         let nw = nf.div_ceil(2);
-        let tiles_total = n_c.div_ceil(TILE as usize);
+        let tile = shape.tile();
+        let tiles_total = n_c.div_ceil(tile);
         let target_wg: usize = if info.device_type == wgpu::DeviceType::Cpu {
             16
         } else {
@@ -417,11 +486,11 @@ impl Plan {
         let n_blocks = n_s.div_ceil(block_samples);
 
         let max_bind = limits.max_storage_buffer_binding_size;
-        let tile = TILE as usize;
         let mut window = n_c.div_ceil(tile) * tile;
         window = window.min((max_bind / (8 * n_blocks as u64)) as usize);
         window = window.min(limits.max_compute_workgroups_per_dimension as usize * tile);
-        window = window.min(limits.max_compute_workgroups_per_dimension as usize * WG as usize);
+        window =
+            window.min(limits.max_compute_workgroups_per_dimension as usize * FINALIZE_WG as usize);
         window = window.min((options.max_pairs_per_dispatch / n_s as u64).max(1) as usize);
         if let Some(m) = options.max_window_candidates {
             window = window.min(m);
@@ -578,9 +647,7 @@ impl Pipelines {
     /// The shaders specialised (by a header of constants) to `plan` and `n_z` variables.
     fn new(device: &wgpu::Device, plan: &Plan, n_z: usize, options: &GpuOptions) -> Pipelines {
         let level_end = plan.level_end(n_z);
-        let header = shader_header(&[
-            ("WG", WG),
-            ("R", R),
+        let consts = [
             ("CHUNK", plan.chunk as u32),
             ("NZ", n_z as u32),
             ("TS", plan.ts as u32),
@@ -591,7 +658,7 @@ impl Pipelines {
             ("LEVEL_END1", level_end[1]),
             ("LEVEL_END2", level_end[2]),
             ("LEVEL_END3", level_end[3]),
-        ]);
+        ];
         // naga's forced loop bounding puts a counter and an exit test in every loop, which keeps
         // the driver from unrolling the R- and NF-loops of sweep.wgsl and so from keeping the
         // per-candidate arrays in registers. Every loop in both shaders ends after a number of
@@ -612,18 +679,10 @@ impl Pipelines {
             // buffer by construction of the layout (windows, blocks and tables sized above).
             unsafe { device.create_shader_module_trusted(desc, checks) }
         };
-        let sweep_mod = module(
-            "sweep",
-            format!("{header}const MODE: u32 = 0u;\n{SWEEP_WGSL}"),
-        );
-        let centred_mod = module(
-            "centred",
-            format!("{header}const MODE: u32 = 1u;\n{SWEEP_WGSL}"),
-        );
-        let finalize_mod = module(
-            "finalize",
-            format!("{}{FINALIZE_WGSL}", shader_header(&[("WG", WG)])),
-        );
+        let shape = &options.kernel;
+        let sweep_mod = module("sweep", shader::sweep(&consts, shape, plan.nf, 0));
+        let centred_mod = module("centred", shader::sweep(&consts, shape, plan.nf, 1));
+        let finalize_mod = module("finalize", shader::finalize(FINALIZE_WG));
 
         let entry = |binding: u32, ty: wgpu::BufferBindingType| wgpu::BindGroupLayoutEntry {
             binding,
@@ -681,13 +740,6 @@ impl Pipelines {
             finalize_pipe,
         }
     }
-}
-
-fn shader_header(consts: &[(&str, u32)]) -> String {
-    consts
-        .iter()
-        .map(|(k, v)| format!("const {k}: u32 = {v}u;\n"))
-        .collect()
 }
 
 fn mib(b: u64) -> f64 {
@@ -875,6 +927,7 @@ impl GpuEngine {
             block_samples,
             windows: spans.clone(),
             device_bytes: total,
+            kernel: options.kernel,
         };
         let engine = GpuEngine {
             device,
@@ -966,10 +1019,11 @@ impl GpuEngine {
                 });
                 pass.set_pipeline(pipe);
                 pass.set_bind_group(0, &w.sweep_bg, &[]);
-                pass.dispatch_workgroups(w.len.div_ceil(TILE as usize) as u32, tiles_y, 1);
+                let tile = self.layout.kernel.tile();
+                pass.dispatch_workgroups(w.len.div_ceil(tile) as u32, tiles_y, 1);
                 pass.set_pipeline(&self.finalize_pipe);
                 pass.set_bind_group(0, &w.finalize_bg, &[]);
-                pass.dispatch_workgroups(w.len.div_ceil(WG as usize) as u32, 1, 1);
+                pass.dispatch_workgroups(w.len.div_ceil(FINALIZE_WG as usize) as u32, 1, 1);
             }
             debug_assert!(w.start + w.len <= self.n_candidates);
             cbs.push(enc.finish());
@@ -1257,15 +1311,20 @@ mod tests {
     #[test]
     fn factor_plan_prefers_few_loads_within_shared_memory() {
         // n_z = 13, d = 9 with 16 KiB: degree-3 factors (560 per sample), 3 per candidate.
-        let (fd, ts, nf, chunk) = plan_factors(13, 9, 16384).unwrap();
+        let (fd, ts, nf, chunk) = plan_factors(13, 9, 16384, &KernelShape::default()).unwrap();
         assert_eq!((fd, ts, nf), (3, 560, 3));
         assert!(chunk >= 4 && (ts + 1) * chunk * 4 <= 16384);
         // n_z = 32, d = 12: degree-3 tables would not fit; degree-2 ones (561) do.
-        let (fd, ts, nf, _) = plan_factors(32, 12, 16384).unwrap();
+        let (fd, ts, nf, _) = plan_factors(32, 12, 16384, &KernelShape::default()).unwrap();
         assert_eq!((fd, ts, nf), (2, 561, 6));
         // Constant-only basis.
-        assert_eq!(plan_factors(4, 0, 16384).unwrap().2, 1);
+        assert_eq!(
+            plan_factors(4, 0, 16384, &KernelShape::default())
+                .unwrap()
+                .2,
+            1
+        );
         // Impossibly small workgroup memory is an error, not a panic.
-        assert!(plan_factors(32, 12, 64).is_err());
+        assert!(plan_factors(32, 12, 64, &KernelShape::default()).is_err());
     }
 }
