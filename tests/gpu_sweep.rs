@@ -8,7 +8,7 @@
 mod common;
 use common::rng::SplitMix as Rng;
 use ctsid::basis::{Basis, BasisLimits};
-use ctsid::engine::gpu::{GpuEngine, GpuOptions};
+use ctsid::engine::gpu::{GpuEngine, GpuOptions, KernelShape};
 use ctsid::engine::{Features, SweepEngine};
 use ctsid::Error;
 
@@ -147,12 +147,51 @@ fn sweep_matches_f64_reference_at_the_degree_and_variable_limits() {
 }
 
 #[test]
+fn every_kernel_shape_matches_the_reference() {
+    // The shapes the H200 report compared (docs/gpu.md): scalar and array code, degree-3 and
+    // degree-2 tables, small and large workgroups, a long chunk.
+    for (k, (workgroup, per_invocation, max_factor_degree, scalar_code, max_chunk)) in [
+        (64, 8, 3, false, 32),
+        (64, 8, 3, true, 32),
+        (128, 4, 2, true, 64),
+        (256, 1, 1, true, 32),
+        (1024, 2, 2, true, 32),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let kernel = KernelShape {
+            workgroup,
+            per_invocation,
+            max_factor_degree,
+            scalar_code,
+            max_chunk,
+        };
+        let opts = GpuOptions {
+            kernel,
+            ..GpuOptions::default()
+        };
+        let Some(eng) = run_case(0x5EED_0100 + k as u64, 1500, 7, 5, opts) else {
+            return;
+        };
+        assert!(eng.layout().factor_degree <= max_factor_degree);
+    }
+}
+
+#[test]
 fn sweep_is_tiled_into_windows_and_blocks() {
     // 6 variables, degree 6: 924 candidates in windows of 512 (2 windows, the second ragged)
     // and blocks of 96 samples over 2999 samples (32 blocks, the last ragged).
+    // A small tile (64 x 8 = 512 candidates) so that a window can hold one.
+    let small = KernelShape {
+        workgroup: 64,
+        per_invocation: 8,
+        ..KernelShape::default()
+    };
     let opts = GpuOptions {
         max_window_candidates: Some(512),
         max_block_samples: 96,
+        kernel: small,
         ..GpuOptions::default()
     };
     let Some(eng) = run_case(0x5EED_0005, 2999, 6, 6, opts) else {
@@ -165,6 +204,7 @@ fn sweep_is_tiled_into_windows_and_blocks() {
     // Bounded dispatch size also forces windows.
     let opts = GpuOptions {
         max_pairs_per_dispatch: 600 * 1000,
+        kernel: small,
         ..GpuOptions::default()
     };
     let Some(eng) = run_case(0x5EED_0006, 1000, 10, 4, opts) else {

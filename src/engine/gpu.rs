@@ -55,8 +55,8 @@ const FINALIZE_WG: u32 = 64;
 /// shapes"); the other shapes exist to measure them (`benches/gpu_report.sh --shapes`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct KernelShape {
-    /// Invocations per workgroup: a multiple of 32 (every warp and wave size divides it), at most
-    /// the adapter's limit.
+    /// Invocations per workgroup: a multiple of 32 (every warp and wave size divides it); the
+    /// plan lowers it to the adapter's limit (a multiple of 32 below it).
     pub workgroup: u32,
     /// Candidates per invocation (R), 1 to 32: each sample's weight and table row are loaded
     /// once for R candidates.
@@ -67,15 +67,22 @@ pub struct KernelShape {
     /// Per-candidate state written out as scalars in the shader text (true) or as arrays that
     /// the driver must unroll to keep in registers (false).
     pub scalar_code: bool,
+    /// Most samples staged in workgroup memory per round (fewer when the table does not fit):
+    /// each round costs a few barriers.
+    pub max_chunk: usize,
 }
 
 impl Default for KernelShape {
     fn default() -> Self {
+        // Measured on an H200 (docs/gpu.md, "Kernel shapes"): large workgroups share one
+        // factor table among many warps, and degree-2 tables (small) leave room for more
+        // workgroups per multiprocessor; within 17 % of the best of 13 shapes at every size.
         KernelShape {
-            workgroup: 64,
-            per_invocation: 8,
-            max_factor_degree: 3,
+            workgroup: 1024,
+            per_invocation: 2,
+            max_factor_degree: 2,
             scalar_code: true,
+            max_chunk: 32,
         }
     }
 }
@@ -86,29 +93,36 @@ impl KernelShape {
         (self.workgroup * self.per_invocation) as usize
     }
 
-    fn check(&self, limits: &wgpu::Limits) -> Result<()> {
+    /// The shape checked, with its workgroup lowered to what the adapter allows.
+    fn fitted(&self, limits: &wgpu::Limits) -> Result<KernelShape> {
         let max_wg = limits
             .max_compute_invocations_per_workgroup
             .min(limits.max_compute_workgroup_size_x);
-        if self.workgroup == 0 || !self.workgroup.is_multiple_of(32) || self.workgroup > max_wg {
+        if self.workgroup == 0 || !self.workgroup.is_multiple_of(32) || max_wg < 32 {
             return Err(Error::param(
                 "workgroup",
                 format!(
-                    "{} invocations: must be a multiple of 32 and at most {max_wg}",
+                    "{} invocations: must be a multiple of 32 (the adapter allows {max_wg})",
                     self.workgroup
                 ),
             ));
         }
-        if !(1..=32).contains(&self.per_invocation) || !(1..=3).contains(&self.max_factor_degree) {
+        if !(1..=32).contains(&self.per_invocation)
+            || !(1..=3).contains(&self.max_factor_degree)
+            || !(4..=1024).contains(&self.max_chunk)
+        {
             return Err(Error::param(
                 "kernel shape",
                 format!(
-                    "{} candidates per invocation (1 to 32), factor degree {} (1 to 3)",
-                    self.per_invocation, self.max_factor_degree
+                    "{} candidates per invocation (1 to 32), factor degree {} (1 to 3), chunk {} (4 to 1024)",
+                    self.per_invocation, self.max_factor_degree, self.max_chunk
                 ),
             ));
         }
-        Ok(())
+        Ok(KernelShape {
+            workgroup: self.workgroup.min(max_wg / 32 * 32),
+            ..*self
+        })
     }
 }
 
@@ -327,7 +341,7 @@ fn plan_factors(
         if ts > 0xffff {
             continue;
         }
-        let chunk = (shared_floats / (ts + 1)).min(32);
+        let chunk = (shared_floats / (ts + 1)).min(shape.max_chunk);
         if chunk < 4 {
             continue;
         }
@@ -442,6 +456,8 @@ struct Plan {
     window: usize,
     /// (first candidate, count) of each window.
     spans: Vec<(usize, usize)>,
+    /// The kernel's shape as fitted to the adapter.
+    shape: KernelShape,
 }
 
 impl Plan {
@@ -456,13 +472,12 @@ impl Plan {
         limits: &wgpu::Limits,
         options: &GpuOptions,
     ) -> Result<Plan> {
-        let shape = &options.kernel;
-        shape.check(limits)?;
+        let shape = options.kernel.fitted(limits)?;
         let (fd, ts, nf, chunk) = plan_factors(
             n_z,
             degree,
             limits.max_compute_workgroup_storage_size,
-            shape,
+            &shape,
         )?;
         let nw = nf.div_ceil(2);
         let tile = shape.tile();
@@ -519,6 +534,7 @@ impl Plan {
             block_samples,
             window,
             spans,
+            shape,
         })
     }
 
@@ -679,7 +695,7 @@ impl Pipelines {
             // buffer by construction of the layout (windows, blocks and tables sized above).
             unsafe { device.create_shader_module_trusted(desc, checks) }
         };
-        let shape = &options.kernel;
+        let shape = &plan.shape;
         let sweep_mod = module("sweep", shader::sweep(&consts, shape, plan.nf, 0));
         let centred_mod = module("centred", shader::sweep(&consts, shape, plan.nf, 1));
         let finalize_mod = module("finalize", shader::finalize(FINALIZE_WG));
@@ -927,7 +943,7 @@ impl GpuEngine {
             block_samples,
             windows: spans.clone(),
             device_bytes: total,
-            kernel: options.kernel,
+            kernel: plan.shape,
         };
         let engine = GpuEngine {
             device,
@@ -1310,21 +1326,23 @@ mod tests {
 
     #[test]
     fn factor_plan_prefers_few_loads_within_shared_memory() {
+        let fd3 = KernelShape {
+            max_factor_degree: 3,
+            ..KernelShape::default()
+        };
         // n_z = 13, d = 9 with 16 KiB: degree-3 factors (560 per sample), 3 per candidate.
-        let (fd, ts, nf, chunk) = plan_factors(13, 9, 16384, &KernelShape::default()).unwrap();
+        let (fd, ts, nf, chunk) = plan_factors(13, 9, 16384, &fd3).unwrap();
         assert_eq!((fd, ts, nf), (3, 560, 3));
         assert!(chunk >= 4 && (ts + 1) * chunk * 4 <= 16384);
         // n_z = 32, d = 12: degree-3 tables would not fit; degree-2 ones (561) do.
-        let (fd, ts, nf, _) = plan_factors(32, 12, 16384, &KernelShape::default()).unwrap();
+        let (fd, ts, nf, _) = plan_factors(32, 12, 16384, &fd3).unwrap();
         assert_eq!((fd, ts, nf), (2, 561, 6));
         // Constant-only basis.
-        assert_eq!(
-            plan_factors(4, 0, 16384, &KernelShape::default())
-                .unwrap()
-                .2,
-            1
-        );
+        assert_eq!(plan_factors(4, 0, 16384, &fd3).unwrap().2, 1);
         // Impossibly small workgroup memory is an error, not a panic.
-        assert!(plan_factors(32, 12, 64, &KernelShape::default()).is_err());
+        assert!(plan_factors(32, 12, 64, &fd3).is_err());
+        // The default shape stops at degree-2 factors (measured faster; docs/gpu.md).
+        let (fd, ts, nf, chunk) = plan_factors(13, 9, 49152, &KernelShape::default()).unwrap();
+        assert_eq!((fd, ts, nf, chunk), (2, 105, 5, 32));
     }
 }

@@ -180,6 +180,7 @@ mod tests {
                     per_invocation,
                     max_factor_degree: 3,
                     scalar_code,
+                    max_chunk: 32,
                 };
                 for mode in [0, 1] {
                     let text = sweep(&consts(), &shape, 2, mode);
