@@ -37,7 +37,7 @@
 //! [`crate::engine::select`]); this engine never falls back silently.
 
 use std::collections::HashMap;
-use std::sync::{mpsc, Arc, Mutex};
+use std::sync::{mpsc, Arc, Mutex, OnceLock};
 use std::time::Duration;
 
 use wgpu::util::DeviceExt as _;
@@ -150,6 +150,9 @@ pub struct GpuOptions {
     pub min_block_samples: usize,
     /// The sweep kernel's shape (see [`KernelShape`]).
     pub kernel: KernelShape,
+    /// Open a device for this engine alone instead of sharing the process's (tests that destroy
+    /// their device use it).
+    pub private_device: bool,
 }
 
 impl Default for GpuOptions {
@@ -165,6 +168,7 @@ impl Default for GpuOptions {
             bounds_checks: true,
             min_block_samples: 0,
             kernel: KernelShape::default(),
+            private_device: false,
         }
     }
 }
@@ -224,11 +228,18 @@ fn owner_of_this_process() -> String {
     std::process::id().to_string()
 }
 
+/// The process's one Vulkan instance (NVIDIA's driver refused the 30th instance or device that
+/// one process opened, with "no adapter found"; docs/gpu.md).
 fn new_instance() -> wgpu::Instance {
-    quiet_vulkan_loader();
-    let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-    desc.backends = wgpu::Backends::VULKAN;
-    wgpu::Instance::new(desc)
+    static INSTANCE: OnceLock<wgpu::Instance> = OnceLock::new();
+    INSTANCE
+        .get_or_init(|| {
+            quiet_vulkan_loader();
+            let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+            desc.backends = wgpu::Backends::VULKAN;
+            wgpu::Instance::new(desc)
+        })
+        .clone()
 }
 
 fn type_rank(t: DeviceType) -> u32 {
@@ -287,6 +298,18 @@ pub struct GpuLayout {
 struct ErrorSink {
     uncaptured: Mutex<Vec<String>>,
     lost: Mutex<Option<String>>,
+}
+
+impl ErrorSink {
+    /// No loss and no uncaptured error recorded: the device can serve another engine.
+    fn healthy(&self) -> bool {
+        self.lost.lock().map(|l| l.is_none()).unwrap_or(false)
+            && self
+                .uncaptured
+                .lock()
+                .map(|u| u.is_empty())
+                .unwrap_or(false)
+    }
 }
 
 struct Window {
@@ -399,11 +422,42 @@ fn check_inputs(features: &Features, basis: &Basis) -> Result<()> {
     Ok(())
 }
 
+/// An opened device with what engines need of it.
+#[derive(Clone)]
+struct Opened {
+    info: wgpu::AdapterInfo,
+    limits: wgpu::Limits,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    sink: Arc<ErrorSink>,
+}
+
+/// The device for `options`: engines of one process share one device per kind of choice
+/// (software adapter allowed or not) while it stays healthy (not lost, no uncaptured error), so
+/// that building many engines neither opens many devices (a driver limit; docs/gpu.md) nor pays
+/// the device's setup each time. `private` opens one for this engine alone (an engine that will
+/// destroy its device on purpose must not take others' with it).
+fn shared_device(options: &GpuOptions, private: bool) -> Result<Opened> {
+    static OPEN: Mutex<Vec<(bool, Opened)>> = Mutex::new(Vec::new());
+    if private {
+        return open_device(options);
+    }
+    let mut open = OPEN.lock().unwrap_or_else(|p| p.into_inner());
+    open.retain(|(_, o)| o.sink.healthy());
+    if let Some((_, o)) = open
+        .iter()
+        .find(|(cpu, _)| *cpu == options.allow_cpu_adapter)
+    {
+        return Ok(o.clone());
+    }
+    let o = open_device(options)?;
+    open.push((options.allow_cpu_adapter, o.clone()));
+    Ok(o)
+}
+
 /// The first Vulkan adapter by kind (discrete first; a software one only when `options` allows),
-/// opened with its own limits: (its description, limits, device, queue).
-fn open_device(
-    options: &GpuOptions,
-) -> Result<(wgpu::AdapterInfo, wgpu::Limits, wgpu::Device, wgpu::Queue)> {
+/// opened with its own limits, with an error sink installed.
+fn open_device(options: &GpuOptions) -> Result<Opened> {
     let instance = new_instance();
     let mut adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
     adapters.sort_by_key(|a| type_rank(device_type(a.get_info().device_type)));
@@ -435,8 +489,14 @@ fn open_device(
         trace: wgpu::Trace::Off,
     }))
     .map_err(|e| Error::Gpu(format!("cannot open {}: {e}", info.name)))?;
-
-    Ok((info, limits, device, queue))
+    let sink = install_sink(&device);
+    Ok(Opened {
+        info,
+        limits,
+        device,
+        queue,
+        sink,
+    })
 }
 
 /// How the candidates and samples are laid out on the device: the factor table (degree `fd`,
@@ -774,9 +834,16 @@ impl GpuEngine {
         check_inputs(features, basis)?;
         let (n_s, n_z, n_c) = (features.n_samples, features.n_vars(), basis.len());
 
-        let (info, limits, device, queue) = open_device(&options)?;
-
-        let sink = install_sink(&device);
+        let lose_after: Option<usize> = std::env::var("CTSID_GPU_LOSE_DEVICE_AFTER")
+            .ok()
+            .and_then(|x| x.parse().ok());
+        let Opened {
+            info,
+            limits,
+            device,
+            queue,
+            sink,
+        } = shared_device(&options, lose_after.is_some() || options.private_device)?;
 
         let plan = Plan::new(n_s, n_z, n_c, basis.degree(), &info, &limits, &options)?;
         let Plan {
@@ -961,9 +1028,7 @@ impl GpuEngine {
             features: features.clone(),
             codes: basis.codes().to_vec(),
             timeout: options.timeout,
-            lose_after: std::env::var("CTSID_GPU_LOSE_DEVICE_AFTER")
-                .ok()
-                .and_then(|x| x.parse().ok()),
+            lose_after,
             sweeps: 0,
             n_samples: n_s,
             n_candidates: n_c,
@@ -1079,7 +1144,9 @@ impl GpuEngine {
                 self.timeout
             )));
         }
-        match rx.try_recv() {
+        // Engines share the device: another thread's poll may be the one that runs this
+        // mapping's callback, just after our wait returned; so wait for it, boundedly.
+        match rx.recv_timeout(self.timeout) {
             Ok(Ok(())) => {}
             Ok(Err(e)) => {
                 self.check()?;
@@ -1282,7 +1349,12 @@ mod tests {
             .collect();
         let f = Features::new(vec!["a".into(), "b".into(), "c".into()], cols).unwrap();
         let b = Basis::new(&f.names, 3, Default::default()).unwrap();
-        match GpuEngine::new(&f, &b, GpuOptions::default()) {
+        // Private: one test destroys its device.
+        let options = GpuOptions {
+            private_device: true,
+            ..GpuOptions::default()
+        };
+        match GpuEngine::new(&f, &b, options) {
             Ok(e) => Some(e),
             Err(Error::NoGpu(m)) if !require_gpu() => {
                 println!("skipping: no GPU adapter ({m})");
