@@ -422,6 +422,14 @@ fn check_inputs(features: &Features, basis: &Basis) -> Result<()> {
     Ok(())
 }
 
+/// Fault injection for the end-to-end fallback test: `CTSID_GPU_LOSE_DEVICE_AFTER=N` (see
+/// [`GpuEngine`]'s `lose_after`).
+fn lose_after_from_env() -> Option<usize> {
+    std::env::var("CTSID_GPU_LOSE_DEVICE_AFTER")
+        .ok()
+        .and_then(|x| x.parse().ok())
+}
+
 /// An opened device with what engines need of it.
 #[derive(Clone)]
 struct Opened {
@@ -834,16 +842,9 @@ impl GpuEngine {
         check_inputs(features, basis)?;
         let (n_s, n_z, n_c) = (features.n_samples, features.n_vars(), basis.len());
 
-        let lose_after: Option<usize> = std::env::var("CTSID_GPU_LOSE_DEVICE_AFTER")
-            .ok()
-            .and_then(|x| x.parse().ok());
-        let Opened {
-            info,
-            limits,
-            device,
-            queue,
-            sink,
-        } = shared_device(&options, lose_after.is_some() || options.private_device)?;
+        let lose_after = lose_after_from_env();
+        let o = shared_device(&options, lose_after.is_some() || options.private_device)?;
+        let (info, limits, device, queue, sink) = (o.info, o.limits, o.device, o.queue, o.sink);
 
         let plan = Plan::new(n_s, n_z, n_c, basis.degree(), &info, &limits, &options)?;
         let Plan {
