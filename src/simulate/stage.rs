@@ -157,6 +157,104 @@ impl StageLu {
     }
 }
 
+/// Factors of `I - s J` (n x n) for the embedded error estimate of a Radau step
+/// (`s = gamma0 h`, see `Integrator::error_estimate`), in the cheapest form the Jacobian allows.
+/// For chains of integrators a chain row reads `e_k - s e_{k+1} = b_k`, so every state of a chain
+/// follows from its top state by `e_k = b_k + s e_{k+1}` and only the chains' top states are
+/// unknowns: a factorisation costs O(chains^3 + n), not O(n^3).
+pub(super) enum ErrorLu {
+    Dense(DenseLu),
+    Chain {
+        s: f64,
+        chains: Vec<(usize, usize)>,
+        /// The chains' top rows of `J` (`chains x n`, row-major).
+        top_rows: Vec<f64>,
+        /// Factors of the reduced matrix on the top states.
+        lu: DenseLu,
+    },
+}
+
+impl ErrorLu {
+    /// Factors of `I - s J` for the row-major `n x n` Jacobian `jac`; `None` when singular.
+    /// `chains` as in [`StageLu::factor`] (used only when `jac` has the structure).
+    pub(super) fn factor(
+        n: usize,
+        s: f64,
+        jac: &[f64],
+        chains: Option<&[(usize, usize)]>,
+    ) -> Option<ErrorLu> {
+        let Some(chains) = chains.filter(|c| has_chains(n, c, &[jac, jac, jac])) else {
+            let mut m: Vec<f64> = jac.iter().map(|v| -s * v).collect();
+            (0..n).for_each(|d| m[d * n + d] += 1.0);
+            return DenseLu::factor(n, m).map(ErrorLu::Dense);
+        };
+        // e_k = a_k e_top + (terms of b): a_k = s^(top - k).
+        let mut a = vec![0.0; n];
+        for &(off, len) in chains {
+            let mut p = 1.0;
+            for k in (off..off + len).rev() {
+                a[k] = p;
+                p *= s;
+            }
+        }
+        let nc = chains.len();
+        let mut mat = vec![0.0; nc * nc];
+        let mut top_rows = Vec::with_capacity(nc * n);
+        for (o, &(off, len)) in chains.iter().enumerate() {
+            let row = &jac[(off + len - 1) * n..(off + len) * n];
+            top_rows.extend_from_slice(row);
+            for (o2, &(off2, len2)) in chains.iter().enumerate() {
+                let g: f64 = (off2..off2 + len2).map(|j| row[j] * a[j]).sum();
+                mat[o * nc + o2] = if o == o2 { 1.0 } else { 0.0 } - s * g;
+            }
+        }
+        Some(ErrorLu::Chain {
+            s,
+            chains: chains.to_vec(),
+            top_rows,
+            lu: DenseLu::factor(nc, mat)?,
+        })
+    }
+
+    /// Solves `(I - s J) x = b`; `work` is scratch.
+    pub(super) fn solve(&self, b: &[f64], x: &mut [f64], work: &mut Vec<f64>) {
+        let (s, chains, top_rows, lu) = match self {
+            ErrorLu::Dense(lu) => return lu.solve(b, x),
+            ErrorLu::Chain {
+                s,
+                chains,
+                top_rows,
+                lu,
+            } => (*s, chains, top_rows, lu),
+        };
+        let (n, nc) = (b.len(), chains.len());
+        // The part of each state that does not depend on its chain's top state.
+        for &(off, len) in chains {
+            let top = off + len - 1;
+            x[top] = 0.0;
+            for k in (off..top).rev() {
+                x[k] = b[k] + s * x[k + 1];
+            }
+        }
+        work.clear();
+        work.resize(2 * nc, 0.0);
+        let (r, w) = work.split_at_mut(nc);
+        for (o, &(off, len)) in chains.iter().enumerate() {
+            let row = &top_rows[o * n..(o + 1) * n];
+            let jb: f64 = row.iter().zip(&x[..n]).map(|(j, v)| j * v).sum();
+            r[o] = b[off + len - 1] + s * jb;
+        }
+        lu.solve(r, w);
+        for (o, &(off, len)) in chains.iter().enumerate() {
+            let top = off + len - 1;
+            x[top] = w[o];
+            for k in (off..top).rev() {
+                x[k] = b[k] + s * x[k + 1];
+            }
+        }
+    }
+}
+
 /// Whether `chains` tile the `n` states in order and every Jacobian row but a chain's last is
 /// the unit shift `e_{k+1}` (so the chain solve is exact, not an approximation).
 fn has_chains(n: usize, chains: &[(usize, usize)], jacs: &[&[f64]; 3]) -> bool {
@@ -508,5 +606,35 @@ mod tests {
         broken[n + 3] = 0.5;
         let f = StageLu::factor(&a, n, 0.7, [&broken, &broken, &broken], Some(&chains)).unwrap();
         assert!(matches!(f, StageLu::Dense(_)));
+    }
+
+    #[test]
+    fn error_matrix_chain_and_dense_solves_agree() {
+        let chains = [(0, 2), (2, 1), (3, 4)];
+        let n = 7;
+        let mut seed = 11u64;
+        let mut jac = vec![0.0; n * n];
+        for &(off, len) in &chains {
+            for k in off..off + len - 1 {
+                jac[k * n + k + 1] = 1.0;
+            }
+            for c in 0..n {
+                jac[(off + len - 1) * n + c] = 5.0 * rnd(&mut seed);
+            }
+        }
+        let s = 0.3;
+        let chain = ErrorLu::factor(n, s, &jac, Some(&chains)).unwrap();
+        assert!(matches!(chain, ErrorLu::Chain { .. }));
+        let dense = ErrorLu::factor(n, s, &jac, None).unwrap();
+        let b: Vec<f64> = (0..n).map(|_| rnd(&mut seed)).collect();
+        let (mut xc, mut xd, mut work) = (vec![0.0; n], vec![0.0; n], Vec::new());
+        chain.solve(&b, &mut xc, &mut work);
+        dense.solve(&b, &mut xd, &mut work);
+        // (I - s J) x = b, row by row.
+        for r in 0..n {
+            let jx: f64 = (0..n).map(|c| jac[r * n + c] * xc[c]).sum();
+            assert!((xc[r] - s * jx - b[r]).abs() < 1e-12, "row {r}");
+            assert!((xc[r] - xd[r]).abs() < 1e-12 * (1.0 + xd[r].abs()));
+        }
     }
 }
