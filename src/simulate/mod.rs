@@ -189,14 +189,24 @@ impl SimOptions {
     /// Silverbox arrow (40,475 samples) takes about one step per sample, against 2.4 at 1e-7
     /// and 3.3 at the default 1e-8, and its free run moves by 1e-6 V against a model error of
     /// 3.9e-4 V (`docs/method/simulation.md`).
+    ///
+    /// They also give up on a model that needs more than [`FIT_MAX_STEPS`] steps in one sample
+    /// interval: dynamics that much faster than the sampling (and not stiff enough for the
+    /// L-stable step to damp them) are none the data could have shown, and resolving them cost
+    /// minutes per refinement (`demo mimo --degrees 4 --noise 0.03`: a candidate of order 4
+    /// refined for 2 minutes, the completion's trials for more than 6).
     pub fn fitting() -> SimOptions {
         SimOptions {
             rtol: FIT_RTOL,
             atol: FIT_ATOL,
+            max_steps_per_interval: FIT_MAX_STEPS,
             ..SimOptions::default()
         }
     }
 }
+
+/// Most steps in one output interval of [`SimOptions::fitting`] (the measured models take 1-7).
+pub const FIT_MAX_STEPS: usize = 100;
 
 /// Relative tolerance of [`SimOptions::fitting`].
 pub const FIT_RTOL: f64 = 1e-5;
