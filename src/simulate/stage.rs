@@ -228,13 +228,16 @@ impl ErrorLu {
             } => (*s, chains, top_rows, lu),
         };
         let (n, nc) = (b.len(), chains.len());
-        // The part of each state that does not depend on its chain's top state.
-        for &(off, len) in chains {
-            let top = off + len - 1;
-            x[top] = 0.0;
-            for k in (off..top).rev() {
+        // e_k = b_k + s e_{k+1} down each chain from its top value.
+        let down = |x: &mut [f64], off: usize, len: usize, top: f64| {
+            x[off + len - 1] = top;
+            for k in (off..off + len - 1).rev() {
                 x[k] = b[k] + s * x[k + 1];
             }
+        };
+        // The part of each state that does not depend on its chain's top state.
+        for &(off, len) in chains {
+            down(x, off, len, 0.0);
         }
         work.clear();
         work.resize(2 * nc, 0.0);
@@ -246,11 +249,7 @@ impl ErrorLu {
         }
         lu.solve(r, w);
         for (o, &(off, len)) in chains.iter().enumerate() {
-            let top = off + len - 1;
-            x[top] = w[o];
-            for k in (off..top).rev() {
-                x[k] = b[k] + s * x[k + 1];
-            }
+            down(x, off, len, w[o]);
         }
     }
 }
