@@ -212,10 +212,10 @@ impl<T: Elem> Scratch<T> {
         }
     }
 
-    /// Loads one block of v (shorter than the block at the end: the rest is zero).
-    pub fn load_v(&mut self, v: &[f64]) {
+    /// Loads one block of v times `scale` (shorter than the block at the end: the rest is zero).
+    pub fn load_v(&mut self, v: &[f64], scale: f64) {
         for (d, s) in self.vb.iter_mut().zip(v) {
-            *d = T::from_f64(*s);
+            *d = T::from_f64(*s * scale);
         }
         self.vb[v.len()..].fill(T::ZERO);
     }
