@@ -12,7 +12,8 @@
 //! attenuated, and it offers the MIMO plant's `y1^3`, which the default fit masks), then the
 //! default fit's near misses (pruned from the chosen support, or entering the path after it; at
 //! most [`CANDIDATES`]; [`near_misses`]). Each is appended at its path coefficient, the model
-//! refined on the fit runs, and kept when its free runs on the gate runs (runs the refinement does not see) fit the measurement
+//! refined on [`TRIAL_RUNS`] of the fit runs (every k-th; the model it is compared with is
+//! refined on the same ones, and the completed model on all of them at the end), and kept when its free runs on the gate runs (runs the refinement does not see) fit the measurement
 //! significantly better. The test is on the change of the squared error,
 //! `dSSE = sum (s_b - y)^2 - (s_a - y)^2 = sum d (s_b + s_a - 2 y_true) - 2 sum d e`, with
 //! `d = s_b - s_a` and `e` the measurement noise: without a real gain the first sum is small and
@@ -56,6 +57,10 @@ type Move = (usize, String, f64);
 /// Most multiple-shooting iterations of a trial's refinement.
 pub const TRIAL_ITERATIONS: usize = 8;
 
+/// Fit runs a trial's refinement uses (the first ones): a trial only has to tell whether a term
+/// helps on the gate runs; the completed model is refined on every fit run at the end.
+pub const TRIAL_RUNS: usize = super::SCORE_RUNS;
+
 /// Most candidates tried per output.
 pub const CANDIDATES: usize = 3;
 
@@ -96,6 +101,28 @@ pub struct Trial {
     pub gate_before: f64,
     pub gate_after: f64,
     pub kept: bool,
+}
+
+/// The completed model (whose trials refined it on [`TRIAL_RUNS`] of the fit runs) refined on
+/// every fit run, kept when its free runs fit the gate runs no worse; with its free runs.
+fn refit_on_all(
+    best: Model,
+    best_sims: Sims,
+    fit_runs: &[RunData],
+    gate_runs: &[RunData],
+    opts: &RefineOptions,
+) -> (Model, Sims) {
+    let Some((m, sims)) = refine(&best, fit_runs, opts)
+        .ok()
+        .and_then(|r| simulations(&r.model, gate_runs).map(|s| (r.model, s)))
+    else {
+        return (best, best_sims);
+    };
+    if gate_nrmse(&sims, gate_runs) <= gate_nrmse(&best_sims, gate_runs) {
+        (m, sims)
+    } else {
+        (best, best_sims)
+    }
 }
 
 /// The names of the terms the fit of one output almost took, best first, with the coefficient
@@ -758,20 +785,39 @@ pub fn complete(
     if gate < opts.skip_below {
         return Ok((model.clone(), Vec::new()));
     }
-    let mut best = if refined {
-        model.clone()
-    } else {
-        refine(model, fit_runs, opts).map_or_else(|_| model.clone(), |r| r.model)
+    // Trials are judged against the model refined on the same runs as they are; where that one
+    // does not simulate the gate runs (a refinement on fewer runs can diverge), against the
+    // model refined on every fit run, and the trials then refine on every fit run too.
+    let trial_runs: Vec<RunData> = fit_runs
+        .iter()
+        .step_by(fit_runs.len().div_ceil(TRIAL_RUNS).max(1))
+        .cloned()
+        .collect();
+    let mut trial_runs = &trial_runs[..];
+    let refined_on = |runs: &[RunData]| {
+        if refined && runs.len() == fit_runs.len() {
+            model.clone()
+        } else {
+            refine(model, runs, opts).map_or_else(|_| model.clone(), |r| r.model)
+        }
     };
+    let mut best = refined_on(trial_runs);
+    let mut sims = simulations(&best, gate_runs);
+    if sims.is_none() && trial_runs.len() < fit_runs.len() {
+        trial_runs = fit_runs;
+        best = refined_on(fit_runs);
+        sims = simulations(&best, gate_runs);
+    }
     // A trial starts at the optimum of the others plus a term the derivative fit sized: a few
     // iterations settle it (the tolerance ends most earlier), and the single-shooting polish is
     // what the gate measures.
+    let full_opts = opts;
     let opts = &RefineOptions {
         max_iterations: opts.max_iterations.min(TRIAL_ITERATIONS),
         ..opts.clone()
     };
     let mut trials = Vec::new();
-    let Some(mut best_sims) = simulations(&best, gate_runs) else {
+    let Some(mut best_sims) = sims else {
         return Ok((model.clone(), trials));
     };
     let start = best.clone();
@@ -791,9 +837,11 @@ pub fn complete(
     // MIMO plant), and retrying every failure after each addition made the completion's cost
     // quadratic in the candidates (146 s of a 222 s identification, `demo mimo --degrees 6
     // --noise 0.01` with one robust pass; docs/method/identification.md).
+    // Trials refine on TRIAL_RUNS of the fit runs (the search's scoring also refines on a
+    // subset); the completed model is refined on all of them at the end.
     let ctx = Context {
         vars: &vars,
-        runs: (fit_runs, gate_runs),
+        runs: (trial_runs, gate_runs),
         noise,
         opts,
         smoothing,
@@ -829,6 +877,9 @@ pub fn complete(
             (best, best_sims) = (m, sims);
         }
         trials.push(t);
+    }
+    if best != start && trial_runs.len() < fit_runs.len() {
+        (best, best_sims) = refit_on_all(best, best_sims, fit_runs, gate_runs, full_opts);
     }
     // Without a kept term the model stays as given (its own refinement was gated), and so it
     // does when the completed model, refined without a gate where the given one was not
