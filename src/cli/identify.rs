@@ -2,7 +2,7 @@
 
 use clap::Args;
 use ctsid::identify::split::parse_list;
-use ctsid::identify::{identify, Orders, Settings, Split};
+use ctsid::identify::{identify, Identification, Orders, OutputReport, Settings, Split};
 use ctsid::model::Interpolation;
 use ctsid::regression::EngineChoice;
 use ctsid::report::compare::write_record_report;
@@ -97,18 +97,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         super::check_output_dir(d)?;
     }
     // Every setting is checked before the data are read.
-    let mut s = Settings::new(a.output.clone(), a.input.clone(), a.degree);
-    s.orders = match &a.order {
-        Some(o) => Orders::Fixed(o.clone()),
-        None => Orders::Search(parse_orders(&a.orders)?),
-    };
-    s.eta = a.eta;
-    s.engine = a.engine;
-    s.method = a.method.into();
-    s.progress = super::show_progress(a.quiet);
-    s.terms = a.term.clone();
-    s.input_interpolation = a.input_interpolation;
-    s.validate()?;
+    let s = settings(&a)?;
     a.segment.check()?;
     let mut columns = a.output.clone();
     columns.extend(a.input.iter().cloned());
@@ -128,108 +117,12 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     )?;
     let id = identify(&rs, &split, &s).map_err(|e| a.segment.explain(e))?;
 
-    let mut text = String::new();
-    for rep in &id.outputs {
-        let mut t = Table::new(&[
-            "order",
-            "terms",
-            "validation p50",
-            "p80",
-            "p90",
-            "p95",
-            "p98",
-            "p99",
-            "p100",
-            "free-run p95",
-            "free-run p100",
-            "selected",
-        ]);
-        let cell = |v: f64| {
-            if v.is_finite() {
-                ctsid::util::num4(v)
-            } else {
-                "-".into()
-            }
-        };
-        for c in &rep.candidates {
-            let mut row = vec![c.order.to_string(), c.n_terms.to_string()];
-            row.extend(c.validation.0.iter().map(|&v| cell(v)));
-            let sim = c.simulation.as_ref();
-            row.push(sim.map_or("-".into(), |s| cell(s.p95())));
-            row.push(sim.map_or("-".into(), |s| cell(s.p100())));
-            row.push(if c.order == rep.order {
-                "<-".into()
-            } else {
-                String::new()
-            });
-            t.row(row);
-        }
-        // The equation printed is the model written with -o (after refinement); the derivative
-        // fit it started from is shown beside it when they differ.
-        let written = id
-            .model
-            .outputs
-            .iter()
-            .find(|o| o.name == rep.name)
-            .map(|o| o.to_string())
-            .unwrap_or_default();
-        text += &format!("## Output '{}': order {} ({} samples, {} left out for uncertain labels; engine {})\n\n{}\n    {}\n\n", rep.name, rep.order, rep.samples_used, rep.samples_excluded, rep.engine, t.markdown(), written);
-        if let Some(r) = id.refinement.as_ref().filter(|r| r.kept) {
-            text += &format!(
-                "Refinement on free-run error changed the derivative fit\n    {}\ninto the model above ({}).\n\n",
-                rep.equation, r.message
-            );
-        }
-        if rep.candidates.iter().any(|c| c.simulation.is_some()) {
-            text += &format!("The eta-rule chose on the free-run profiles (simulation on held-out runs; errors below {} count as equal, and the lowest order wins); the derivative-domain validation profiles are shown beside them.\n\n", ctsid::identify::FREE_RUN_RESOLUTION);
-        }
-        if rep
-            .candidates
-            .iter()
-            .any(|c| !c.validation.p50().is_finite())
-        {
-            text += "No derivative validation profile: without --validation runs it is 5-fold over the training runs, and one training run gives no folds (the free-run refinement gate then uses the training runs themselves); a long record cut into runs with --segment SECONDS gives folds and held-out runs.\n\n";
-        }
-        if let Some(p) = &rep.test {
-            text += &format!(
-                "Test runs, against our labels: p50/80/90/95/98/99/100 = {}\n\n",
-                p.compact()
-            );
-        }
-    }
-    if !id.simulations.is_empty() {
-        let mut t = Table::new(&["test run", "output", "RMS", "NRMSE"]);
-        for sim in &id.simulations {
-            match &sim.error {
-                Some(e) => t.row(vec![
-                    sim.run.clone(),
-                    "-".into(),
-                    "-".into(),
-                    format!("diverged: {e}"),
-                ]),
-                None => {
-                    for (o, name) in a.output.iter().enumerate() {
-                        t.row(vec![
-                            sim.run.clone(),
-                            name.clone(),
-                            format!("{:.4e}", sim.rms[o]),
-                            format!("{:.2} %", 100.0 * sim.nrmse[o]),
-                        ]);
-                    }
-                }
-            }
-        }
-        let overall: Vec<String> = id
-            .test_nrmse()
-            .iter()
-            .map(|v| format!("{:.2} %", 100.0 * v))
-            .collect();
-        text += &format!(
-            "## Free-run simulation on test runs (overall NRMSE {})\n\n{}\n",
-            overall.join(", "),
-            t.markdown()
-        );
-    }
+    let mut text: String = id
+        .outputs
+        .iter()
+        .map(|rep| output_section(&id, rep))
+        .collect();
+    text += &test_section(&id, &a.output);
     text += &format!("Weighting: {}.\n", id.weighting);
     if let Some(r) = &id.refinement {
         text += &format!("Refinement by free-run simulation error: {}.\n", r.message);
@@ -249,24 +142,162 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         eprintln!("model written to {}", path.display());
     }
     if let Some(dir) = &a.report {
-        let runs: Vec<(usize, &[Vec<f64>])> = id
-            .simulations
-            .iter()
-            .filter(|s| s.error.is_none())
-            .filter_map(|s| Some((ids.iter().position(|i| *i == s.run)?, &s.simulated[..])))
-            .collect();
-        let outputs: Vec<&str> = a.output.iter().map(String::as_str).collect();
-        let inputs: Vec<&str> = a.input.iter().map(String::as_str).collect();
-        let table = if runs.is_empty() {
-            "No test run was simulated (none given with --test, or each diverged); for test data in a separate file, `ctsid simulate MODEL DATA --report DIR` writes these figures.\n".to_string()
-        } else {
-            write_record_report(dir, &rs, &outputs, &inputs, "model", &runs)?
-        };
-        let text = format!(
-            "{text}\n## Free runs on the test runs\n\nFit = 100 (1 - NRMSE); residual tests at 99 % (see `ctsid simulate --report`).\n\n{table}"
-        );
-        write_file(dir, "report.md", &text)?;
+        write_report(dir, &a, &id, (&rs, &ids), &text)?;
         eprintln!("report written to {}", dir.display());
     }
     Ok(())
+}
+
+/// The identification's settings from the arguments, checked.
+fn settings(a: &IdentifyArgs) -> Result<Settings> {
+    let mut s = Settings::new(a.output.clone(), a.input.clone(), a.degree);
+    s.orders = match &a.order {
+        Some(o) => Orders::Fixed(o.clone()),
+        None => Orders::Search(parse_orders(&a.orders)?),
+    };
+    s.eta = a.eta;
+    s.engine = a.engine;
+    s.method = a.method.into();
+    s.progress = super::show_progress(a.quiet);
+    s.terms = a.term.clone();
+    s.input_interpolation = a.input_interpolation;
+    s.validate()?;
+    Ok(s)
+}
+
+/// One output's section of the printed report: the order search's table, the written
+/// equation and the notes that explain it.
+fn output_section(id: &Identification, rep: &OutputReport) -> String {
+    let mut t = Table::new(&[
+        "order",
+        "terms",
+        "validation p50",
+        "p80",
+        "p90",
+        "p95",
+        "p98",
+        "p99",
+        "p100",
+        "free-run p95",
+        "free-run p100",
+        "selected",
+    ]);
+    let cell = |v: f64| {
+        if v.is_finite() {
+            ctsid::util::num4(v)
+        } else {
+            "-".into()
+        }
+    };
+    for c in &rep.candidates {
+        let mut row = vec![c.order.to_string(), c.n_terms.to_string()];
+        row.extend(c.validation.0.iter().map(|&v| cell(v)));
+        let sim = c.simulation.as_ref();
+        row.push(sim.map_or("-".into(), |s| cell(s.p95())));
+        row.push(sim.map_or("-".into(), |s| cell(s.p100())));
+        row.push(if c.order == rep.order {
+            "<-".into()
+        } else {
+            String::new()
+        });
+        t.row(row);
+    }
+    // The equation printed is the model written with -o (after refinement); the derivative
+    // fit it started from is shown beside it when they differ.
+    let written = id
+        .model
+        .outputs
+        .iter()
+        .find(|o| o.name == rep.name)
+        .map(|o| o.to_string())
+        .unwrap_or_default();
+    let mut text = format!("## Output '{}': order {} ({} samples, {} left out for uncertain labels; engine {})\n\n{}\n    {}\n\n", rep.name, rep.order, rep.samples_used, rep.samples_excluded, rep.engine, t.markdown(), written);
+    if let Some(r) = id.refinement.as_ref().filter(|r| r.kept) {
+        text += &format!(
+            "Refinement on free-run error changed the derivative fit\n    {}\ninto the model above ({}).\n\n",
+            rep.equation, r.message
+        );
+    }
+    if rep.candidates.iter().any(|c| c.simulation.is_some()) {
+        text += &format!("The eta-rule chose on the free-run profiles (simulation on held-out runs; errors below {} count as equal, and the lowest order wins); the derivative-domain validation profiles are shown beside them.\n\n", ctsid::identify::FREE_RUN_RESOLUTION);
+    }
+    if rep
+        .candidates
+        .iter()
+        .any(|c| !c.validation.p50().is_finite())
+    {
+        text += "No derivative validation profile: without --validation runs it is 5-fold over the training runs, and one training run gives no folds (the free-run refinement gate then uses the training runs themselves); a long record cut into runs with --segment SECONDS gives folds and held-out runs.\n\n";
+    }
+    if let Some(p) = &rep.test {
+        text += &format!(
+            "Test runs, against our labels: p50/80/90/95/98/99/100 = {}\n\n",
+            p.compact()
+        );
+    }
+    text
+}
+
+/// The free runs on the test runs, per run and output (empty without test runs).
+fn test_section(id: &Identification, outputs: &[String]) -> String {
+    if id.simulations.is_empty() {
+        return String::new();
+    }
+    let mut t = Table::new(&["test run", "output", "RMS", "NRMSE"]);
+    for sim in &id.simulations {
+        match &sim.error {
+            Some(e) => t.row(vec![
+                sim.run.clone(),
+                "-".into(),
+                "-".into(),
+                format!("diverged: {e}"),
+            ]),
+            None => {
+                for (o, name) in outputs.iter().enumerate() {
+                    t.row(vec![
+                        sim.run.clone(),
+                        name.clone(),
+                        format!("{:.4e}", sim.rms[o]),
+                        format!("{:.2} %", 100.0 * sim.nrmse[o]),
+                    ]);
+                }
+            }
+        }
+    }
+    let overall: Vec<String> = id
+        .test_nrmse()
+        .iter()
+        .map(|v| format!("{:.2} %", 100.0 * v))
+        .collect();
+    format!(
+        "## Free-run simulation on test runs (overall NRMSE {})\n\n{}\n",
+        overall.join(", "),
+        t.markdown()
+    )
+}
+
+/// `--report DIR`: the printed text, then figures and residual tests of the test runs' free runs.
+fn write_report(
+    dir: &std::path::Path,
+    a: &IdentifyArgs,
+    id: &Identification,
+    (rs, ids): (&ctsid::records::RecordSet, &[String]),
+    text: &str,
+) -> Result<()> {
+    let runs: Vec<(usize, &[Vec<f64>])> = id
+        .simulations
+        .iter()
+        .filter(|s| s.error.is_none())
+        .filter_map(|s| Some((ids.iter().position(|i| *i == s.run)?, &s.simulated[..])))
+        .collect();
+    let outputs: Vec<&str> = a.output.iter().map(String::as_str).collect();
+    let inputs: Vec<&str> = a.input.iter().map(String::as_str).collect();
+    let table = if runs.is_empty() {
+        "No test run was simulated (none given with --test, or each diverged); for test data in a separate file, `ctsid simulate MODEL DATA --report DIR` writes these figures.\n".to_string()
+    } else {
+        write_record_report(dir, rs, &outputs, &inputs, "model", &runs)?
+    };
+    let text = format!(
+        "{text}\n## Free runs on the test runs\n\nFit = 100 (1 - NRMSE); residual tests at 99 % (see `ctsid simulate --report`).\n\n{table}"
+    );
+    write_file(dir, "report.md", &text)
 }
