@@ -13,7 +13,8 @@
 //! default fit's near misses (pruned from the chosen support, or entering the path after it; at
 //! most [`CANDIDATES`]; [`near_misses`]). Each is appended at its path coefficient, the model
 //! refined on [`TRIAL_RUNS`] of the fit runs (every k-th; the model it is compared with is
-//! refined on the same ones, and the completed model on all of them at the end), and kept when its free runs on the gate runs (runs the refinement does not see) fit the measurement
+//! refined on the same ones, and the completed model on all of them at the end), and kept when
+//! its free runs on the gate runs (runs the refinement does not see) fit the measurement
 //! significantly better. The test is on the change of the squared error,
 //! `dSSE = sum (s_b - y)^2 - (s_a - y)^2 = sum d (s_b + s_a - 2 y_true) - 2 sum d e`, with
 //! `d = s_b - s_a` and `e` the measurement noise: without a real gain the first sum is small and
@@ -57,8 +58,9 @@ type Move = (usize, String, f64);
 /// Most multiple-shooting iterations of a trial's refinement.
 pub const TRIAL_ITERATIONS: usize = 8;
 
-/// Fit runs a trial's refinement uses (the first ones): a trial only has to tell whether a term
-/// helps on the gate runs; the completed model is refined on every fit run at the end.
+/// Fit runs a trial's refinement uses (every k-th, so that each kind of run is among them): a
+/// trial only has to tell whether a term helps on the gate runs; the completed model is refined
+/// on every fit run at the end.
 pub const TRIAL_RUNS: usize = super::SCORE_RUNS;
 
 /// Most candidates tried per output.
@@ -101,6 +103,40 @@ pub struct Trial {
     pub gate_before: f64,
     pub gate_after: f64,
     pub kept: bool,
+}
+
+/// At most `count` of `runs`, every k-th.
+fn every_kth(runs: &[RunData], count: usize) -> Vec<RunData> {
+    let k = runs.len().div_ceil(count.max(1)).max(1);
+    runs.iter().step_by(k).cloned().collect()
+}
+
+/// The model the trials are judged against, its free runs on the gate runs (`None` where it
+/// cannot be simulated) and the runs the trials refine on: the model refined on `subset`, the
+/// runs the trials use; where that one does not simulate the gate runs (a refinement on fewer
+/// runs can diverge), the model refined on every fit run, and the trials then use every fit run
+/// too. A model `refined` on the fit runs already is not refined on them again.
+fn baseline<'a>(
+    (model, refined): (&Model, bool),
+    (fit_runs, subset): (&'a [RunData], &'a [RunData]),
+    gate_runs: &[RunData],
+    opts: &RefineOptions,
+) -> (Model, Option<Sims>, &'a [RunData]) {
+    let refined_on = |runs: &[RunData]| {
+        if refined && runs.len() == fit_runs.len() {
+            model.clone()
+        } else {
+            refine(model, runs, opts).map_or_else(|_| model.clone(), |r| r.model)
+        }
+    };
+    let best = refined_on(subset);
+    let sims = simulations(&best, gate_runs);
+    if sims.is_some() || subset.len() == fit_runs.len() {
+        return (best, sims, subset);
+    }
+    let best = refined_on(fit_runs);
+    let sims = simulations(&best, gate_runs);
+    (best, sims, fit_runs)
 }
 
 /// The completed model (whose trials refined it on [`TRIAL_RUNS`] of the fit runs) refined on
@@ -785,29 +821,9 @@ pub fn complete(
     if gate < opts.skip_below {
         return Ok((model.clone(), Vec::new()));
     }
-    // Trials are judged against the model refined on the same runs as they are; where that one
-    // does not simulate the gate runs (a refinement on fewer runs can diverge), against the
-    // model refined on every fit run, and the trials then refine on every fit run too.
-    let trial_runs: Vec<RunData> = fit_runs
-        .iter()
-        .step_by(fit_runs.len().div_ceil(TRIAL_RUNS).max(1))
-        .cloned()
-        .collect();
-    let mut trial_runs = &trial_runs[..];
-    let refined_on = |runs: &[RunData]| {
-        if refined && runs.len() == fit_runs.len() {
-            model.clone()
-        } else {
-            refine(model, runs, opts).map_or_else(|_| model.clone(), |r| r.model)
-        }
-    };
-    let mut best = refined_on(trial_runs);
-    let mut sims = simulations(&best, gate_runs);
-    if sims.is_none() && trial_runs.len() < fit_runs.len() {
-        trial_runs = fit_runs;
-        best = refined_on(fit_runs);
-        sims = simulations(&best, gate_runs);
-    }
+    let subset = every_kth(fit_runs, TRIAL_RUNS);
+    let (mut best, sims, trial_runs) =
+        baseline((model, refined), (fit_runs, &subset), gate_runs, opts);
     // A trial starts at the optimum of the others plus a term the derivative fit sized: a few
     // iterations settle it (the tolerance ends most earlier), and the single-shooting polish is
     // what the gate measures.
