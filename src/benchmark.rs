@@ -10,7 +10,11 @@
 //!    nominal; the rounds stop when the gates refuse (nothing added), when a round does not
 //!    lower the validation error, or after [`MAX_ROUNDS`]. Each round's validation NRMSE before
 //!    and after is kept.
-//! 3. **Score** on the test run by the benchmark's protocol: free run from the initial state
+//! 3. **Simplify**: the terms whose coefficient lies within two standard errors of zero are
+//!    dropped one at a time, the rest refitted on simulation error of the training runs, each
+//!    removal kept unless the validation free-run error rises by more than a quarter
+//!    ([`crate::identify::prune`]).
+//! 4. **Score** on the test run by the benchmark's protocol: free run from the initial state
 //!    fitted on the first `init` samples (at least the crate's floor for the order), RMS on the
 //!    rest, per metric (a metric may cover part of the test run).
 //!
@@ -20,10 +24,11 @@
 use crate::discover::benchmarks::columns;
 use crate::discover::{discover, Options};
 use crate::error::{Error, Result};
+use crate::identify::prune::{prune, PruneOptions, Pruned, Removal};
 use crate::identify::Split;
 use crate::model::{Interpolation, Model};
 use crate::records::{RecordSet, Run};
-use crate::simulate::{free_run, run_data, SimOptions};
+use crate::simulate::{free_run, initial_state, run_data, RunData, SimOptions, INIT_WINDOW};
 
 /// Most discover rounds.
 pub const MAX_ROUNDS: usize = 3;
@@ -298,6 +303,9 @@ pub struct Outcome {
     pub nominal: Model,
     pub model: Model,
     pub rounds: Vec<Round>,
+    /// Step 3: every term tried for removal, in order.
+    pub removals: Vec<Removal>,
+    pub prune_seconds: f64,
     pub scores: Vec<Score>,
     /// The test run's time, measured output and the final model's free run (record units).
     pub test_t: Vec<f64>,
@@ -358,6 +366,10 @@ pub fn run(b: &Benchmark) -> Result<Outcome> {
             _ => break,
         }
     }
+    let clock = std::time::Instant::now();
+    let pruned = simplify(b, &model)?;
+    model = pruned.model;
+    let prune_seconds = clock.elapsed().as_secs_f64();
     let test_run = &b.records.runs[b.split.test[0]];
     let data = run_data(&model, &b.records, test_run)?;
     let simulate = |m: &Model| -> Result<Vec<f64>> {
@@ -384,6 +396,8 @@ pub fn run(b: &Benchmark) -> Result<Outcome> {
         nominal,
         model,
         rounds,
+        removals: pruned.removals,
+        prune_seconds,
         scores,
         test_t: data.t.clone(),
         test_measured: y.clone(),
@@ -391,4 +405,26 @@ pub fn run(b: &Benchmark) -> Result<Outcome> {
         identify_seconds,
         seconds: started.elapsed().as_secs_f64(),
     })
+}
+
+/// Step 3 of the module docs: the terms the data do not determine dropped
+/// ([`crate::identify::prune`]), refitted on the training runs, judged on the validation runs.
+fn simplify(b: &Benchmark, model: &Model) -> Result<Pruned> {
+    let fit = fit_runs(b, model, &b.split.train)?;
+    let gate = fit_runs(b, model, b.split.validation.as_deref().unwrap_or_default())?;
+    prune(model, &fit, &gate, &PruneOptions::default())
+}
+
+/// Runs `ids` of the benchmark's records for `model`, each with the initial state fitted on its
+/// first [`INIT_WINDOW`] samples (the refinement's starting states).
+fn fit_runs(b: &Benchmark, model: &Model, ids: &[usize]) -> Result<Vec<RunData>> {
+    let c = model.compile()?;
+    let opts = SimOptions::fitting();
+    ids.iter()
+        .map(|&i| {
+            let mut r = run_data(model, &b.records, &b.records.runs[i])?;
+            r.x0 = initial_state(&c, &r.t, &r.y, &r.u, INIT_WINDOW, &opts)?;
+            Ok(r)
+        })
+        .collect()
 }

@@ -214,3 +214,43 @@ fn a_trial_step_that_diverges_is_rejected_not_fatal() {
         );
     }
 }
+
+#[test]
+fn prune_drops_a_term_the_data_do_not_determine_and_keeps_the_true_ones() {
+    // The linear system fitted with a spurious term `y*u` beside its four true terms: the
+    // output-error fit gives it a coefficient within its noise, the four true terms dozens of
+    // standard errors; pruning must drop it alone and leave the rest near truth.
+    use ctsid::identify::prune::{prune, PruneOptions};
+    let train = runs(0, 4, 0.03);
+    let val = runs(100, 3, 0.03);
+    let mut start = model(TRUE);
+    start.degree = 2;
+    start.outputs[0]
+        .terms
+        .push(Term::new(&[("y", 1), ("u", 1)], 0.05));
+    let fitted = refine(&start, &train, &RefineOptions::default())
+        .unwrap()
+        .model;
+    let t = &fitted.outputs[0].terms[4];
+    let z = t.coefficient.abs() / t.std_error.unwrap();
+    assert!(z < 1.96, "the spurious term came out determined: {t:?}");
+    let p = prune(&fitted, &train, &val, &PruneOptions::default()).unwrap();
+    eprintln!("{:?}", p.removals);
+    assert_eq!(p.removals.len(), 1, "{:?}", p.removals);
+    let r = &p.removals[0];
+    assert!(r.kept && r.term == "u*y" && r.equation == "y_d2", "{r:?}");
+    let c = coefficients(&p.model);
+    assert_eq!(c.len(), 4);
+    for (k, (a, b)) in c.iter().zip(TRUE).enumerate() {
+        let bound = if k == 0 { 0.10 } else { 0.03 };
+        assert!(
+            (a - b).abs() < bound * b.abs(),
+            "coefficient {k}: {a} vs {b}"
+        );
+    }
+
+    // Nothing to drop when every term is determined: the pruned model is the model.
+    let q = prune(&p.model, &train, &val, &PruneOptions::default()).unwrap();
+    assert!(q.removals.is_empty(), "{:?}", q.removals);
+    assert_eq!(q.model, p.model);
+}

@@ -58,6 +58,26 @@ pub fn run(a: BenchmarkArgs) -> Result<()> {
             outln!("  {why}")?;
         }
     }
+    for r in &o.removals {
+        outln!(
+            "simplify: term {} of {} ({:.2} standard errors from zero): {} (validation NRMSE from fitted initial states {:.4}, without it {:.4})",
+            r.term,
+            r.equation,
+            r.t_ratio,
+            if r.kept { "dropped" } else { "kept" },
+            r.gate_before,
+            r.gate_after
+        )?;
+    }
+    let dropped = o.removals.iter().filter(|r| r.kept).count();
+    if o.removals.is_empty() {
+        outln!(
+            "simplify: every term is at least 1.96 standard errors from zero ({:.1} s)",
+            o.prune_seconds
+        )?;
+    } else {
+        outln!("simplify: {dropped} dropped ({:.1} s)", o.prune_seconds)?;
+    }
     outln!("final model: {}\n", o.model.outputs[0].to_text())?;
     outln!("{}", table(&b, &o))?;
     outln!("time {:.1} s", o.seconds)?;

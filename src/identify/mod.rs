@@ -50,6 +50,7 @@
 pub mod complete;
 mod identifier;
 pub mod profile;
+pub mod prune;
 pub mod refine;
 pub mod split;
 mod uncertainty;
