@@ -238,7 +238,10 @@ fn prune_drops_a_term_the_data_do_not_determine_and_keeps_the_true_ones() {
     eprintln!("{:?}", p.removals);
     assert_eq!(p.removals.len(), 1, "{:?}", p.removals);
     let r = &p.removals[0];
-    assert!(r.kept && r.term == "u*y" && r.equation == "y_d2", "{r:?}");
+    assert!(
+        r.dropped && r.term == "u*y" && r.equation == "y_d2",
+        "{r:?}"
+    );
     let c = coefficients(&p.model);
     assert_eq!(c.len(), 4);
     for (k, (a, b)) in c.iter().zip(TRUE).enumerate() {

@@ -1,5 +1,6 @@
 //! `ctsid benchmark NAME [--data DIR] [--out DIR]`: the one workflow of [`ctsid::benchmark`]
-//! (a linear nominal by identify, then discover in rounds) on a public benchmark record, scored
+//! (a linear nominal by identify, discover in rounds, then the undetermined terms dropped) on a
+//! public benchmark record, scored
 //! by the benchmark's protocol beside the published rows. `--out` writes `NAME.model.json`,
 //! `NAME.csv` (benchmark, metric, ours, linear, pnarx, best), the test run as `NAME_test.csv`
 //! (so that `ctsid simulate` checks the printed RMS) and `NAME_test.svg`.
@@ -64,12 +65,12 @@ pub fn run(a: BenchmarkArgs) -> Result<()> {
             r.term,
             r.equation,
             r.t_ratio,
-            if r.kept { "dropped" } else { "kept" },
+            if r.dropped { "dropped" } else { "kept" },
             r.gate_before,
             r.gate_after
         )?;
     }
-    let dropped = o.removals.iter().filter(|r| r.kept).count();
+    let dropped = o.removals.iter().filter(|r| r.dropped).count();
     if o.removals.is_empty() {
         outln!(
             "simplify: every term is at least 1.96 standard errors from zero ({:.1} s)",

@@ -62,7 +62,8 @@ pub struct Removal {
     /// when the refit failed or diverged there).
     pub gate_before: f64,
     pub gate_after: f64,
-    pub kept: bool,
+    /// Whether the term went (the removal was kept).
+    pub dropped: bool,
 }
 
 /// What [`prune`] did.
@@ -100,6 +101,21 @@ fn weakest(model: &Model, z: f64, tried: &[(usize, String)]) -> Option<(usize, u
 /// Drops the terms of `model` the data do not determine (see the module docs): refits on `fit`,
 /// judged on `gate`. Refuses what [`free_run_nrmse`] refuses on the gate runs; a refit that
 /// fails only refuses that removal.
+///
+/// ```no_run
+/// use ctsid::identify::prune::{prune, PruneOptions};
+/// use ctsid::identify::refine::{refine, RefineOptions, RunData};
+/// # fn runs() -> (Vec<RunData>, Vec<RunData>) { unimplemented!() }
+/// let (fit, gate) = runs(); // measured runs, each with its initial state in `x0`
+/// let model = ctsid::Model::read("emps.model.json")?;
+/// // Standard errors of the output-error fit are what the test reads.
+/// let fitted = refine(&model, &fit, &RefineOptions::default())?.model;
+/// let pruned = prune(&fitted, &fit, &gate, &PruneOptions::default())?;
+/// for r in &pruned.removals {
+///     println!("{} of {}: {}", r.term, r.equation, if r.dropped { "dropped" } else { "kept" });
+/// }
+/// # Ok::<(), ctsid::Error>(())
+/// ```
 pub fn prune(
     model: &Model,
     fit: &[RunData],
@@ -126,7 +142,7 @@ pub fn prune(
             t_ratio,
             gate_before: now.1,
             gate_after,
-            kept,
+            dropped: kept,
         });
         if let (true, Some(r)) = (kept, refit) {
             now = (r, gate_after);
