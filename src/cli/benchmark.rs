@@ -1,7 +1,7 @@
 //! `ctsid benchmark NAME [--data DIR] [--out DIR]`: the one workflow of [`ctsid::benchmark`]
 //! (a linear nominal by identify, discover in rounds, then the undetermined terms dropped) on a
-//! public benchmark record, scored
-//! by the benchmark's protocol beside the published rows. `--out` writes `NAME.model.json`,
+//! public benchmark record, scored by the benchmark's protocol beside the published rows.
+//! `--out` writes `NAME.model.json`,
 //! `NAME.csv` (benchmark, metric, ours, linear, pnarx, best), the test run as `NAME_test.csv`
 //! (so that `ctsid simulate` checks the printed RMS) and `NAME_test.svg`.
 
