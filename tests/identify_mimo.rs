@@ -274,3 +274,44 @@ fn mimo_plant_at_one_percent_noise_finds_every_true_term() {
         );
     }
 }
+
+/// At 3 % noise (d = 4, the demo's 40 runs and seed, orders searched 1..4 on free-run
+/// simulation) every output gets its true order 3, at least 16 of the 18 true terms with at most
+/// two others, and a free run within 2.5 % of the noise-free truth. Measured: orders (3, 3, 3),
+/// 17 / 18 (`u1*y2*y2_d1` in y3's equation given as `u1*y2*y3`), 0.57 / 0.57 / 1.54 %; before
+/// the cap on the label floor (`identify::FLOOR_CAP`) orders (4, 3, 3), 15 / 18, 10 others.
+#[test]
+fn mimo_plant_at_three_percent_noise_gets_the_true_orders() {
+    let plant = Plant::mimo();
+    let (inputs, outputs) = (plant.input_names(), plant.output_names());
+    let truth = plant.true_model(Some(0.01)).unwrap();
+    let runs = dataset(&plant, 40, 1000, 0.01, 0.03, 1).unwrap();
+    let rs = records(&runs, &inputs, &outputs, 0.01).unwrap();
+    let ids: Vec<String> = (0..40).map(|i| i.to_string()).collect();
+    let split = Split::new((0..25).collect(), None, (25..40).collect(), &ids).unwrap();
+    let mut s = Settings::new(outputs, inputs, 4);
+    s.orders = Orders::Search(vec![1, 2, 3, 4]);
+    s.engine = EngineChoice::Cpu;
+    let id = identify(&rs, &split, &s).unwrap();
+    let orders: Vec<usize> = id.model.outputs.iter().map(|o| o.order).collect();
+    assert_eq!(orders, vec![3, 3, 3], "{}", id.model);
+    let (mut found, mut extras) = (0, Vec::new());
+    for i in 0..3 {
+        let (rows, extra) = coefficient_errors(&id.model, &truth, i);
+        found += rows.iter().filter(|r| r.2 != 0.0).count();
+        extras.extend(extra);
+        let (_, _, pooled, diverged) = nrmse_vs_truth(&id, &runs, i);
+        eprintln!("output {i}: {rows:?}, NRMSE vs truth {pooled}");
+        assert_eq!(diverged, 0);
+        assert!(
+            pooled < 0.025,
+            "output {i}: NRMSE vs truth {pooled}\n{}",
+            id.model
+        );
+    }
+    assert!(
+        found >= 16 && extras.len() <= 2,
+        "{found} / 18, extra {extras:?}\n{}",
+        id.model
+    );
+}
