@@ -118,7 +118,7 @@ pub const FREE_RUN_RESOLUTION: f64 = 1e-3;
 /// Highest order an identification searches or fits (its derivatives go one order higher).
 pub const MAX_ORDER: usize = 6;
 pub use identifier::Identifier;
-use profile::{eta_rule, Profile};
+use profile::{eta_rule, eta_rule_parsimonious, Profile};
 use rayon::prelude::*;
 use serde::Serialize;
 pub use split::Split;
@@ -1034,7 +1034,10 @@ fn search_orders<'p, 'a: 'p>(
     prep_for: &(dyn Fn(&[usize]) -> &'p Prepared<'a> + Sync),
 ) -> Result<(Vec<usize>, Vec<Vec<Candidate>>)> {
     let ny = outputs.len();
-    let mut ord = vec![*cands.iter().min().unwrap(); ny];
+    // Lowest order first: the parsimonious rule takes the first of near-equals.
+    let mut cands = cands.to_vec();
+    cands.sort_unstable();
+    let mut ord = vec![cands[0]; ny];
     let mut candidates: Vec<Vec<Candidate>> = vec![Vec::new(); ny];
     // Candidates already scored, by output and orders: a sweep that revisits an output whose
     // neighbours kept their orders asks for the same fits again.
@@ -1070,7 +1073,12 @@ fn search_orders<'p, 'a: 'p>(
                 .collect();
             report_candidates(settings, i, &list);
             let profiles: Vec<Profile> = list.iter().map(Candidate::chosen_on).collect();
-            let pick = eta_rule(&profiles, settings.eta).ok_or_else(|| {
+            let rule = if ny > 1 {
+                eta_rule_parsimonious
+            } else {
+                eta_rule
+            };
+            let pick = rule(&profiles, settings.eta).ok_or_else(|| {
                 Error::Numerical(format!(
                     "no candidate order of '{}' could be scored",
                     settings.outputs[i]
