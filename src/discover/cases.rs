@@ -150,6 +150,51 @@ pub fn generate(name: &str, seed: u64, eta: f64) -> Result<Case> {
 /// an unknown case name, and errs when the plant's simulation fails or [`RecordSet::new`] refuses
 /// the noisy samples (as a NaN `eta` or `scale` makes them).
 pub fn generate_scaled(name: &str, seed: u64, eta: f64, scale: f64) -> Result<Case> {
+    let Spec {
+        order,
+        f,
+        nominal_terms,
+        expect,
+        amp,
+        offset,
+        single,
+    } = spec(name)?;
+    let case_id = CASES.iter().position(|c| *c == name).unwrap_or(0) as u64;
+    let amp = amp * scale;
+    let tau = 0.01;
+    let times: Vec<f64> = (0..1000).map(|i| i as f64 * tau).collect();
+    let truth = Truth { order, f };
+    let mut runs = Vec::new();
+    let mut clean = Vec::new();
+    for r in 0..10u64 {
+        let mut rng = Rng::new(stream_seed(seed, case_id, r));
+        let input = excitation(name, single, amp, offset, &mut rng);
+        let (run, y) = case_run(name, (&truth, offset), &input, &times, r, eta, &mut rng)?;
+        clean.push(y);
+        runs.push(run);
+    }
+    let records = RecordSet::new(tau, vec!["y".into(), "u".into()], runs)?;
+    let nominal = Model::new(
+        &["u"],
+        vec![OutputEquation::new("y", order, nominal_terms)],
+        Some(tau),
+    );
+    Ok(Case {
+        name: CASES.iter().find(|c| **c == name).copied().unwrap_or("?"),
+        records,
+        nominal,
+        expect,
+        confidence: if name == "tank" {
+            vec![("1", 1.0), ("y", 1.0)]
+        } else {
+            Vec::new()
+        },
+        truth: clean,
+    })
+}
+
+/// The plant, nominal, expectation and excitation of case `name`; refuses an unknown name.
+fn spec(name: &str) -> Result<Spec> {
     let spec = match name {
         "coulomb" => Spec {
             order: 2,
@@ -282,113 +327,94 @@ pub fn generate_scaled(name: &str, seed: u64, eta: f64, scale: f64) -> Result<Ca
             ))
         }
     };
-    let Spec {
-        order,
-        f,
-        nominal_terms,
-        expect,
-        amp,
-        offset,
-        single,
-    } = spec;
-    let case_id = CASES.iter().position(|c| *c == name).unwrap_or(0) as u64;
-    let fmax = if name == "tank" { 0.3 } else { 1.2 };
-    let amp = amp * scale;
-    let tau = 0.01;
-    let n = 1000;
-    let times: Vec<f64> = (0..n).map(|i| i as f64 * tau).collect();
-    let truth = Truth { order, f };
-    let mut runs = Vec::new();
-    let mut clean = Vec::new();
-    for r in 0..10u64 {
-        let mut rng = Rng::new(stream_seed(seed, case_id, r));
-        let input = if single {
-            Multisine {
-                a: vec![amp],
-                w: vec![2.0 * std::f64::consts::PI * rng.uniform_in(0.2, 0.4)],
-                phi: vec![rng.uniform_in(0.0, PHASE_MAX)],
-                offset,
-                floor: f64::NEG_INFINITY,
-            }
-        } else {
-            let k = 5;
-            Multisine {
-                a: (0..k)
-                    .map(|_| amp * rng.uniform_in(0.3, 1.0) / (k as f64).sqrt() * 1.4)
-                    .collect(),
-                // The tank is slow (1 s): drive it below its corner so the level swings.
-                // One frequency in each of k log-spaced bands over 0.05..fmax Hz, so that every
-                // run reaches both the quasi-static range (where stiffness effects show) and
-                // the fast one (damping and friction).
-                w: (0..k)
-                    .map(|i| {
-                        let band = |j: usize| 0.05 * (fmax / 0.05f64).powf(j as f64 / k as f64);
-                        2.0 * std::f64::consts::PI * rng.uniform_in(band(i), band(i + 1))
-                    })
-                    .collect(),
-                phi: (0..k).map(|_| rng.uniform_in(0.0, PHASE_MAX)).collect(),
-                offset,
-                floor: if name == "tank" {
-                    0.05
-                } else {
-                    f64::NEG_INFINITY
-                },
-            }
+    Ok(spec)
+}
+
+/// Run `r`'s input: one sine for a `single` case, else five in log-spaced bands (see there).
+fn excitation(name: &str, single: bool, amp: f64, offset: f64, rng: &mut Rng) -> Multisine {
+    if single {
+        return Multisine {
+            a: vec![amp],
+            w: vec![2.0 * std::f64::consts::PI * rng.uniform_in(0.2, 0.4)],
+            phi: vec![rng.uniform_in(0.0, PHASE_MAX)],
+            offset,
+            floor: f64::NEG_INFINITY,
         };
-        let x0: Vec<f64> = if order == 1 {
-            vec![(0.5 * offset / 0.5).powi(2)]
-        } else {
-            vec![0.0; order]
-        };
-        let opts = SimOptions {
-            rtol: 1e-9,
-            atol: 1e-11,
-            run: format!("{r}"),
-            ..SimOptions::default()
-        };
-        let tr = simulate(&truth, &input, &x0, &times, &opts)?;
-        let mut y = tr.series_of(0);
-        clean.push(y.clone());
-        if name == "negative_drift" {
-            let amp = y.iter().fold(0.0f64, |a, v| a.max(v.abs()));
-            for (i, v) in y.iter_mut().enumerate() {
-                *v += 0.03 * amp * (i as f64 / n as f64);
-            }
-        }
-        let y = add_noise(&y, eta, &mut rng);
-        let mut u = vec![0.0];
-        let uv: Vec<f64> = times
-            .iter()
-            .map(|&t| {
-                input.eval(t, &mut u);
-                u[0]
-            })
-            .collect();
-        runs.push(Run {
-            id: format!("{r}"),
-            channels: vec![y, uv],
-            rows: (0..n).collect(),
-            t0: 0.0,
-        });
     }
-    let records = RecordSet::new(tau, vec!["y".into(), "u".into()], runs)?;
-    let nominal = Model::new(
-        &["u"],
-        vec![OutputEquation::new("y", order, nominal_terms)],
-        Some(tau),
-    );
-    Ok(Case {
-        name: CASES.iter().find(|c| **c == name).copied().unwrap_or("?"),
-        records,
-        nominal,
-        expect,
-        confidence: if name == "tank" {
-            vec![("1", 1.0), ("y", 1.0)]
+    let fmax = if name == "tank" { 0.3 } else { 1.2 };
+    let k = 5;
+    Multisine {
+        a: (0..k)
+            .map(|_| amp * rng.uniform_in(0.3, 1.0) / (k as f64).sqrt() * 1.4)
+            .collect(),
+        // The tank is slow (1 s): drive it below its corner so the level swings.
+        // One frequency in each of k log-spaced bands over 0.05..fmax Hz, so that every
+        // run reaches both the quasi-static range (where stiffness effects show) and
+        // the fast one (damping and friction).
+        w: (0..k)
+            .map(|i| {
+                let band = |j: usize| 0.05 * (fmax / 0.05f64).powf(j as f64 / k as f64);
+                2.0 * std::f64::consts::PI * rng.uniform_in(band(i), band(i + 1))
+            })
+            .collect(),
+        phi: (0..k).map(|_| rng.uniform_in(0.0, PHASE_MAX)).collect(),
+        offset,
+        floor: if name == "tank" {
+            0.05
         } else {
-            Vec::new()
+            f64::NEG_INFINITY
         },
-        truth: clean,
-    })
+    }
+}
+
+/// Run `r` of case `name`: the plant simulated from rest (the tank from its level at the input
+/// offset) under `input`, noise `eta` added; the run and its noise-free output.
+fn case_run(
+    name: &str,
+    (truth, offset): (&Truth, f64),
+    input: &Multisine,
+    times: &[f64],
+    r: u64,
+    eta: f64,
+    rng: &mut Rng,
+) -> Result<(Run, Vec<f64>)> {
+    let x0: Vec<f64> = if truth.order == 1 {
+        vec![(0.5 * offset / 0.5).powi(2)]
+    } else {
+        vec![0.0; truth.order]
+    };
+    let opts = SimOptions {
+        rtol: 1e-9,
+        atol: 1e-11,
+        run: format!("{r}"),
+        ..SimOptions::default()
+    };
+    let tr = simulate(truth, input, &x0, times, &opts)?;
+    let mut y = tr.series_of(0);
+    let clean = y.clone();
+    let n = times.len();
+    if name == "negative_drift" {
+        let amp = y.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+        for (i, v) in y.iter_mut().enumerate() {
+            *v += 0.03 * amp * (i as f64 / n as f64);
+        }
+    }
+    let y = add_noise(&y, eta, rng);
+    let mut u = vec![0.0];
+    let uv: Vec<f64> = times
+        .iter()
+        .map(|&t| {
+            input.eval(t, &mut u);
+            u[0]
+        })
+        .collect();
+    let run = Run {
+        id: format!("{r}"),
+        channels: vec![y, uv],
+        rows: (0..n).collect(),
+        t0: 0.0,
+    };
+    Ok((run, clean))
 }
 
 /// The options a user would give for `case`: the standard split, its confidences, `seed`.

@@ -447,188 +447,294 @@ pub fn lars_path_monitored(
     }
 }
 
-/// The LARS / LassoLars steps from a started path (see the module docs).
+/// The LARS / LassoLars steps from a started path (see the module docs): each step takes the
+/// candidate of largest correlation into the active set ([`Lars::enter`]), moves along the
+/// equiangular direction ([`Lars::direction`]) until an inactive candidate catches up or, for
+/// the lasso, a coefficient crosses zero ([`Lars::step_bound`], [`Lars::advance`]), and records
+/// a breakpoint; [`Lars::stop`] says when the path ends.
 fn lars_steps(
     begun: Begun,
     opts: &PathOptions,
     monitor: &mut dyn FnMut(&Path, usize) -> bool,
 ) -> Result<Path> {
-    let Begun {
-        mut sd,
-        mut path,
-        y_tilde,
-    } = begun;
-    let (n, nc) = (y_tilde.len(), sd.usable.len());
-    let y_norm = path.y_norm;
-    // scikit-learn's equality tolerance is the absolute f64 epsilon, which ends the path of a
-    // label of 1e-15 before it starts; here it is relative to alpha's scale (alpha <= ||y~|| / n).
-    let eq_tol = EQ_TOL * y_norm / n as f64;
-
-    let lasso = opts.method == Method::LassoLars;
-    let mut cov = vec![0.0; nc];
-    sd.corr(&y_tilde, &mut cov)?;
-    let mut r = y_tilde.clone();
-    let mut in_active = vec![false; nc];
-    let mut skipped = vec![false; nc];
-    let mut active: Vec<usize> = Vec::new();
-    let mut xa: Vec<Vec<f64>> = Vec::new();
-    let mut coef: Vec<f64> = Vec::new();
-    let mut sign: Vec<f64> = Vec::new();
-    let mut chol = Cholesky::default();
-    let mut n_iter = 0usize;
-    let mut drop = false;
-    let mut pending: (Vec<usize>, Vec<f64>) = (vec![], vec![]);
-    let mut a = vec![0.0; nc];
-    let mut u = vec![0.0; n];
-    let mut refreshed_this_iter = false;
-    let mut stop_next: Option<StopReason> = None;
-    let mut prev_alpha = f64::INFINITY;
-    let mut rel_res_at_last_bp = 1.0;
-
+    let mut s = Lars::new(begun, *opts)?;
     let mut last_idx;
     loop {
-        // Largest |correlation| among the inactive usable candidates (first one on ties, like argmax).
-        let mut c_idx = usize::MAX;
-        let mut big = -1.0f64;
-        for j in 0..nc {
-            if sd.usable[j] && !in_active[j] && !skipped[j] && cov[j].abs() > big {
-                big = cov[j].abs();
-                c_idx = j;
-            }
-        }
+        let (c_idx, big) = s.entering();
         last_idx = c_idx;
         let mut c = if c_idx == usize::MAX { 0.0 } else { big };
-        let mut alpha = c / n as f64;
-        let rel_res = dot(&r, &r).sqrt() / y_norm;
-        // Breakpoint n_iter: coefficients from the end of the last step, alpha from now.
-        let bp = Breakpoint {
-            alpha,
-            active: pending.0.clone(),
-            coefs: pending.1.clone(),
-            rel_residual: rel_res,
-        };
-        if path.breakpoints.len() == n_iter + 1 {
-            path.breakpoints[n_iter] = bp;
-        } else {
-            path.breakpoints.push(bp);
-        }
-        if let Some(reason) = stop_next {
-            path.stop = reason;
-            break;
-        }
-        if monitor(&path, n_iter) {
-            path.stop = StopReason::NoImprovement;
-            break;
-        }
-        if alpha <= opts.alpha_min + eq_tol {
-            if (alpha - opts.alpha_min).abs() > eq_tol && n_iter > 0 {
-                // Interpolate back to alpha_min between the last two breakpoints.
-                let prev = path.breakpoints[n_iter - 1].clone();
-                let ss = (prev.alpha - opts.alpha_min) / (prev.alpha - alpha);
-                let cur = &mut path.breakpoints[n_iter];
-                for (k, id) in cur.active.clone().iter().enumerate() {
-                    let p = prev
-                        .active
-                        .iter()
-                        .position(|x| x == id)
-                        .map_or(0.0, |q| prev.coefs[q]);
-                    cur.coefs[k] = p + ss * (cur.coefs[k] - p);
-                }
-            }
-            path.breakpoints[n_iter].alpha = opts.alpha_min;
-            path.stop = StopReason::AlphaMin;
-            break;
-        }
-        if n_iter >= opts.max_steps {
-            path.stop = StopReason::MaxSteps;
-            break;
-        }
-        if !drop && active.len() >= opts.max_terms {
-            path.stop = StopReason::MaxTerms;
-            break;
-        }
-        if !drop && active.len() + 2 > n {
-            path.stop = StopReason::SampleLimit;
-            break;
-        }
-        if rel_res < 1e-12 {
-            path.stop = StopReason::ExactFit;
+        s.record_breakpoint(c / s.n as f64);
+        if let Some(reason) = s.stop(c / s.n as f64, monitor) {
+            s.path.stop = reason;
             break;
         }
         let mut added = false;
-        if !drop {
-            let (xt, m, s) = sd.exact_column(c_idx)?;
-            if !(s > 0.0) || !s.is_finite() {
-                skipped[c_idx] = true;
-                path.events.push(Event::SkippedCollinear {
-                    step: n_iter,
-                    candidate: c_idx,
-                    pivot: 0.0,
-                });
-                continue;
+        if !s.drop {
+            match s.enter(c_idx)? {
+                Entry::Retry => continue,
+                Entry::Added(exact) => {
+                    c = exact;
+                    added = true;
+                }
             }
-            // Drift check: the exact correlation of the entering candidate against the incremental one.
-            let exact = dot(&xt, &r);
-            let drift = (exact - cov[c_idx]).abs() / cov[c_idx].abs().max(f64::MIN_POSITIVE);
-            if drift > opts.refresh_tol && !refreshed_this_iter {
-                sd.corr(&r, &mut cov)?;
-                path.refreshes += 1;
-                path.events.push(Event::Refreshed {
-                    step: n_iter,
-                    drift,
-                });
-                refreshed_this_iter = true;
-                continue;
-            }
-            // The breakpoint's alpha and the step's C from the exact f64 column rather than the
-            // swept value (which carries the engine's f32 rounding): with f32 sweeps this is what
-            // keeps the breakpoints equal to an f64 engine's, not only the entering order.
-            cov[c_idx] = exact;
-            c = exact.abs();
-            alpha = c / n as f64;
-            path.breakpoints[n_iter].alpha = alpha;
-            let g: Vec<f64> = xa.par_iter().map(|x| dot(x, &xt)).collect();
-            let (wv, pivot) = chol.pivot(&g, dot(&xt, &xt));
-            let pivot = pivot.max(f64::EPSILON);
-            if pivot < opts.collinearity_tol {
-                skipped[c_idx] = true;
-                path.events.push(Event::SkippedCollinear {
-                    step: n_iter,
-                    candidate: c_idx,
-                    pivot,
-                });
-                continue;
-            }
-            chol.append(wv, pivot);
-            path.store.add(c_idx, m, s, &xt, &y_tilde);
-            xa.push(xt);
-            active.push(c_idx);
-            in_active[c_idx] = true;
-            sign.push(if cov[c_idx] > 0.0 {
-                1.0
-            } else if cov[c_idx] < 0.0 {
-                -1.0
-            } else {
-                0.0
-            });
-            coef.push(0.0);
-            path.events.push(Event::Added {
-                step: n_iter,
-                candidate: c_idx,
-            });
-            added = true;
         }
-        refreshed_this_iter = false;
-        if lasso && n_iter > 0 && prev_alpha < alpha {
-            path.stop = StopReason::AlphaIncreasing;
+        s.refreshed_this_iter = false;
+        let alpha = c / s.n as f64;
+        if s.lasso && s.n_iter > 0 && s.prev_alpha < alpha {
+            s.path.stop = StopReason::AlphaIncreasing;
             break;
         }
+        let (ls, aa) = s.direction()?;
+        let gamma = s.step_bound(c, aa)?;
+        s.advance(gamma, &ls, alpha, added);
+    }
+    s.finish(last_idx)
+}
 
-        // Equiangular direction.
-        let k = active.len();
-        let mut ls = sign.clone();
-        chol.solve(&mut ls);
-        let s_ls: f64 = ls.iter().zip(&sign).map(|(a, b)| a * b).sum();
+/// What [`Lars::enter`] did with the candidate of largest correlation.
+enum Entry {
+    /// Taken into the active set; its exact |correlation| (the step's C).
+    Added(f64),
+    /// Skipped (collinear, or no spread) or the correlations refreshed: look again.
+    Retry,
+}
+
+/// The state of a LARS / LassoLars path between steps, in standardised units: the correlations
+/// `cov` of every candidate with the residual `r`, the active set with its columns `xa`,
+/// coefficients, signs and the Cholesky factor of its Gram matrix, and the last step's
+/// equiangular vector `u` and its correlations `a`.
+struct Lars<'a> {
+    sd: Standardiser<'a>,
+    path: Path,
+    y_tilde: Vec<f64>,
+    opts: PathOptions,
+    n: usize,
+    /// scikit-learn's equality tolerance is the absolute f64 epsilon, which ends the path of a
+    /// label of 1e-15 before it starts; here it is relative to alpha's scale (alpha <= ||y~|| / n).
+    eq_tol: f64,
+    lasso: bool,
+    cov: Vec<f64>,
+    r: Vec<f64>,
+    in_active: Vec<bool>,
+    skipped: Vec<bool>,
+    active: Vec<usize>,
+    xa: Vec<Vec<f64>>,
+    coef: Vec<f64>,
+    sign: Vec<f64>,
+    chol: Cholesky,
+    n_iter: usize,
+    /// The last step ended at a lasso zero crossing (nothing enters at the next).
+    drop: bool,
+    /// The active set and coefficients at the end of the last step (the next breakpoint's).
+    pending: (Vec<usize>, Vec<f64>),
+    a: Vec<f64>,
+    u: Vec<f64>,
+    refreshed_this_iter: bool,
+    stop_next: Option<StopReason>,
+    prev_alpha: f64,
+    rel_res_at_last_bp: f64,
+}
+
+impl<'a> Lars<'a> {
+    fn new(begun: Begun<'a>, opts: PathOptions) -> Result<Lars<'a>> {
+        let Begun {
+            mut sd,
+            path,
+            y_tilde,
+        } = begun;
+        let (n, nc) = (y_tilde.len(), sd.usable.len());
+        let mut cov = vec![0.0; nc];
+        sd.corr(&y_tilde, &mut cov)?;
+        Ok(Lars {
+            eq_tol: EQ_TOL * path.y_norm / n as f64,
+            lasso: opts.method == Method::LassoLars,
+            r: y_tilde.clone(),
+            sd,
+            path,
+            y_tilde,
+            opts,
+            n,
+            cov,
+            in_active: vec![false; nc],
+            skipped: vec![false; nc],
+            active: Vec::new(),
+            xa: Vec::new(),
+            coef: Vec::new(),
+            sign: Vec::new(),
+            chol: Cholesky::default(),
+            n_iter: 0,
+            drop: false,
+            pending: (vec![], vec![]),
+            a: vec![0.0; nc],
+            u: vec![0.0; n],
+            refreshed_this_iter: false,
+            stop_next: None,
+            prev_alpha: f64::INFINITY,
+            rel_res_at_last_bp: 1.0,
+        })
+    }
+
+    fn inactive(&self, j: usize) -> bool {
+        self.sd.usable[j] && !self.in_active[j] && !self.skipped[j]
+    }
+
+    /// The inactive usable candidate of largest |correlation| and that value (the first one on
+    /// ties, like argmax); `usize::MAX` and -1 when there is none.
+    fn entering(&self) -> (usize, f64) {
+        let mut c_idx = usize::MAX;
+        let mut big = -1.0f64;
+        for j in 0..self.cov.len() {
+            if self.inactive(j) && self.cov[j].abs() > big {
+                big = self.cov[j].abs();
+                c_idx = j;
+            }
+        }
+        (c_idx, big)
+    }
+
+    fn rel_residual(&self) -> f64 {
+        dot(&self.r, &self.r).sqrt() / self.path.y_norm
+    }
+
+    /// Breakpoint `n_iter`: coefficients from the end of the last step, alpha from now (a retry
+    /// of the same step overwrites it).
+    fn record_breakpoint(&mut self, alpha: f64) {
+        let bp = Breakpoint {
+            alpha,
+            active: self.pending.0.clone(),
+            coefs: self.pending.1.clone(),
+            rel_residual: self.rel_residual(),
+        };
+        if self.path.breakpoints.len() == self.n_iter + 1 {
+            self.path.breakpoints[self.n_iter] = bp;
+        } else {
+            self.path.breakpoints.push(bp);
+        }
+    }
+
+    /// Why the path ends at the breakpoint just recorded, if it does (at `alpha_min`, the
+    /// breakpoint is interpolated back to it).
+    fn stop(
+        &mut self,
+        alpha: f64,
+        monitor: &mut dyn FnMut(&Path, usize) -> bool,
+    ) -> Option<StopReason> {
+        let opts = self.opts;
+        if let Some(reason) = self.stop_next {
+            return Some(reason);
+        }
+        if monitor(&self.path, self.n_iter) {
+            return Some(StopReason::NoImprovement);
+        }
+        if alpha <= opts.alpha_min + self.eq_tol {
+            if (alpha - opts.alpha_min).abs() > self.eq_tol && self.n_iter > 0 {
+                self.interpolate_to_alpha_min(alpha);
+            }
+            self.path.breakpoints[self.n_iter].alpha = opts.alpha_min;
+            return Some(StopReason::AlphaMin);
+        }
+        if self.n_iter >= opts.max_steps {
+            return Some(StopReason::MaxSteps);
+        }
+        if !self.drop && self.active.len() >= opts.max_terms {
+            return Some(StopReason::MaxTerms);
+        }
+        if !self.drop && self.active.len() + 2 > self.n {
+            return Some(StopReason::SampleLimit);
+        }
+        if self.rel_residual() < 1e-12 {
+            return Some(StopReason::ExactFit);
+        }
+        None
+    }
+
+    /// The last breakpoint's coefficients moved back to `alpha_min`, linearly between the last
+    /// two breakpoints.
+    fn interpolate_to_alpha_min(&mut self, alpha: f64) {
+        let prev = self.path.breakpoints[self.n_iter - 1].clone();
+        let ss = (prev.alpha - self.opts.alpha_min) / (prev.alpha - alpha);
+        let cur = &mut self.path.breakpoints[self.n_iter];
+        for (k, id) in cur.active.clone().iter().enumerate() {
+            let p = prev
+                .active
+                .iter()
+                .position(|x| x == id)
+                .map_or(0.0, |q| prev.coefs[q]);
+            cur.coefs[k] = p + ss * (cur.coefs[k] - p);
+        }
+    }
+
+    /// Takes candidate `c_idx` into the active set from its exact f64 column, unless it has no
+    /// spread or is collinear with the active set (skipped for the rest of the path), or its
+    /// swept correlation had drifted (every correlation refreshed, once per step).
+    fn enter(&mut self, c_idx: usize) -> Result<Entry> {
+        let (xt, m, s) = self.sd.exact_column(c_idx)?;
+        if !(s > 0.0) || !s.is_finite() {
+            self.skip(c_idx, 0.0);
+            return Ok(Entry::Retry);
+        }
+        // Drift check: the exact correlation of the entering candidate against the incremental one.
+        let exact = dot(&xt, &self.r);
+        let drift = (exact - self.cov[c_idx]).abs() / self.cov[c_idx].abs().max(f64::MIN_POSITIVE);
+        if drift > self.opts.refresh_tol && !self.refreshed_this_iter {
+            self.sd.corr(&self.r, &mut self.cov)?;
+            self.path.refreshes += 1;
+            self.path.events.push(Event::Refreshed {
+                step: self.n_iter,
+                drift,
+            });
+            self.refreshed_this_iter = true;
+            return Ok(Entry::Retry);
+        }
+        // The breakpoint's alpha and the step's C from the exact f64 column rather than the
+        // swept value (which carries the engine's f32 rounding): with f32 sweeps this is what
+        // keeps the breakpoints equal to an f64 engine's, not only the entering order.
+        self.cov[c_idx] = exact;
+        let c = exact.abs();
+        self.path.breakpoints[self.n_iter].alpha = c / self.n as f64;
+        let g: Vec<f64> = self.xa.par_iter().map(|x| dot(x, &xt)).collect();
+        let (wv, pivot) = self.chol.pivot(&g, dot(&xt, &xt));
+        let pivot = pivot.max(f64::EPSILON);
+        if pivot < self.opts.collinearity_tol {
+            self.skip(c_idx, pivot);
+            return Ok(Entry::Retry);
+        }
+        self.chol.append(wv, pivot);
+        self.path.store.add(c_idx, m, s, &xt, &self.y_tilde);
+        self.xa.push(xt);
+        self.active.push(c_idx);
+        self.in_active[c_idx] = true;
+        self.sign.push(if exact > 0.0 {
+            1.0
+        } else if exact < 0.0 {
+            -1.0
+        } else {
+            0.0
+        });
+        self.coef.push(0.0);
+        self.path.events.push(Event::Added {
+            step: self.n_iter,
+            candidate: c_idx,
+        });
+        Ok(Entry::Added(c))
+    }
+
+    fn skip(&mut self, candidate: usize, pivot: f64) {
+        self.skipped[candidate] = true;
+        self.path.events.push(Event::SkippedCollinear {
+            step: self.n_iter,
+            candidate,
+            pivot,
+        });
+    }
+
+    /// The equiangular direction: its coefficients `ls` (scaled by A_A) and A_A; sets `u` (the
+    /// direction in sample space) and `a` (every candidate's correlation with it).
+    fn direction(&mut self) -> Result<(Vec<f64>, f64)> {
+        let k = self.active.len();
+        let mut ls = self.sign.clone();
+        self.chol.solve(&mut ls);
+        let s_ls: f64 = ls.iter().zip(&self.sign).map(|(a, b)| a * b).sum();
         let aa = if k == 1 && ls[0] == 0.0 {
             ls[0] = 1.0;
             1.0
@@ -636,137 +742,161 @@ fn lars_steps(
             1.0 / s_ls.sqrt()
         };
         if !aa.is_finite() {
-            return Err(Error::Numerical(format!("the active system became singular at step {n_iter} with {k} terms; raise the collinearity tolerance")));
+            return Err(Error::Numerical(format!("the active system became singular at step {} with {k} terms; raise the collinearity tolerance", self.n_iter)));
         }
         ls.iter_mut().for_each(|x| *x *= aa);
-        // u = X~_A ls, parallel over sample chunks (O(n k) per step).
-        // Four columns per pass over the chunk: a quarter of the loads and stores of u.
-        u.par_chunks_mut(4096).enumerate().for_each(|(c, uc)| {
-            uc.iter_mut().for_each(|x| *x = 0.0);
-            let (off, len) = (c * 4096, uc.len());
-            let mut q = 0;
-            while q + 4 <= xa.len() {
-                let (c0, c1) = (&xa[q][off..off + len], &xa[q + 1][off..off + len]);
-                let (c2, c3) = (&xa[q + 2][off..off + len], &xa[q + 3][off..off + len]);
-                let (l0, l1, l2, l3) = (ls[q], ls[q + 1], ls[q + 2], ls[q + 3]);
-                for i in 0..len {
-                    uc[i] += l0 * c0[i] + l1 * c1[i] + l2 * c2[i] + l3 * c3[i];
-                }
-                q += 4;
-            }
-            for (col, l) in xa[q..].iter().zip(&ls[q..]) {
-                uc.iter_mut()
-                    .zip(&col[off..off + len])
-                    .for_each(|(ui, xi)| *ui += l * xi);
-            }
-        });
-        sd.corr(&u, &mut a)?;
+        active_combination(&self.xa, &ls, &mut self.u);
+        self.sd.corr(&self.u, &mut self.a)?;
+        Ok((ls, aa))
+    }
 
-        let inactive = |j: usize| sd.usable[j] && !in_active[j] && !skipped[j];
-        let g1 = min_pos(
-            (0..nc)
-                .filter(|&j| inactive(j))
-                .map(|j| (c - cov[j]) / (aa - a[j] + TINY32)),
-        );
-        let g2 = min_pos(
-            (0..nc)
-                .filter(|&j| inactive(j))
-                .map(|j| (c + cov[j]) / (aa + a[j] + TINY32)),
-        );
+    /// The step length along the direction: where the first inactive candidate's correlation
+    /// catches up with the active ones' (`c`, falling at rate `aa`), at most to `c / aa`.
+    fn step_bound(&mut self, c: f64, aa: f64) -> Result<f64> {
+        let (cov, a) = (&self.cov, &self.a);
+        let catch_up = |j: usize| (c - cov[j]) / (aa - a[j] + TINY32);
+        let catch_down = |j: usize| (c + cov[j]) / (aa + a[j] + TINY32);
+        let nc = cov.len();
+        let g1 = min_pos((0..nc).filter(|&j| self.inactive(j)).map(catch_up));
+        let g2 = min_pos((0..nc).filter(|&j| self.inactive(j)).map(catch_down));
+        let g12 = g1.min(g2);
         // The candidate that limits the step: its exact f64 correlation and direction product
         // replace the swept ones, so gamma (hence every coefficient) is exact given that choice.
-        let g_exact = {
-            let g12 = g1.min(g2);
-            let arg = (0..nc).filter(|&j| inactive(j)).find(|&j| {
-                (c - cov[j]) / (aa - a[j] + TINY32) == g12
-                    || (c + cov[j]) / (aa + a[j] + TINY32) == g12
-            });
-            match arg {
-                Some(j) if g12 < c / aa => {
-                    let (xt, _, _) = sd.exact_column(j)?;
-                    let (cj, aj) = (dot(&xt, &r), dot(&xt, &u));
-                    let g = min_pos(
-                        [(c - cj) / (aa - aj + TINY32), (c + cj) / (aa + aj + TINY32)].into_iter(),
-                    );
-                    if g < f64::MAX {
-                        g
-                    } else {
-                        g12
-                    }
+        let arg = (0..nc)
+            .filter(|&j| self.inactive(j))
+            .find(|&j| catch_up(j) == g12 || catch_down(j) == g12);
+        let g_exact = match arg {
+            Some(j) if g12 < c / aa => {
+                let (xt, _, _) = self.sd.exact_column(j)?;
+                let (cj, aj) = (dot(&xt, &self.r), dot(&xt, &self.u));
+                let g = min_pos(
+                    [(c - cj) / (aa - aj + TINY32), (c + cj) / (aa + aj + TINY32)].into_iter(),
+                );
+                if g < f64::MAX {
+                    g
+                } else {
+                    g12
                 }
-                _ => g1.min(g2),
             }
+            _ => g12,
         };
-        let mut gamma = g_exact.min(c / aa);
-        let z: Vec<f64> = coef
+        Ok(g_exact.min(c / aa))
+    }
+
+    /// Moves `gamma` along the direction (for the lasso, only to the first zero crossing, whose
+    /// terms then leave the active set), and ends the step.
+    fn advance(&mut self, mut gamma: f64, ls: &[f64], alpha: f64, added: bool) {
+        let k = self.active.len();
+        let z: Vec<f64> = self
+            .coef
             .iter()
-            .zip(&ls)
+            .zip(ls)
             .map(|(cf, l)| -cf / (l + TINY32))
             .collect();
         let z_pos = min_pos(z.iter().copied());
-        drop = false;
+        self.drop = false;
         let mut idx: Vec<usize> = Vec::new();
         if z_pos < gamma {
             idx = (0..k).filter(|&q| z[q] == z_pos).rev().collect();
             for &q in &idx {
-                sign[q] = -sign[q];
+                self.sign[q] = -self.sign[q];
             }
-            if lasso {
+            if self.lasso {
                 gamma = z_pos;
             }
-            drop = true;
+            self.drop = true;
         }
-        n_iter += 1;
-        coef.iter_mut()
-            .zip(&ls)
+        self.n_iter += 1;
+        self.coef
+            .iter_mut()
+            .zip(ls)
             .for_each(|(cf, l)| *cf += gamma * l);
-        cov.iter_mut()
-            .zip(&a)
+        self.cov
+            .iter_mut()
+            .zip(&self.a)
             .for_each(|(cv, av)| *cv -= gamma * av);
-        r.iter_mut().zip(&u).for_each(|(ri, ui)| *ri -= gamma * ui);
-        if drop && lasso {
+        self.r
+            .iter_mut()
+            .zip(&self.u)
+            .for_each(|(ri, ui)| *ri -= gamma * ui);
+        if self.drop && self.lasso {
             for &q in &idx {
-                chol.delete(q);
-                let id = active.remove(q);
-                let col = xa.remove(q);
-                coef.remove(q);
-                sign.remove(q);
-                in_active[id] = false;
-                cov[id] = dot(&col, &r);
-                path.events.push(Event::Dropped {
-                    step: n_iter,
-                    candidate: id,
-                });
+                self.remove_active(q);
             }
         }
-        pending = (active.clone(), coef.clone());
-        prev_alpha = alpha;
-        let new_rel = dot(&r, &r).sqrt() / y_norm;
-        if added && opts.epsilon > 0.0 && rel_res_at_last_bp - new_rel < opts.epsilon {
-            stop_next = Some(StopReason::Relevance);
+        self.pending = (self.active.clone(), self.coef.clone());
+        self.prev_alpha = alpha;
+        let new_rel = self.rel_residual();
+        if added && self.opts.epsilon > 0.0 && self.rel_res_at_last_bp - new_rel < self.opts.epsilon
+        {
+            self.stop_next = Some(StopReason::Relevance);
         }
-        rel_res_at_last_bp = new_rel;
+        self.rel_res_at_last_bp = new_rel;
     }
-    // A path that stops before adding the candidate of its last breakpoint: that alpha too from
-    // the exact column (as every entering breakpoint's), unless the swept value had drifted.
-    if matches!(
-        path.stop,
-        StopReason::MaxSteps
-            | StopReason::MaxTerms
-            | StopReason::SampleLimit
-            | StopReason::ExactFit
-            | StopReason::Relevance
-            | StopReason::NoImprovement
-    ) && last_idx != usize::MAX
-    {
-        let exact = dot(&sd.exact_column(last_idx)?.0, &r);
-        let drift = (exact - cov[last_idx]).abs() / cov[last_idx].abs().max(f64::MIN_POSITIVE);
-        if drift <= opts.refresh_tol {
-            if let Some(bp) = path.breakpoints.last_mut() {
-                bp.alpha = exact.abs() / n as f64;
+
+    /// The lasso drop: active term `q` leaves (its coefficient crossed zero).
+    fn remove_active(&mut self, q: usize) {
+        self.chol.delete(q);
+        let id = self.active.remove(q);
+        let col = self.xa.remove(q);
+        self.coef.remove(q);
+        self.sign.remove(q);
+        self.in_active[id] = false;
+        self.cov[id] = dot(&col, &self.r);
+        self.path.events.push(Event::Dropped {
+            step: self.n_iter,
+            candidate: id,
+        });
+    }
+
+    /// The finished path. One that stops before adding the candidate of its last breakpoint
+    /// gets that alpha too from the exact column (as every entering breakpoint's), unless the
+    /// swept value had drifted.
+    fn finish(mut self, last_idx: usize) -> Result<Path> {
+        if matches!(
+            self.path.stop,
+            StopReason::MaxSteps
+                | StopReason::MaxTerms
+                | StopReason::SampleLimit
+                | StopReason::ExactFit
+                | StopReason::Relevance
+                | StopReason::NoImprovement
+        ) && last_idx != usize::MAX
+        {
+            let exact = dot(&self.sd.exact_column(last_idx)?.0, &self.r);
+            let drift = (exact - self.cov[last_idx]).abs()
+                / self.cov[last_idx].abs().max(f64::MIN_POSITIVE);
+            if drift <= self.opts.refresh_tol {
+                if let Some(bp) = self.path.breakpoints.last_mut() {
+                    bp.alpha = exact.abs() / self.n as f64;
+                }
             }
         }
+        self.path.sweeps = self.sd.sweeps;
+        Ok(self.path)
     }
-    path.sweeps = sd.sweeps;
-    Ok(path)
+}
+
+/// `u = X~_A ls`, parallel over sample chunks (O(n k) per step); four columns per pass over a
+/// chunk, a quarter of the loads and stores of `u`.
+fn active_combination(xa: &[Vec<f64>], ls: &[f64], u: &mut [f64]) {
+    u.par_chunks_mut(4096).enumerate().for_each(|(c, uc)| {
+        uc.iter_mut().for_each(|x| *x = 0.0);
+        let (off, len) = (c * 4096, uc.len());
+        let mut q = 0;
+        while q + 4 <= xa.len() {
+            let (c0, c1) = (&xa[q][off..off + len], &xa[q + 1][off..off + len]);
+            let (c2, c3) = (&xa[q + 2][off..off + len], &xa[q + 3][off..off + len]);
+            let (l0, l1, l2, l3) = (ls[q], ls[q + 1], ls[q + 2], ls[q + 3]);
+            for i in 0..len {
+                uc[i] += l0 * c0[i] + l1 * c1[i] + l2 * c2[i] + l3 * c3[i];
+            }
+            q += 4;
+        }
+        for (col, l) in xa[q..].iter().zip(&ls[q..]) {
+            uc.iter_mut()
+                .zip(&col[off..off + len])
+                .for_each(|(ui, xi)| *ui += l * xi);
+        }
+    });
 }
