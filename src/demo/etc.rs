@@ -66,16 +66,7 @@ pub const PATM_MAX: f64 = 1e7;
 /// Runs the experiment; returns the report text (also printed by the CLI).
 pub fn run(o: &EtcOptions) -> Result<String> {
     // Settings are checked before the minutes of simulation and fitting, not after.
-    crate::util::finite_nonneg("noise", o.noise)?;
-    crate::basis::check_degree(o.degree)?;
-    super::check_runs(o.train, o.runs)?;
-    crate::util::finite_nonneg("patm", o.patm)?;
-    if o.patm > PATM_MAX {
-        return Err(Error::param(
-            "patm",
-            format!("{:e} Pa is beyond any air pressure a throttle sees; give 0 to {PATM_MAX:e} Pa (the atmosphere is 101325 Pa)", o.patm),
-        ));
-    }
+    check(o)?;
     let t_all = std::time::Instant::now();
     let plant = if o.physical {
         Plant::throttle(ThrottlePreset::Physical)
@@ -98,48 +89,9 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         &ids,
     )?;
     let truth = plant.true_model(Some(o.tau));
-    let mut out = String::new();
-    let _ = writeln!(
-        out,
-        "# Electronic throttle (the source paper's experiment)\n"
-    );
-    let _ = writeln!(
-        out,
-        "{} runs x {} samples, tau = {} s, {} train / {} test, noise {} % and 0 %, degree {}, seed {}, Patm = {} Pa{}.",
-        o.runs,
-        o.samples,
-        o.tau,
-        o.train,
-        o.runs - o.train,
-        o.noise * 100.0,
-        o.degree,
-        o.seed,
-        patm,
-        if o.physical { " (preset physical: excitation scaled so the angle stays within [0, pi/2])" } else { "" }
-    );
-    if !o.physical && patm == 0.0 {
-        let _ = writeln!(out, "Patm defaults to 0 Pa: with the paper's printed parameters the angle swings tens of radians from rest, and with Patm = 101325 Pa the aerodynamic term (pi - y) cos^2(y) would dominate y'''. Give --patm to change it.");
-    }
-    let _ = writeln!(out);
-
+    let mut out = header(o, patm);
     let mut tables: Vec<(String, Table)> = Vec::new();
-    let mut profile_table = Table::new(&[
-        "data",
-        "order n",
-        "n terms",
-        "train p50",
-        "p80",
-        "p90",
-        "p95",
-        "p98",
-        "p99",
-        "p100",
-        "5-fold p95",
-        "5-fold p100",
-        "free-run p95",
-        "free-run p100",
-        "selected",
-    ]);
+    let mut profile_table = profile_table();
     let mut noisy: Option<(Identification, Vec<crate::plants::Run>)> = None;
     // One identification of the demo: degree d, the order searched (None) or fixed.
     let run_identify = |runs: &[crate::plants::Run], d: usize, order: Option<usize>| {
@@ -166,7 +118,7 @@ pub fn run(o: &EtcOptions) -> Result<String> {
     // d = 1 identification on the noisy runs is independent of both: it follows the noisy one,
     // which finishes well before the noise-free one.
     let fixed = |d: usize, runs: &[crate::plants::Run]| run_identify(runs, d, Some(3));
-    let (clean, (noisy_search, mut d1)) = rayon::join(
+    let (clean, (noisy_search, d1)) = rayon::join(
         || search(0.0),
         || {
             let r = search(o.noise);
@@ -182,36 +134,7 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         .enumerate()
     {
         let (id, runs) = result?;
-        let rep = &id.outputs[0];
-        for c in &rep.candidates {
-            let mut row = vec![
-                if eta == 0.0 {
-                    "noise-free".to_string()
-                } else {
-                    format!("{} % noise", eta * 100.0)
-                },
-                c.order.to_string(),
-                c.n_terms.to_string(),
-            ];
-            row.extend(prof_cells(&c.train));
-            row.push(format!("{:.3}", c.validation.p95()));
-            row.push(format!("{:.3}", c.validation.p100()));
-            for v in [
-                c.simulation.as_ref().map(|s| s.p95()),
-                c.simulation.as_ref().map(|s| s.p100()),
-            ] {
-                row.push(
-                    v.filter(|v| v.is_finite())
-                        .map_or("-".into(), |v| format!("{v:.3}")),
-                );
-            }
-            row.push(if c.order == rep.order {
-                "<- selected".into()
-            } else {
-                String::new()
-            });
-            profile_table.row(row);
-        }
+        profile_rows(&mut profile_table, eta, &id.outputs[0]);
         // The second search, also at noise 0 when asked for.
         if k == 1 {
             noisy = Some((id, runs));
@@ -227,6 +150,76 @@ pub fn run(o: &EtcOptions) -> Result<String> {
     );
 
     // Fixed n = 3 at d = 3 and d = 1: test percentiles against our labels and the true y'''.
+    let (test_table, id, d1_model) = fixed_order_tests(o, &id_noisy, d1, &fixed, (&runs, &split))?;
+    if let Some(r) = &id.refinement {
+        let _ = writeln!(out, "{}", refinement_line(o.degree, r));
+    }
+    let _ = writeln!(
+        out,
+        "## Test runs ({}), n = 3\n\n{}",
+        o.runs - o.train,
+        test_table.markdown()
+    );
+    tables.push(("test_percentiles".into(), test_table));
+
+    // The equation against the truth.
+    if let Some(t) = equation_section(&mut out, o, &id, truth.as_ref()) {
+        tables.push(("coefficients".into(), t));
+    }
+
+    // Derivatives against the truth on the test runs.
+    let dt = derivatives_table(&id, &runs, &split);
+    let _ = writeln!(out, "## Reconstructed derivatives against the true ones (test runs, normalised by median |truth|)\n\n{}", dt.markdown());
+    tables.push(("derivatives".into(), dt));
+
+    // Free-run simulation.
+    let (st, div) = simulation_table(&id, &runs);
+    let _ = writeln!(
+        out,
+        "## Free-run simulation ({} test runs, {} diverged)\n\n{}",
+        id.simulations.len(),
+        div,
+        st.markdown()
+    );
+    tables.push(("simulation".into(), st));
+
+    let (feedback_plot, tracking_plot) = control_sections(
+        &mut out,
+        &mut tables,
+        o,
+        (&plant, truth.as_ref()),
+        (&id.model, d1_model.as_ref()),
+    );
+    let _ = writeln!(
+        out,
+        "Sample weighting: {}.\nTotal time {:.1} s.",
+        id.weighting,
+        t_all.elapsed().as_secs_f64()
+    );
+
+    if let Some(dir) = &o.out {
+        let svgs = [
+            ("feedback_step.svg", feedback_plot),
+            ("tracking_profile_law.svg", tracking_plot),
+        ];
+        write_report(dir, &out, &tables, &svgs)?;
+        plots(dir, &id, &runs, split.test[0], o.tau)?;
+    }
+    Ok(out)
+}
+
+/// The n = 3 identifications at the demo's degree and at d = 1 (the search's own result when it
+/// selected n = 3, `d1` when it was run beside the search, else `fixed(d, runs)`): their test
+/// percentiles against our labels and the true y''' beside the paper's row, the identification
+/// at the demo's degree and the d = 1 model.
+#[allow(clippy::type_complexity)]
+fn fixed_order_tests(
+    o: &EtcOptions,
+    id_noisy: &Identification,
+    mut d1: Option<Result<Identification>>,
+    fixed: &dyn Fn(usize, &[crate::plants::Run]) -> Result<Identification>,
+    (runs, split): (&[crate::plants::Run], &Split),
+) -> Result<(Table, Identification, Option<crate::model::Model>)> {
     let mut test_table = Table::new(&[
         "model", "against", "p50", "p80", "p90", "p95", "p98", "p99", "p100",
     ]);
@@ -246,7 +239,7 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         } else if let Some(done) = d1.take_if(|_| d == 1) {
             done?
         } else {
-            fixed(d, &runs)?
+            fixed(d, runs)?
         };
         let own = id.outputs[0]
             .test
@@ -257,7 +250,7 @@ pub fn run(o: &EtcOptions) -> Result<String> {
                 .chain(prof_cells(&own))
                 .collect(),
         );
-        let vs_truth = profile_vs_true_label(&id, &runs, &split);
+        let vs_truth = profile_vs_true_label(&id, runs, split);
         test_table.row(
             [format!("ours (n = 3, d = {d})"), "true y'''".into()]
                 .into_iter()
@@ -271,12 +264,39 @@ pub fn run(o: &EtcOptions) -> Result<String> {
             main_id = Some(id);
         }
     }
-    let id = main_id.unwrap();
-    if let Some(r) = &id.refinement {
-        let _ = writeln!(
-            out,
-            "Refinement on free-run simulation error (n = 3, d = {}): {} ({}; gate: {}, NRMSE {:.4} -> {:.4}; {} iterations, {:.1} s).\n",
-            o.degree,
+    Ok((
+        test_table,
+        main_id.expect("the loop covers the demo's degree"),
+        d1_model,
+    ))
+}
+
+/// The columns of the error-profile table (one row per data set and candidate order).
+fn profile_table() -> Table {
+    Table::new(&[
+        "data",
+        "order n",
+        "n terms",
+        "train p50",
+        "p80",
+        "p90",
+        "p95",
+        "p98",
+        "p99",
+        "p100",
+        "5-fold p95",
+        "5-fold p100",
+        "free-run p95",
+        "free-run p100",
+        "selected",
+    ])
+}
+
+/// The refinement's verdict in one line of the report.
+fn refinement_line(degree: usize, r: &crate::identify::RefinementReport) -> String {
+    format!(
+        "Refinement on free-run simulation error (n = 3, d = {}): {} ({}; gate: {}, NRMSE {:.4} -> {:.4}; {} iterations, {:.1} s).\n",
+            degree,
             if r.kept { "kept" } else { "refused" },
             r.message,
             r.gate,
@@ -284,27 +304,152 @@ pub fn run(o: &EtcOptions) -> Result<String> {
             r.validation_after.first().copied().unwrap_or(f64::NAN),
             r.iterations,
             r.seconds
-        );
-    }
-    let _ = writeln!(
-        out,
-        "## Test runs ({}), n = 3\n\n{}",
-        o.runs - o.train,
-        test_table.markdown()
-    );
-    tables.push(("test_percentiles".into(), test_table));
+    )
+}
 
-    // The equation against the truth.
+/// One row per candidate order of an identification's output (`eta` its noise level) in the
+/// profile table.
+fn profile_rows(table: &mut Table, eta: f64, rep: &crate::identify::OutputReport) {
+    for c in &rep.candidates {
+        let mut row = vec![
+            if eta == 0.0 {
+                "noise-free".to_string()
+            } else {
+                format!("{} % noise", eta * 100.0)
+            },
+            c.order.to_string(),
+            c.n_terms.to_string(),
+        ];
+        row.extend(prof_cells(&c.train));
+        row.push(format!("{:.3}", c.validation.p95()));
+        row.push(format!("{:.3}", c.validation.p100()));
+        for v in [
+            c.simulation.as_ref().map(|s| s.p95()),
+            c.simulation.as_ref().map(|s| s.p100()),
+        ] {
+            row.push(
+                v.filter(|v| v.is_finite())
+                    .map_or("-".into(), |v| format!("{v:.3}")),
+            );
+        }
+        row.push(if c.order == rep.order {
+            "<- selected".into()
+        } else {
+            String::new()
+        });
+        table.row(row);
+    }
+}
+
+/// The feedback designed on the identified model and the paper's closed-loop experiment with
+/// the d = 1 model, both run around the true plant: their report sections and tables, and the
+/// plots (`None` where a design failed, which the report says).
+fn control_sections(
+    out: &mut String,
+    tables: &mut Vec<(String, Table)>,
+    o: &EtcOptions,
+    (plant, truth): (&Plant, Option<&crate::model::Model>),
+    (model, d1): (&crate::model::Model, Option<&crate::model::Model>),
+) -> (Option<String>, Option<String>) {
+    // Feedback designed on the identified model, run around the true plant. The sensor noise is
+    // the data's relative level applied to the step (the data's own level, relative to swings of
+    // tens of radians at Patm = 0, would bury a 0.5 rad step).
+    // A model the design cannot use is a finding of the report, not a failure of the demo.
+    let mut feedback_plot = None;
+    match feedback(plant, model, truth, o.tau, o.noise * STEP, o.seed) {
+        Ok((text, table, plot)) => {
+            let _ = writeln!(*out, "{text}");
+            tables.push(("feedback".into(), table));
+            feedback_plot = Some(plot);
+        }
+        Err(e) => {
+            let _ = writeln!(
+                *out,
+                "## Feedback designed on the identified model\n\nNot designed: {e}.\n"
+            );
+        }
+    }
+    // The paper's closed-loop experiment: the d = 1 model in both laws, on the true plant.
+    let mut tracking_plot = None;
+    if let Some(m1) = d1 {
+        match paper_tracking(plant, m1, o.seed) {
+            Ok((text, table, plot)) => {
+                let _ = writeln!(*out, "{text}");
+                tables.push(("tracking".into(), table));
+                tracking_plot = Some(plot);
+            }
+            Err(e) => {
+                let _ = writeln!(
+                    *out,
+                    "## The paper's closed-loop experiment\n\nNot run: {e}.\n"
+                );
+            }
+        }
+    }
+    (feedback_plot, tracking_plot)
+}
+
+/// Refuses a noise, degree, run split or atmospheric pressure the demo cannot use.
+fn check(o: &EtcOptions) -> Result<()> {
+    crate::util::finite_nonneg("noise", o.noise)?;
+    crate::basis::check_degree(o.degree)?;
+    super::check_runs(o.train, o.runs)?;
+    crate::util::finite_nonneg("patm", o.patm)?;
+    if o.patm > PATM_MAX {
+        return Err(Error::param(
+            "patm",
+            format!("{:e} Pa is beyond any air pressure a throttle sees; give 0 to {PATM_MAX:e} Pa (the atmosphere is 101325 Pa)", o.patm),
+        ));
+    }
+    Ok(())
+}
+
+/// The report's title and the experiment's settings.
+fn header(o: &EtcOptions, patm: f64) -> String {
+    let mut out = String::new();
     let _ = writeln!(
         out,
+        "# Electronic throttle (the source paper's experiment)\n"
+    );
+    let _ = writeln!(
+        out,
+        "{} runs x {} samples, tau = {} s, {} train / {} test, noise {} % and 0 %, degree {}, seed {}, Patm = {} Pa{}.",
+        o.runs,
+        o.samples,
+        o.tau,
+        o.train,
+        o.runs - o.train,
+        o.noise * 100.0,
+        o.degree,
+        o.seed,
+        patm,
+        if o.physical { " (preset physical: excitation scaled so the angle stays within [0, pi/2])" } else { "" }
+    );
+    if !o.physical && patm == 0.0 {
+        let _ = writeln!(out, "Patm defaults to 0 Pa: with the paper's printed parameters the angle swings tens of radians from rest, and with Patm = 101325 Pa the aerodynamic term (pi - y) cos^2(y) would dominate y'''. Give --patm to change it.");
+    }
+    let _ = writeln!(out);
+    out
+}
+
+/// The identified equation, the true one and the coefficient table (returned; `None` without a
+/// polynomial truth).
+fn equation_section(
+    out: &mut String,
+    o: &EtcOptions,
+    id: &Identification,
+    truth: Option<&crate::model::Model>,
+) -> Option<Table> {
+    let _ = writeln!(
+        *out,
         "## Identified equation ({} % noise, n = 3, d = {})\n\n    {}\n",
         crate::util::num4(100.0 * o.noise),
         o.degree,
         id.model.outputs[0].to_text()
     );
-    if let Some(tm) = &truth {
+    if let Some(tm) = truth {
         let _ = writeln!(
-            out,
+            *out,
             "True equation (Patm = 0):\n\n    {}\n",
             tm.outputs[0].to_text()
         );
@@ -319,7 +464,7 @@ pub fn run(o: &EtcOptions) -> Result<String> {
             ]);
         }
         let _ = writeln!(
-            out,
+            *out,
             "{}\nTerms not in the truth: {}\n",
             t.markdown(),
             if extra.is_empty() {
@@ -328,15 +473,19 @@ pub fn run(o: &EtcOptions) -> Result<String> {
                 extra.join(", ")
             }
         );
-        tables.push(("coefficients".into(), t));
+        Some(t)
     } else {
         let _ = writeln!(
-            out,
+            *out,
             "(No polynomial truth at Patm > 0: the aerodynamic term is not a polynomial.)\n"
         );
+        None
     }
+}
 
-    // Derivatives against the truth on the test runs.
+/// The reconstructed derivatives against the true ones on the test runs: profile and 2-sigma
+/// coverage per derivative.
+fn derivatives_table(id: &Identification, runs: &[crate::plants::Run], split: &Split) -> Table {
     let mut dt = Table::new(&["derivative", "p50", "p95", "p100", "2-sigma coverage"]);
     for k in 0..=3 {
         let est: Vec<&[f64]> = split
@@ -371,11 +520,13 @@ pub fn run(o: &EtcOptions) -> Result<String> {
             format!("{:.3}", inside as f64 / all as f64),
         ]);
     }
-    let _ = writeln!(out, "## Reconstructed derivatives against the true ones (test runs, normalised by median |truth|)\n\n{}", dt.markdown());
-    tables.push(("derivatives".into(), dt));
+    dt
+}
 
-    // Free-run simulation.
-    let (med, max, pooled, div) = nrmse_vs_truth(&id, &runs, 0);
+/// The free-run NRMSE on the test runs against the true output and the measurement, and how
+/// many runs diverged.
+fn simulation_table(id: &Identification, runs: &[crate::plants::Run]) -> (Table, usize) {
+    let (med, max, pooled, div) = nrmse_vs_truth(id, runs, 0);
     let meas: Vec<f64> = id
         .simulations
         .iter()
@@ -400,79 +551,27 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         format!("{:.3} %", 100.0 * meas.iter().cloned().fold(0.0, f64::max)),
         "-".into(),
     ]);
-    let _ = writeln!(
-        out,
-        "## Free-run simulation ({} test runs, {} diverged)\n\n{}",
-        id.simulations.len(),
-        div,
-        st.markdown()
-    );
-    tables.push(("simulation".into(), st));
+    (st, div)
+}
 
-    // Feedback designed on the identified model, run around the true plant. The sensor noise is
-    // the data's relative level applied to the step (the data's own level, relative to swings of
-    // tens of radians at Patm = 0, would bury a 0.5 rad step).
-    // A model the design cannot use is a finding of the report, not a failure of the demo.
-    let mut feedback_plot = None;
-    match feedback(
-        &plant,
-        &id.model,
-        truth.as_ref(),
-        o.tau,
-        o.noise * STEP,
-        o.seed,
-    ) {
-        Ok((text, table, plot)) => {
-            let _ = writeln!(out, "{text}");
-            tables.push(("feedback".into(), table));
-            feedback_plot = Some(plot);
-        }
-        Err(e) => {
-            let _ = writeln!(
-                out,
-                "## Feedback designed on the identified model\n\nNot designed: {e}.\n"
-            );
+/// `report.md`, every table as markdown and CSV, and the SVGs that were made.
+fn write_report(
+    dir: &std::path::Path,
+    out: &str,
+    tables: &[(String, Table)],
+    svgs: &[(&str, Option<String>)],
+) -> Result<()> {
+    write_file(dir, "report.md", out)?;
+    for (name, t) in tables {
+        write_file(dir, &format!("{name}.md"), &t.markdown())?;
+        write_file(dir, &format!("{name}.csv"), &t.csv())?;
+    }
+    for (name, svg) in svgs {
+        if let Some(p) = svg {
+            write_file(dir, name, p)?;
         }
     }
-    // The paper's closed-loop experiment: the d = 1 model in both laws, on the true plant.
-    let mut tracking_plot = None;
-    if let Some(m1) = &d1_model {
-        match paper_tracking(&plant, m1, o.seed) {
-            Ok((text, table, plot)) => {
-                let _ = writeln!(out, "{text}");
-                tables.push(("tracking".into(), table));
-                tracking_plot = Some(plot);
-            }
-            Err(e) => {
-                let _ = writeln!(
-                    out,
-                    "## The paper's closed-loop experiment\n\nNot run: {e}.\n"
-                );
-            }
-        }
-    }
-    let _ = writeln!(
-        out,
-        "Sample weighting: {}.\nTotal time {:.1} s.",
-        id.weighting,
-        t_all.elapsed().as_secs_f64()
-    );
-
-    if let Some(dir) = &o.out {
-        write_file(dir, "report.md", &out)?;
-        for (name, t) in &tables {
-            write_file(dir, &format!("{name}.md"), &t.markdown())?;
-            write_file(dir, &format!("{name}.csv"), &t.csv())?;
-        }
-        plots(dir, &id, &runs, split.test[0], o.tau)?;
-        if let Some(p) = &feedback_plot {
-            write_file(dir, "feedback_step.svg", p)?;
-        }
-        if let Some(p) = &tracking_plot {
-            write_file(dir, "tracking_profile_law.svg", p)?;
-        }
-    }
-    Ok(out)
+    Ok(())
 }
 
 /// Test profile of the fixed-order model against the true y''' (same sample mask as our labels).
