@@ -104,6 +104,108 @@ pub enum ObserverArg {
 }
 
 pub fn run(a: ControlArgs) -> Result<()> {
+    check_args(&a)?;
+    let model = Model::read(&a.model.to_string_lossy())?;
+    let tau = a.tau.or(model.tau).ok_or_else(|| {
+        Error::param(
+            "tau",
+            "the model file has no tau; give the controller's sampling period with --tau",
+        )
+    })?;
+    let mut o = DesignOptions::new(a.setpoint, tau);
+    o.bandwidth = a.bandwidth;
+    o.observer_speed = a.observer_speed;
+    let mut d = control::design(&model, &o)?;
+    if a.observer == ObserverArg::Chain {
+        d.l = control::chain_observer_gains(d.order, d.observer_speed * d.bandwidth);
+    }
+    let tracking = tracking_settings(&a, &d)?;
+    let plant_model = plant_model(&a, &model)?;
+    let (compiled, x0, u0) = control::model_at_rest(&plant_model, a.from, d.u_star)?;
+    let default_duration = match &tracking {
+        Some(tk) if a.reference.is_some() => tk.reference.end().max(10.0 * d.tau),
+        _ => control::default_duration(&d),
+    };
+    let scenario = Scenario {
+        duration: a.duration.unwrap_or(default_duration),
+        noise_sd: a.noise,
+        seed: a.seed,
+        u_limits: a.u_min.zip(a.u_max),
+    };
+    let plant = control::Plant {
+        system: &compiled,
+        output: 0,
+        x0,
+        u0,
+    };
+
+    let names = print_design(&a, &d)?;
+    if let Some(tk) = tracking {
+        return run_tracking(&a, &d, &plant, &scenario, &tk, &names);
+    }
+    // The design is printed before the loop runs: when the loop fails, it explains why.
+    let tr = control::run(&d, &plant, &scenario)?;
+    let m = control::metrics(&tr, &d, a.from)?;
+    let plant_name = a
+        .plant
+        .as_ref()
+        .map_or("the model itself".to_string(), |p| p.display().to_string());
+    outln!(
+        "step {} -> {} around {plant_name} (rest input {:.6e}), {} s, noise sd {}:",
+        short(a.from),
+        short(a.setpoint),
+        u0,
+        num4(scenario.duration),
+        short(a.noise)
+    )?;
+    let settling = if m.settling_time.is_nan() {
+        format!("none within the {} s run", num4(scenario.duration))
+    } else {
+        format!("{} s", num4(m.settling_time))
+    };
+    let rise = if m.rise_time.is_nan() {
+        "never".to_string()
+    } else {
+        format!("{} s", num4(m.rise_time))
+    };
+    outln!(
+        "rise time (10-90 %) {rise}, overshoot {:.2} %, settling (2 %) {settling}, final error {:.3} % of the step, input {:.4e}..{:.4e}, observer RMS error {:.3e}; largest difference from the designed response {:.2} % of the step",
+        m.overshoot,
+        m.final_error,
+        m.u_min,
+        m.u_max,
+        m.observer_rms,
+        m.design_deviation
+    )?;
+    // Around its own model and without noise the loop must do what it was designed for; where
+    // it strays from the designed response and does not settle, the sampling (or the model's
+    // order) breaks the design, and the figures above are not a controller to use: an error,
+    // with no files written. Following the design but unsettled is a short run.
+    let unsettled = m.settling_time.is_nan();
+    if a.plant.is_none() && a.noise == 0.0 && unsettled && m.design_deviation > DESIGN_STRAY {
+        return Err(diagnose_stray(&a, (&model, &o, &d), &plant, &scenario, &m));
+    }
+    if a.plant.is_none() && a.noise == 0.0 && unsettled {
+        eprintln!(
+            "note: the loop follows the designed response ({:.2} % off) but has not settled within the {} s run; give a longer --duration to see it settle",
+            m.design_deviation,
+            num4(scenario.duration)
+        );
+    }
+    if let Some(path) = &a.output {
+        write_trace(path, &tr, &names)?;
+        eprintln!("wrote {}", path.display());
+    }
+    if let Some(dir) = &a.report {
+        write_plots(dir, &d, &tr, a.from)?;
+        eprintln!("plots written to {}", dir.display());
+    }
+    Ok(())
+}
+
+/// Refuses output paths that would overwrite an input, and a step of no size or from a value
+/// that is not finite.
+fn check_args(a: &ControlArgs) -> Result<()> {
     let mut inputs = vec![a.model.as_path()];
     if let Some(p) = &a.plant {
         inputs.push(p.as_path());
@@ -126,22 +228,13 @@ pub fn run(a: ControlArgs) -> Result<()> {
             "the same as --setpoint: there is no step; give another starting output",
         ));
     }
-    let model = Model::read(&a.model.to_string_lossy())?;
-    let tau = a.tau.or(model.tau).ok_or_else(|| {
-        Error::param(
-            "tau",
-            "the model file has no tau; give the controller's sampling period with --tau",
-        )
-    })?;
-    let mut o = DesignOptions::new(a.setpoint, tau);
-    o.bandwidth = a.bandwidth;
-    o.observer_speed = a.observer_speed;
-    let mut d = control::design(&model, &o)?;
-    if a.observer == ObserverArg::Chain {
-        d.l = control::chain_observer_gains(d.order, d.observer_speed * d.bandwidth);
-    }
-    let tracking = tracking_settings(&a, &d)?;
-    let plant_model = match &a.plant {
+    Ok(())
+}
+
+/// The plant the loop runs around: `--plant`'s model (a SISO model of the same output and input
+/// names), else the design model itself.
+fn plant_model(a: &ControlArgs, model: &Model) -> Result<Model> {
+    Ok(match &a.plant {
         Some(p) => {
             let m = Model::read(&p.to_string_lossy())?;
             control::design::siso_order(&m).map_err(|e| match e {
@@ -166,25 +259,11 @@ pub fn run(a: ControlArgs) -> Result<()> {
             m
         }
         None => model.clone(),
-    };
-    let (compiled, x0, u0) = control::model_at_rest(&plant_model, a.from, d.u_star)?;
-    let default_duration = match &tracking {
-        Some(tk) if a.reference.is_some() => tk.reference.end().max(10.0 * d.tau),
-        _ => control::default_duration(&d),
-    };
-    let scenario = Scenario {
-        duration: a.duration.unwrap_or(default_duration),
-        noise_sd: a.noise,
-        seed: a.seed,
-        u_limits: a.u_min.zip(a.u_max),
-    };
-    let plant = control::Plant {
-        system: &compiled,
-        output: 0,
-        x0,
-        u0,
-    };
+    })
+}
 
+/// Prints the design (operating point, poles, gains) and returns the state names.
+fn print_design(a: &ControlArgs, d: &control::Design) -> Result<Vec<String>> {
     let y = &d.output;
     outln!(
         "# Feedback on {} ({} -> {y}, order {})",
@@ -235,126 +314,79 @@ pub fn run(a: ControlArgs) -> Result<()> {
         gains(&d.l)
     )?;
     outln!("")?;
-    if let Some(tk) = tracking {
-        return run_tracking(&a, &d, &plant, &scenario, &tk, &names);
+    Ok(names)
+}
+
+/// Why a noise-free loop around its own model strays from the design and does not settle, as
+/// the error to give: a faster sampling that is checked to work, a longer run that settles, or
+/// another bandwidth.
+fn diagnose_stray(
+    a: &ControlArgs,
+    (model, o, d): (&Model, &DesignOptions, &control::Design),
+    plant: &control::Plant,
+    scenario: &Scenario,
+    m: &control::StepMetrics,
+) -> Error {
+    // Suggest only a sampling period that is checked to work.
+    let works = |t: f64| -> bool {
+        let mut o2 = o.clone();
+        o2.tau = t;
+        let Ok(d2) = control::design(model, &o2) else {
+            return false;
+        };
+        // The same noise-free run as the failing one, at the other tau.
+        control::run(&d2, plant, scenario)
+            .and_then(|tr| control::metrics(&tr, &d2, a.from))
+            .is_ok_and(|m2| !m2.settling_time.is_nan() && m2.design_deviation <= DESIGN_STRAY)
+    };
+    let stray = |advice: String| {
+        Error::param(
+            "tau",
+            format!(
+                "around its own model the loop sampled every {} s does not settle within {} s ({:.1} % off the designed response): {advice}",
+                short(d.tau),
+                num4(scenario.duration),
+                m.design_deviation,
+            ),
+        )
+    };
+    if let Some(t) = (1..=6)
+        .map(|h| d.tau / f64::powi(2.0, h))
+        .find(|&t| works(t))
+    {
+        return stray(format!("sample faster (--tau {t:.3e} works)"));
     }
-    // The design is printed before the loop runs: when the loop fails, it explains why.
-    let tr = control::run(&d, &plant, &scenario)?;
-    let m = control::metrics(&tr, &d, a.from)?;
-    let plant_name = a
-        .plant
-        .as_ref()
-        .map_or("the model itself".to_string(), |p| p.display().to_string());
-    outln!(
-        "step {} -> {} around {plant_name} (rest input {:.6e}), {} s, noise sd {}:",
-        short(a.from),
-        short(a.setpoint),
-        u0,
-        num4(scenario.duration),
-        short(a.noise)
-    )?;
-    let settling = if m.settling_time.is_nan() {
-        format!("none within the {} s run", num4(scenario.duration))
-    } else {
-        format!("{} s", num4(m.settling_time))
-    };
-    let rise = if m.rise_time.is_nan() {
-        "never".to_string()
-    } else {
-        format!("{} s", num4(m.rise_time))
-    };
-    outln!(
-        "rise time (10-90 %) {rise}, overshoot {:.2} %, settling (2 %) {settling}, final error {:.3} % of the step, input {:.4e}..{:.4e}, observer RMS error {:.3e}; largest difference from the designed response {:.2} % of the step",
-        m.overshoot,
-        m.final_error,
-        m.u_min,
-        m.u_max,
-        m.observer_rms,
-        m.design_deviation
-    )?;
-    // Around its own model and without noise the loop must do what it was designed for; where
-    // it strays from the designed response and does not settle, the sampling (or the model's
-    // order) breaks the design, and the figures above are not a controller to use: an error,
-    // with no files written. Following the design but unsettled is a short run.
-    let unsettled = m.settling_time.is_nan();
-    if a.plant.is_none() && a.noise == 0.0 && unsettled && m.design_deviation > DESIGN_STRAY {
-        // Suggest only a sampling period that is checked to work.
-        let works = |t: f64| -> bool {
-            let mut o2 = o.clone();
-            o2.tau = t;
-            let Ok(d2) = control::design(&model, &o2) else {
-                return false;
+    // Sampling faster does not help. A nonlinear model can follow its linear design loosely
+    // and still settle, only later than the run (sized for the design) lasts: that asks
+    // for a longer --duration, not another bandwidth. Tried up to 16 times the run.
+    let longer = (1..=4)
+        .map(|k| scenario.duration * f64::powi(2.0, k))
+        .find_map(|dur| {
+            let long = Scenario {
+                duration: dur,
+                ..scenario.clone()
             };
-            // The same noise-free run as the failing one, at the other tau.
-            control::run(&d2, &plant, &scenario)
-                .and_then(|tr| control::metrics(&tr, &d2, a.from))
-                .is_ok_and(|m2| !m2.settling_time.is_nan() && m2.design_deviation <= DESIGN_STRAY)
-        };
-        let stray = |advice: String| {
-            Error::param(
-                "tau",
-                format!(
-                    "around its own model the loop sampled every {} s does not settle within {} s ({:.1} % off the designed response): {advice}",
-                    short(d.tau),
-                    num4(scenario.duration),
-                    m.design_deviation,
-                ),
-            )
-        };
-        if let Some(t) = (1..=6)
-            .map(|h| d.tau / f64::powi(2.0, h))
-            .find(|&t| works(t))
-        {
-            return Err(stray(format!("sample faster (--tau {t:.3e} works)")));
-        }
-        // Sampling faster does not help. A nonlinear model can follow its linear design loosely
-        // and still settle, only later than the run (sized for the design) lasts: that asks
-        // for a longer --duration, not another bandwidth. Tried up to 16 times the run.
-        let longer = (1..=4)
-            .map(|k| scenario.duration * f64::powi(2.0, k))
-            .find_map(|dur| {
-                let long = Scenario {
-                    duration: dur,
-                    ..scenario.clone()
-                };
-                let m2 = control::run(&d, &plant, &long)
-                    .and_then(|tr| control::metrics(&tr, &d, a.from))
-                    .ok()?;
-                (!m2.settling_time.is_nan()).then_some((dur, m2.settling_time))
-            });
-        if let Some((dur, settle)) = longer {
-            return Err(Error::param(
-                "duration",
-                format!(
-                    "around its own model the loop has not settled within the {} s run ({:.1} % off the linear design's response): it settles in {} s; give --duration {} or more",
-                    num4(scenario.duration),
-                    m.design_deviation,
-                    num4(settle),
-                    num4(dur)
-                ),
-            ));
-        }
-        return Err(stray(format!(
-            "sampling up to 64 times faster does not help: give another --bandwidth (now {})",
-            num4(d.bandwidth)
-        )));
-    }
-    if a.plant.is_none() && a.noise == 0.0 && unsettled {
-        eprintln!(
-            "note: the loop follows the designed response ({:.2} % off) but has not settled within the {} s run; give a longer --duration to see it settle",
-            m.design_deviation,
-            num4(scenario.duration)
+            let m2 = control::run(d, plant, &long)
+                .and_then(|tr| control::metrics(&tr, d, a.from))
+                .ok()?;
+            (!m2.settling_time.is_nan()).then_some((dur, m2.settling_time))
+        });
+    if let Some((dur, settle)) = longer {
+        return Error::param(
+            "duration",
+            format!(
+                "around its own model the loop has not settled within the {} s run ({:.1} % off the linear design's response): it settles in {} s; give --duration {} or more",
+                num4(scenario.duration),
+                m.design_deviation,
+                num4(settle),
+                num4(dur)
+            ),
         );
     }
-    if let Some(path) = &a.output {
-        write_trace(path, &tr, &names)?;
-        eprintln!("wrote {}", path.display());
-    }
-    if let Some(dir) = &a.report {
-        write_plots(dir, &d, &tr, a.from)?;
-        eprintln!("plots written to {}", dir.display());
-    }
-    Ok(())
+    stray(format!(
+        "sampling up to 64 times faster does not help: give another --bandwidth (now {})",
+        num4(d.bandwidth)
+    ))
 }
 
 /// Largest difference from the designed response, in % of the step, of a loop around its own
