@@ -622,13 +622,7 @@ impl Regression {
             &mut with
         };
         let nb = basis.len();
-        let name_of = |j: usize| {
-            if j < nb {
-                basis.name(j)
-            } else {
-                named[j - nb].name.clone()
-            }
-        };
+        let name_of = |j: usize| candidate_name(basis, named, j);
         if engine.n_candidates() != basis.len() + named.len() {
             return Err(Error::param(
                 "engine",
@@ -679,108 +673,18 @@ impl Regression {
         if self.fit_intercept {
             support.insert(0, 0);
         }
-        let sw = &path.sqrt_w;
-        let y_w: Vec<f64> = label.iter().zip(sw).map(|(y, s)| y * s).collect();
-        let floor = (self.rss_floor * path.y_norm).powi(2);
-        let mut pruned = Vec::new();
-        let mut cols: Vec<Vec<f64>> = engine
-            .columns(&support)?
-            .into_iter()
-            .map(|c| c.iter().zip(sw).map(|(x, s)| x * s).collect())
-            .collect();
-        let mut ls = select::least_squares(&cols, &y_w)?;
-        let mut score = select::ebic(n, ls.rss, support.len(), p, self.ebic_gamma, floor);
-        while self.prune && !support.is_empty() {
-            let k = support.len();
-            let best = (0..k)
-                .map(|t| {
-                    (
-                        t,
-                        select::ebic(
-                            n,
-                            ls.rss + ls.removal_cost[t],
-                            k - 1,
-                            p,
-                            self.ebic_gamma,
-                            floor,
-                        ),
-                    )
-                })
-                .fold(
-                    (usize::MAX, f64::INFINITY),
-                    |b, c| if c.1 < b.1 { c } else { b },
-                );
-            if best.0 == usize::MAX || best.1 >= score {
-                break;
-            }
-            let id = support.remove(best.0);
-            cols.remove(best.0);
-            pruned.push(name_of(id));
-            ls = select::least_squares(&cols, &y_w)?;
-            score = select::ebic(n, ls.rss, support.len(), p, self.ebic_gamma, floor);
-        }
+        let (ls, score, pruned) =
+            self.refit_pruned(engine, &mut support, (label, &path), (n, p), &name_of)?;
 
         let names = basis.names();
-        let term = |id: usize, c: f64| {
-            if id >= nb {
-                return Term {
-                    exponents: BTreeMap::new(),
-                    coefficient: c,
-                    index: Some(id),
-                    name: name_of(id),
-                    expression: Some(name_of(id)),
-                };
-            }
-            let e = basis.code(id).exponents(names.len());
-            Term {
-                exponents: e
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, k)| **k > 0)
-                    .map(|(v, k)| (names[v].clone(), *k))
-                    .collect(),
-                coefficient: c,
-                index: Some(id),
-                name: basis.name(id),
-                expression: None,
-            }
-        };
         let mut terms: Vec<Term> = support
             .iter()
             .zip(&ls.coef)
-            .map(|(&id, &c)| term(id, c))
+            .map(|(&id, &c)| term_of(basis, id, c, &name_of))
             .collect();
         terms.sort_by_key(|t| t.index);
 
-        let st = &path.store;
-        let path_points = path
-            .breakpoints
-            .iter()
-            .zip(&ebics)
-            .map(|(bp, e)| {
-                let mut intercept = path.y_mean;
-                let coefficients: Vec<f64> = bp
-                    .active
-                    .iter()
-                    .zip(&bp.coefs)
-                    .map(|(id, c)| {
-                        let q = st.position(*id).expect("stored");
-                        let b = c / st.norm[q];
-                        intercept -= b * st.mean[q];
-                        b
-                    })
-                    .collect();
-                PathPoint {
-                    alpha: bp.alpha,
-                    active: bp.active.iter().map(|j| name_of(*j)).collect(),
-                    active_index: bp.active.clone(),
-                    coefficients,
-                    intercept,
-                    rel_residual: bp.rel_residual,
-                    ebic: e.map(|v| v.0),
-                }
-            })
-            .collect();
+        let path_points = path_points(&path, &ebics, &name_of);
 
         let yy: f64 = path.y_norm * path.y_norm;
         let diagnostics = Diagnostics {
@@ -820,6 +724,61 @@ impl Regression {
             diagnostics,
             path: path_points,
         })
+    }
+
+    /// Least squares on `support` in the label's units (weighted), then, with pruning on, the
+    /// term whose removal lowers eBIC most removed while one does: the fit, its eBIC and the
+    /// names of the removed terms.
+    #[allow(clippy::type_complexity)]
+    fn refit_pruned(
+        &self,
+        engine: &mut dyn SweepEngine,
+        support: &mut Vec<usize>,
+        (label, path): (&[f64], &Path),
+        (n, p): (usize, usize),
+        name_of: &dyn Fn(usize) -> String,
+    ) -> Result<(select::LeastSquares, f64, Vec<String>)> {
+        let sw = &path.sqrt_w;
+        let y_w: Vec<f64> = label.iter().zip(sw).map(|(y, s)| y * s).collect();
+        let floor = (self.rss_floor * path.y_norm).powi(2);
+        let mut pruned = Vec::new();
+        let mut cols: Vec<Vec<f64>> = engine
+            .columns(support)?
+            .into_iter()
+            .map(|c| c.iter().zip(sw).map(|(x, s)| x * s).collect())
+            .collect();
+        let mut ls = select::least_squares(&cols, &y_w)?;
+        let mut score = select::ebic(n, ls.rss, support.len(), p, self.ebic_gamma, floor);
+        while self.prune && !support.is_empty() {
+            let k = support.len();
+            let best = (0..k)
+                .map(|t| {
+                    (
+                        t,
+                        select::ebic(
+                            n,
+                            ls.rss + ls.removal_cost[t],
+                            k - 1,
+                            p,
+                            self.ebic_gamma,
+                            floor,
+                        ),
+                    )
+                })
+                .fold(
+                    (usize::MAX, f64::INFINITY),
+                    |b, c| if c.1 < b.1 { c } else { b },
+                );
+            if best.0 == usize::MAX || best.1 >= score {
+                break;
+            }
+            let id = support.remove(best.0);
+            cols.remove(best.0);
+            pruned.push(name_of(id));
+            ls = select::least_squares(&cols, &y_w)?;
+            score = select::ebic(n, ls.rss, support.len(), p, self.ebic_gamma, floor);
+        }
+        Ok((ls, score, pruned))
     }
 }
 
@@ -906,4 +865,76 @@ fn unscale(model: &mut Model, basis: &Basis, pows: &[i32]) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The name of candidate `j`: a monomial of `basis`, or a named column after them.
+fn candidate_name(basis: &Basis, named: &[NamedColumn], j: usize) -> String {
+    if j < basis.len() {
+        basis.name(j)
+    } else {
+        named[j - basis.len()].name.clone()
+    }
+}
+
+/// Candidate `id` with coefficient `c` as a model term (a named column keeps its expression).
+fn term_of(basis: &Basis, id: usize, c: f64, name_of: &dyn Fn(usize) -> String) -> Term {
+    if id >= basis.len() {
+        return Term {
+            exponents: BTreeMap::new(),
+            coefficient: c,
+            index: Some(id),
+            name: name_of(id),
+            expression: Some(name_of(id)),
+        };
+    }
+    let names = basis.names();
+    let e = basis.code(id).exponents(names.len());
+    Term {
+        exponents: e
+            .iter()
+            .enumerate()
+            .filter(|(_, k)| **k > 0)
+            .map(|(v, k)| (names[v].clone(), *k))
+            .collect(),
+        coefficient: c,
+        index: Some(id),
+        name: basis.name(id),
+        expression: None,
+    }
+}
+
+/// The path's breakpoints in original units, each with its eBIC.
+fn path_points(
+    path: &Path,
+    ebics: &[Option<(f64, f64)>],
+    name_of: &dyn Fn(usize) -> String,
+) -> Vec<PathPoint> {
+    let st = &path.store;
+    path.breakpoints
+        .iter()
+        .zip(ebics)
+        .map(|(bp, e)| {
+            let mut intercept = path.y_mean;
+            let coefficients: Vec<f64> = bp
+                .active
+                .iter()
+                .zip(&bp.coefs)
+                .map(|(id, c)| {
+                    let q = st.position(*id).expect("stored");
+                    let b = c / st.norm[q];
+                    intercept -= b * st.mean[q];
+                    b
+                })
+                .collect();
+            PathPoint {
+                alpha: bp.alpha,
+                active: bp.active.iter().map(|j| name_of(*j)).collect(),
+                active_index: bp.active.clone(),
+                coefficients,
+                intercept,
+                rel_residual: bp.rel_residual,
+                ebic: e.map(|v| v.0),
+            }
+        })
+        .collect()
 }
