@@ -878,20 +878,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let n_nom = p.free.len();
     let n_eff = p.effects.len();
     let ncol = n_nom + n_eff;
-    let pb = Problem {
-        n_nom,
-        prior_sd: p
-            .free
-            .iter()
-            .map(|&j| {
-                o.confidence
-                    .get(&p.nom_text[j])
-                    .copied()
-                    .unwrap_or(o.default_confidence)
-                    * p.theta0[j].abs()
-            })
-            .collect(),
-    };
+    let pb = problem(&p, o);
     let blocks = block_grams(&p, &o.train);
     let late = block_is_late(&p, &o.train);
     let train = sum_grams(&blocks, ncol);
@@ -952,11 +939,6 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         dropped,
         ..
     } = selected;
-    let Bootstrapped {
-        aliases,
-        inclusion,
-        intervals,
-    } = boot;
     let idx_cand: Vec<usize> = (0..n_nom).chain(cand.iter().map(|&k| n_nom + k)).collect();
     let mut xc = cand_sol.delta.clone();
     xc.extend(&cand_sol.coef);
@@ -966,33 +948,16 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let sim_ret = mean_nrmse(&retuned_model, vruns, gate);
     let sim_cand = mean_nrmse(&cand_model, vruns, gate);
     let simulation_ratio = sim_cand / sim_nom.min(sim_ret);
-    let excl: Vec<bool> = intervals
-        .iter()
-        .map(|iv| iv[0] > 0.0 || iv[1] < 0.0)
-        .collect();
     let name_of = |k: usize| format!("{} {}", p.effects[k].family, p.effects[k].formula);
-    let (mut failed, dz) = effect_failure;
-    if failed.is_none() && residual_ratio > 0.9 {
-        failed = Some(format!(
-            "validation residual only {:.1} % below the better of nominal and re-tuned (< 10 %)",
-            100.0 * (1.0 - residual_ratio)
-        ));
-    }
-    // Written so that a NaN ratio (a model that cannot be simulated) fails the gate.
-    #[allow(clippy::neg_cmp_op_on_partial_ord)]
-    let sim_gate_fails = !(simulation_ratio <= 0.8);
-    if failed.is_none() && sim_gate_fails {
-        failed = Some(format!(
-            "validation free-run NRMSE {} vs {} nominal / {} re-tuned: {:.1} % lower (< 20 %)",
-            num(sim_cand),
-            num(sim_nom),
-            num(sim_ret),
-            100.0 * (1.0 - simulation_ratio)
-        ));
-    }
+    let (failed, dz) = effect_failure;
+    let failed = failed.or_else(|| gate_failure(residual_ratio, (sim_cand, sim_nom, sim_ret)));
     let gates = Gates {
-        inclusion: inclusion.clone(),
-        interval_excludes_zero: excl.clone(),
+        inclusion: boot.inclusion.clone(),
+        interval_excludes_zero: boot
+            .intervals
+            .iter()
+            .map(|iv| iv[0] > 0.0 || iv[1] < 0.0)
+            .collect(),
         residual_ratio,
         simulation_ratio,
         failed: failed.clone(),
@@ -1011,22 +976,13 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         verdict = "added";
         let refined = cand_model.clone();
         let c = coefficients(&refined);
-        for (i, &k) in cand.iter().enumerate() {
-            let e = &p.effects[k];
-            effects.push(FoundEffect {
-                family: e.family.clone(),
-                formula: e.formula.clone(),
-                coefficient: c[nt + i],
-                weak_coefficient: cand_sol.coef[i],
-                interval: intervals[i],
-                inclusion: inclusion[i],
-                aliases: aliases[i].iter().map(|&a| name_of(a)).collect(),
-                reading: reading(&e.family, c[nt + i], &p),
-                halves: dz.get(i).map_or([f64::NAN; 2], |z| [z.0, z.1]),
-                halves_z: dz.get(i).map_or(f64::NAN, |z| z.2),
-                simulation_share: sim_shares.get(i).copied(),
-            });
-        }
+        effects = found_effects(
+            &p,
+            (&cand, &cand_sol.coef, &c[nt..]),
+            &boot,
+            &dz,
+            &sim_shares,
+        );
         retuned = retuned_list(&p, &c[..nt], o);
         final_model = refined;
     } else if retune_ok {
@@ -1048,14 +1004,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         });
         final_model = nominal_model.clone();
     }
-    for r in runs.iter_mut() {
-        if let Some(sr) = p.simruns.iter().find(|s| s.id == r.run) {
-            let (rms, nr) = simulated(&final_model, sr, &report_opts)
-                .map_or((f64::INFINITY, f64::INFINITY), |s| rms_nrmse(&s, &sr.y[0]));
-            r.nrmse_final = Some(nr);
-            r.rms_final = Some(rms);
-        }
-    }
+    score_final(&mut runs, &p, &final_model, &report_opts);
     let nrmse_after = mean_nrmse(&final_model, &test_runs, &report_opts);
     Ok(Discovery {
         verdict: verdict.into(),
@@ -1074,6 +1023,96 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         nominal_model: Some(nominal_model),
         test_runs,
     })
+}
+
+/// The regression problem: the nominal's free coefficients with their prior standard deviations
+/// (each term's confidence times its magnitude).
+fn problem(p: &Prepared, o: &Options) -> Problem {
+    Problem {
+        n_nom: p.free.len(),
+        prior_sd: p
+            .free
+            .iter()
+            .map(|&j| {
+                o.confidence
+                    .get(&p.nom_text[j])
+                    .copied()
+                    .unwrap_or(o.default_confidence)
+                    * p.theta0[j].abs()
+            })
+            .collect(),
+    }
+}
+
+/// The residual and simulation gates on the validation runs: why the candidate fails them, if it
+/// does. `sims` are the validation free-run NRMSEs of the candidate, the nominal and the re-tuned
+/// nominal.
+fn gate_failure(
+    residual_ratio: f64,
+    (sim_cand, sim_nom, sim_ret): (f64, f64, f64),
+) -> Option<String> {
+    if residual_ratio > 0.9 {
+        return Some(format!(
+            "validation residual only {:.1} % below the better of nominal and re-tuned (< 10 %)",
+            100.0 * (1.0 - residual_ratio)
+        ));
+    }
+    let simulation_ratio = sim_cand / sim_nom.min(sim_ret);
+    // Written so that a NaN ratio (a model that cannot be simulated) fails the gate.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    let sim_gate_fails = !(simulation_ratio <= 0.8);
+    sim_gate_fails.then(|| {
+        format!(
+            "validation free-run NRMSE {} vs {} nominal / {} re-tuned: {:.1} % lower (< 20 %)",
+            num(sim_cand),
+            num(sim_nom),
+            num(sim_ret),
+            100.0 * (1.0 - simulation_ratio)
+        )
+    })
+}
+
+/// The added effects as reported: `cand` (effect indices) with their weak-form and refined
+/// coefficients, bootstrap figures, half-record checks and simulation shares.
+fn found_effects(
+    p: &Prepared,
+    (cand, weak, refined): (&[usize], &[f64], &[f64]),
+    boot: &Bootstrapped,
+    dz: &[Halves],
+    sim_shares: &[f64],
+) -> Vec<FoundEffect> {
+    let name_of = |k: usize| format!("{} {}", p.effects[k].family, p.effects[k].formula);
+    cand.iter()
+        .enumerate()
+        .map(|(i, &k)| {
+            let e = &p.effects[k];
+            FoundEffect {
+                family: e.family.clone(),
+                formula: e.formula.clone(),
+                coefficient: refined[i],
+                weak_coefficient: weak[i],
+                interval: boot.intervals[i],
+                inclusion: boot.inclusion[i],
+                aliases: boot.aliases[i].iter().map(|&a| name_of(a)).collect(),
+                reading: reading(&e.family, refined[i], p),
+                halves: dz.get(i).map_or([f64::NAN; 2], |z| [z.0, z.1]),
+                halves_z: dz.get(i).map_or(f64::NAN, |z| z.2),
+                simulation_share: sim_shares.get(i).copied(),
+            }
+        })
+        .collect()
+}
+
+/// Each run's RMS and NRMSE under the final model.
+fn score_final(runs: &mut [RunScore], p: &Prepared, model: &Model, opts: &SimOptions) {
+    for r in runs.iter_mut() {
+        if let Some(sr) = p.simruns.iter().find(|s| s.id == r.run) {
+            let (rms, nr) = simulated(model, sr, opts)
+                .map_or((f64::INFINITY, f64::INFINITY), |s| rms_nrmse(&s, &sr.y[0]));
+            r.nrmse_final = Some(nr);
+            r.rms_final = Some(rms);
+        }
+    }
 }
 
 /// The coefficients of a one-output model in term order.
