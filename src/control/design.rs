@@ -357,95 +357,12 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
     o.validate()?;
     let n = siso_order(model)?;
     let u_star = steady_input(model, o.setpoint)?;
-    let c = model.compile()?;
-    let mut x = vec![0.0; n];
-    x[0] = o.setpoint;
-    let (mut jx, mut ju) = (vec![0.0; n * n], vec![0.0; n]);
-    c.jacobians_unchecked(&x, &[u_star], &mut jx, &mut ju);
-    let a = DMatrix::from_row_slice(n, n, &jx);
-    let b = DVector::from_column_slice(&ju);
-    if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
-        return Err(Error::InvalidData(
-            "the model's Jacobian at the setpoint is not finite".into(),
-        ));
-    }
+    let (a, b) = linearised(model, o.setpoint, u_star, n)?;
     let open_loop = eigenvalues(&a)?;
-    let w = match o.bandwidth {
-        Some(w) => w,
-        None => {
-            let mags: Vec<f64> = open_loop
-                .iter()
-                .map(|(r, i)| r.hypot(*i))
-                .filter(|m| *m > 0.0)
-                .collect();
-            if mags.is_empty() {
-                return Err(Error::param(
-                    "bandwidth",
-                    "the model's open-loop eigenvalues are all 0 at the setpoint; give a bandwidth",
-                ));
-            }
-            (mags.iter().map(|m| m.ln()).sum::<f64>() / mags.len() as f64).exp()
-        }
-    };
-    // The loop runs at most MAX_SAMPLES samples, and its default length is settle_units / w:
-    // a slower bandwidth could never be shown settling.
-    let slowest = super::closed_loop::settle_units(n) / (super::MAX_SAMPLES as f64 * o.tau);
-    if w < slowest {
-        return Err(Error::param(
-            "bandwidth",
-            format!(
-                "{w:e} rad/s is too slow for a controller sampled every {} s (settling would take over {} samples); give a bandwidth above {slowest:.3e} rad/s",
-                o.tau,
-                super::MAX_SAMPLES
-            ),
-        ));
-    }
+    let w = bandwidth(o, &open_loop, n)?;
     let ctrl = placed_poles(&open_loop, w);
     let obs = placed_poles(&open_loop, o.observer_speed * w);
-    // The poles the design moves must be slow against the sampling: the controller updates once
-    // per tau, and a pole at -p holds its value over a sample only while p tau is small. (Fast
-    // stable poles it keeps are the model's own, integrated as such.)
-    let fastest_moved = ctrl
-        .iter()
-        .chain(&obs)
-        .filter(|(_, moved)| *moved)
-        .map(|((re, im), _)| re.hypot(*im))
-        .fold(0.0, f64::max);
-    if fastest_moved * o.tau > 0.5 {
-        let own = ctrl
-            .iter()
-            .chain(&obs)
-            .any(|((re, im), moved)| *moved && re.hypot(*im) > o.observer_speed * w);
-        let fix = if own && 0.5 / fastest_moved < crate::records::TAU_MIN {
-            format!(
-                "the model has an unstable or lightly damped mode at {} rad/s that feedback must move, faster than any sampling (tau >= {:e} s) can follow; check the model's coefficients",
-                crate::util::num4(fastest_moved),
-                crate::records::TAU_MIN
-            )
-        } else if own {
-            format!(
-                "the model has a fast unstable or lightly damped mode at {} rad/s that feedback must move; sample faster: give a tau below {:.3e} s",
-                crate::util::num4(fastest_moved),
-                0.5 / fastest_moved
-            )
-        } else {
-            format!(
-                "{} puts the observer poles at {} rad/s, too fast for a controller sampled every {} s; give a bandwidth below {} rad/s",
-                if o.bandwidth.is_some() {
-                    format!("{} rad/s", crate::util::num4(w))
-                } else {
-                    format!(
-                        "the default bandwidth {} rad/s (the geometric mean of the model's pole magnitudes)",
-                        crate::util::num4(w)
-                    )
-                },
-                crate::util::num4(o.observer_speed * w),
-                o.tau,
-                crate::util::num4(0.5 / (o.tau * o.observer_speed))
-            )
-        };
-        return Err(Error::param(if own { "tau" } else { "bandwidth" }, fix));
-    }
+    check_moved_poles(o, w, (&ctrl, &obs))?;
 
     // Scaled time t' = w t and states y^(k) / w^k keep the matrices of order one (a throttle's
     // companion row holds 1e6 next to 1). The open loop with integral action (q_s' = y - r in
@@ -479,15 +396,7 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
     }
     let worst = placement_residual(&acl_s, &ctrl_s).max(placement_residual(&aobs_s, &obs_s));
     if worst.is_nan() || worst > 1e-6 {
-        let mags = open_loop
-            .iter()
-            .map(|(r, i)| r.hypot(*i))
-            .filter(|v| *v > 0.0);
-        let (lo, hi) = mags.fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
-        let decades = if hi > 0.0 { (hi / lo).log10() } else { 0.0 };
-        return Err(Error::InvalidData(format!(
-            "pole placement is numerically unreliable for this model (relative residual {worst:.1e}; its modes spread over {decades:.1} decades): identify a lower order or give a bandwidth nearer the plant's poles"
-        )));
+        return Err(unreliable_placement(&open_loop, worst));
     }
     if k.iter().chain(&l).chain([&k_i]).any(|v| !v.is_finite()) {
         return Err(Error::InvalidData(
@@ -501,33 +410,7 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
         k: k_aug.as_slice(),
         l: l_s.as_slice(),
     };
-    let radius = sampled_radius(&a_s, &b_aug.rows(0, n).into_owned(), &gains, w * o.tau)?;
-    if radius.is_nan() || radius >= 1.0 {
-        // Suggested: a quarter of the longest tau / 2^h at which the sampled loop is stable (at
-        // the limit itself it barely decays: an order-7 loop at its limit was 21 % off its
-        // design, at a quarter of it 0.7 %).
-        let stable_tau = (1..=20)
-            .map(|h| o.tau / 2f64.powi(h))
-            .find(|&t| {
-                sampled_radius(&a_s, &b_aug.rows(0, n).into_owned(), &gains, w * t)
-                    .is_ok_and(|r| r < 1.0)
-            })
-            .map(|t| t / 4.0);
-        let fix = match stable_tau {
-            Some(t) if t >= crate::records::TAU_MIN => {
-                format!("give a tau of {t:.3e} s or less (a quarter of the longest that is stable)")
-            }
-            _ => "no sampling period holds it: give another bandwidth or identify a lower order"
-                .into(),
-        };
-        return Err(Error::param(
-            "tau",
-            format!(
-                "the loop sampled every {} s is unstable (one sample multiplies a deviation by up to {radius:.3}; the continuous design is stable, holding the input and measurement over a sample is not, at order {n}): {fix}",
-                o.tau
-            ),
-        ));
-    }
+    check_sampled_loop(&a_s, &b_aug.rows(0, n).into_owned(), &gains, (w, o.tau), n)?;
 
     Ok(Design {
         output: model.outputs[0].name.clone(),
@@ -554,4 +437,168 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
             .collect(),
         model: model.clone(),
     })
+}
+
+/// The model's Jacobians at rest at `setpoint` under `u_star` (`n` states); refuses one that
+/// is not finite.
+fn linearised(
+    model: &Model,
+    setpoint: f64,
+    u_star: f64,
+    n: usize,
+) -> Result<(DMatrix<f64>, DVector<f64>)> {
+    let c = model.compile()?;
+    let mut x = vec![0.0; n];
+    x[0] = setpoint;
+    let (mut jx, mut ju) = (vec![0.0; n * n], vec![0.0; n]);
+    c.jacobians_unchecked(&x, &[u_star], &mut jx, &mut ju);
+    let a = DMatrix::from_row_slice(n, n, &jx);
+    let b = DVector::from_column_slice(&ju);
+    if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+        return Err(Error::InvalidData(
+            "the model's Jacobian at the setpoint is not finite".into(),
+        ));
+    }
+    Ok((a, b))
+}
+
+/// The design bandwidth: the one given, else the geometric mean of the open-loop pole
+/// magnitudes; refuses one too slow to be shown settling within the loop's longest run.
+fn bandwidth(o: &DesignOptions, open_loop: &[(f64, f64)], n: usize) -> Result<f64> {
+    let w = match o.bandwidth {
+        Some(w) => w,
+        None => {
+            let mags: Vec<f64> = open_loop
+                .iter()
+                .map(|(r, i)| r.hypot(*i))
+                .filter(|m| *m > 0.0)
+                .collect();
+            if mags.is_empty() {
+                return Err(Error::param(
+                    "bandwidth",
+                    "the model's open-loop eigenvalues are all 0 at the setpoint; give a bandwidth",
+                ));
+            }
+            (mags.iter().map(|m| m.ln()).sum::<f64>() / mags.len() as f64).exp()
+        }
+    };
+    // The loop runs at most MAX_SAMPLES samples, and its default length is settle_units / w:
+    // a slower bandwidth could never be shown settling.
+    let slowest = super::closed_loop::settle_units(n) / (super::MAX_SAMPLES as f64 * o.tau);
+    if w < slowest {
+        return Err(Error::param(
+            "bandwidth",
+            format!(
+                "{w:e} rad/s is too slow for a controller sampled every {} s (settling would take over {} samples); give a bandwidth above {slowest:.3e} rad/s",
+                o.tau,
+                super::MAX_SAMPLES
+            ),
+        ));
+    }
+    Ok(w)
+}
+
+/// Refuses poles the design moves that are fast against the sampling (the controller updates
+/// once per tau), saying whether the model's own mode or the bandwidth asks for them.
+#[allow(clippy::type_complexity)]
+fn check_moved_poles(
+    o: &DesignOptions,
+    w: f64,
+    (ctrl, obs): (&[((f64, f64), bool)], &[((f64, f64), bool)]),
+) -> Result<()> {
+    // The poles the design moves must be slow against the sampling: the controller updates once
+    // per tau, and a pole at -p holds its value over a sample only while p tau is small. (Fast
+    // stable poles it keeps are the model's own, integrated as such.)
+    let fastest_moved = ctrl
+        .iter()
+        .chain(obs)
+        .filter(|(_, moved)| *moved)
+        .map(|((re, im), _)| re.hypot(*im))
+        .fold(0.0, f64::max);
+    if fastest_moved * o.tau > 0.5 {
+        let own = ctrl
+            .iter()
+            .chain(obs)
+            .any(|((re, im), moved)| *moved && re.hypot(*im) > o.observer_speed * w);
+        let fix = if own && 0.5 / fastest_moved < crate::records::TAU_MIN {
+            format!(
+                "the model has an unstable or lightly damped mode at {} rad/s that feedback must move, faster than any sampling (tau >= {:e} s) can follow; check the model's coefficients",
+                crate::util::num4(fastest_moved),
+                crate::records::TAU_MIN
+            )
+        } else if own {
+            format!(
+                "the model has a fast unstable or lightly damped mode at {} rad/s that feedback must move; sample faster: give a tau below {:.3e} s",
+                crate::util::num4(fastest_moved),
+                0.5 / fastest_moved
+            )
+        } else {
+            format!(
+                "{} puts the observer poles at {} rad/s, too fast for a controller sampled every {} s; give a bandwidth below {} rad/s",
+                if o.bandwidth.is_some() {
+                    format!("{} rad/s", crate::util::num4(w))
+                } else {
+                    format!(
+                        "the default bandwidth {} rad/s (the geometric mean of the model's pole magnitudes)",
+                        crate::util::num4(w)
+                    )
+                },
+                crate::util::num4(o.observer_speed * w),
+                o.tau,
+                crate::util::num4(0.5 / (o.tau * o.observer_speed))
+            )
+        };
+        return Err(Error::param(if own { "tau" } else { "bandwidth" }, fix));
+    }
+    Ok(())
+}
+
+/// The error for a placement whose poles are off by `worst` (relative), with how many decades
+/// the model's modes spread over.
+fn unreliable_placement(open_loop: &[(f64, f64)], worst: f64) -> Error {
+    let mags = open_loop
+        .iter()
+        .map(|(r, i)| r.hypot(*i))
+        .filter(|v| *v > 0.0);
+    let (lo, hi) = mags.fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
+    let decades = if hi > 0.0 { (hi / lo).log10() } else { 0.0 };
+    Error::InvalidData(format!(
+        "pole placement is numerically unreliable for this model (relative residual {worst:.1e}; its modes spread over {decades:.1} decades): identify a lower order or give a bandwidth nearer the plant's poles"
+    ))
+}
+
+/// Refuses gains whose loop, holding the input and measurement over each sample of `tau`, is
+/// unstable (spectral radius of one sample at least 1), suggesting a tau that holds it.
+fn check_sampled_loop(
+    a_s: &DMatrix<f64>,
+    b_s: &DVector<f64>,
+    gains: &SampledGains,
+    (w, tau): (f64, f64),
+    n: usize,
+) -> Result<()> {
+    let radius = sampled_radius(a_s, b_s, gains, w * tau)?;
+    if radius.is_nan() || radius >= 1.0 {
+        // Suggested: a quarter of the longest tau / 2^h at which the sampled loop is stable (at
+        // the limit itself it barely decays: an order-7 loop at its limit was 21 % off its
+        // design, at a quarter of it 0.7 %).
+        let stable_tau = (1..=20)
+            .map(|h| tau / 2f64.powi(h))
+            .find(|&t| sampled_radius(a_s, b_s, gains, w * t).is_ok_and(|r| r < 1.0))
+            .map(|t| t / 4.0);
+        let fix = match stable_tau {
+            Some(t) if t >= crate::records::TAU_MIN => {
+                format!("give a tau of {t:.3e} s or less (a quarter of the longest that is stable)")
+            }
+            _ => "no sampling period holds it: give another bandwidth or identify a lower order"
+                .into(),
+        };
+        return Err(Error::param(
+            "tau",
+            format!(
+                "the loop sampled every {} s is unstable (one sample multiplies a deviation by up to {radius:.3}; the continuous design is stable, holding the input and measurement over a sample is not, at order {n}): {fix}",
+                tau
+            ),
+        ));
+    }
+    Ok(())
 }
