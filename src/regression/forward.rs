@@ -89,28 +89,8 @@ pub(super) fn forward_path(
             path.stop = StopReason::NoImprovement;
             break;
         }
-        if step >= opts.max_steps {
-            path.stop = StopReason::MaxSteps;
-            break;
-        }
-        if active.len() >= opts.max_terms {
-            path.stop = StopReason::MaxTerms;
-            break;
-        }
-        if active.len() + 2 > n {
-            path.stop = StopReason::SampleLimit;
-            break;
-        }
-        if rel < 1e-12 {
-            path.stop = StopReason::ExactFit;
-            break;
-        }
-        if alpha <= opts.alpha_min {
-            path.stop = StopReason::AlphaMin;
-            break;
-        }
-        if opts.epsilon > 0.0 && step > 0 && prev_rel - rel < opts.epsilon {
-            path.stop = StopReason::Relevance;
+        if let Some(reason) = stop_reason(opts, (step, active.len(), n), (rel, prev_rel, alpha)) {
+            path.stop = reason;
             break;
         }
         prev_rel = rel;
@@ -136,23 +116,7 @@ pub(super) fn forward_path(
                 break;
             }
             let (xt, m, s) = sd.exact_column(j)?;
-            let mut v = xt.clone();
-            let mut coef_on_q = vec![0.0; q.len()];
-            // Gram-Schmidt, repeated once when the first pass cancelled most of the column
-            // (Kahan's "twice is enough"; otherwise one pass is already orthogonal to rounding).
-            let mut before = 1.0;
-            for _ in 0..2 {
-                for (i, qi) in q.iter().enumerate() {
-                    let a = dot(qi, &v);
-                    coef_on_q[i] += a;
-                    v.iter_mut().zip(qi).for_each(|(x, b)| *x -= a * b);
-                }
-                let after = dot(&v, &v);
-                if after > 0.5 * before {
-                    break;
-                }
-                before = after;
-            }
+            let (v, coef_on_q) = orthogonalise(&q, &xt);
             let d2 = dot(&v, &v);
             let cj = dot(&xt, &r);
             if !(d2 > tol2) {
@@ -205,6 +169,52 @@ pub(super) fn forward_path(
     }
     path.sweeps = sd.sweeps;
     Ok(path)
+}
+
+/// Why a forward path ends at breakpoint `step` with `active` terms of `n` samples, residual
+/// `rel` (`prev_rel` at the last breakpoint) and largest inactive correlation `alpha`, if it does.
+fn stop_reason(
+    opts: &PathOptions,
+    (step, active, n): (usize, usize, usize),
+    (rel, prev_rel, alpha): (f64, f64, f64),
+) -> Option<StopReason> {
+    if step >= opts.max_steps {
+        Some(StopReason::MaxSteps)
+    } else if active >= opts.max_terms {
+        Some(StopReason::MaxTerms)
+    } else if active + 2 > n {
+        Some(StopReason::SampleLimit)
+    } else if rel < 1e-12 {
+        Some(StopReason::ExactFit)
+    } else if alpha <= opts.alpha_min {
+        Some(StopReason::AlphaMin)
+    } else if opts.epsilon > 0.0 && step > 0 && prev_rel - rel < opts.epsilon {
+        Some(StopReason::Relevance)
+    } else {
+        None
+    }
+}
+
+/// Column `xt` less its projection on the orthonormal `q`, and its coefficients on them.
+/// Gram-Schmidt, repeated once when the first pass cancelled most of the column (Kahan's
+/// "twice is enough"; otherwise one pass is already orthogonal to rounding).
+fn orthogonalise(q: &[Vec<f64>], xt: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let mut v = xt.to_vec();
+    let mut coef_on_q = vec![0.0; q.len()];
+    let mut before = 1.0;
+    for _ in 0..2 {
+        for (i, qi) in q.iter().enumerate() {
+            let a = dot(qi, &v);
+            coef_on_q[i] += a;
+            v.iter_mut().zip(qi).for_each(|(x, b)| *x -= a * b);
+        }
+        let after = dot(&v, &v);
+        if after > 0.5 * before {
+            break;
+        }
+        before = after;
+    }
+    (v, coef_on_q)
 }
 
 /// Solves `R b = z` where row k of `rmat` holds the coefficients of active column k on
