@@ -312,6 +312,85 @@ impl ErrorSink {
     }
 }
 
+/// One [`Window`] per span of candidates: its parameters and the bind groups of its sweep
+/// (`sweep_bufs`: z, v, recipe, cand, mean, partial, after the parameters) and finalize passes
+/// (the partial sums and its slice of `out_buf`).
+fn make_windows(
+    device: &wgpu::Device,
+    (spans, n_s, block_samples, n_blocks, window): (&[(usize, usize)], usize, usize, usize, usize),
+    (sweep_bgl, finalize_bgl): (&wgpu::BindGroupLayout, &wgpu::BindGroupLayout),
+    sweep_bufs: [&wgpu::Buffer; 6],
+    out_buf: &wgpu::Buffer,
+) -> Vec<Window> {
+    // Bind groups list their resources in binding order: binding k is resources[k].
+    let bind =
+        |label: &str, layout: &wgpu::BindGroupLayout, resources: Vec<wgpu::BindingResource<'_>>| {
+            let entries: Vec<wgpu::BindGroupEntry> = resources
+                .into_iter()
+                .enumerate()
+                .map(|(k, resource)| wgpu::BindGroupEntry {
+                    binding: k as u32,
+                    resource,
+                })
+                .collect();
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some(label),
+                layout,
+                entries: &entries,
+            })
+        };
+    spans
+        .iter()
+        .map(|&(start, len)| {
+            let params: [u32; 8] = [
+                start as u32,
+                len as u32,
+                n_s as u32,
+                block_samples as u32,
+                n_blocks as u32,
+                window as u32,
+                // `zero`: the shaders' opaque 0 that keeps Kahan's compensation alive.
+                0,
+                0,
+            ];
+            let pbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some("params"),
+                contents: bytemuck::cast_slice(&params),
+                usage: wgpu::BufferUsages::UNIFORM,
+            });
+            let sweep_bg = bind(
+                "sweep",
+                sweep_bgl,
+                std::iter::once(&pbuf)
+                    .chain(sweep_bufs)
+                    .map(|b| b.as_entire_binding())
+                    .collect(),
+            );
+            // The finalize pass writes this window's slice of the output only.
+            let out_slice = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: out_buf,
+                offset: (start * 8) as u64,
+                size: wgpu::BufferSize::new((len * 8) as u64),
+            });
+            let finalize_bg = bind(
+                "finalize",
+                finalize_bgl,
+                vec![
+                    pbuf.as_entire_binding(),
+                    sweep_bufs[5].as_entire_binding(),
+                    out_slice,
+                ],
+            );
+            Window {
+                start,
+                len,
+                sweep_bg,
+                finalize_bg,
+            }
+        })
+        .collect()
+}
+
 struct Window {
     start: usize,
     len: usize,
@@ -908,82 +987,20 @@ impl GpuEngine {
             finalize_pipe,
         } = Pipelines::new(&device, &plan, n_z, &options);
 
-        // Bind groups list their resources in binding order: binding k is resources[k].
-        let bind = |label: &str,
-                    layout: &wgpu::BindGroupLayout,
-                    resources: Vec<wgpu::BindingResource<'_>>| {
-            let entries: Vec<wgpu::BindGroupEntry> = resources
-                .into_iter()
-                .enumerate()
-                .map(|(k, resource)| wgpu::BindGroupEntry {
-                    binding: k as u32,
-                    resource,
-                })
-                .collect();
-            device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some(label),
-                layout,
-                entries: &entries,
-            })
-        };
-        let windows: Vec<Window> = spans
-            .iter()
-            .map(|&(start, len)| {
-                let params: [u32; 8] = [
-                    start as u32,
-                    len as u32,
-                    n_s as u32,
-                    block_samples as u32,
-                    n_blocks as u32,
-                    window as u32,
-                    // `zero`: the shaders' opaque 0 that keeps Kahan's compensation alive.
-                    0,
-                    0,
-                ];
-                let pbuf = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("params"),
-                    contents: bytemuck::cast_slice(&params),
-                    usage: wgpu::BufferUsages::UNIFORM,
-                });
-                let sweep_bg = bind(
-                    "sweep",
-                    &sweep_bgl,
-                    [
-                        &pbuf,
-                        &z_buf,
-                        &v_buf,
-                        &recipe_buf,
-                        &cand_buf,
-                        &mean_buf,
-                        &partial_buf,
-                    ]
-                    .into_iter()
-                    .map(|b| b.as_entire_binding())
-                    .collect(),
-                );
-                // The finalize pass writes this window's slice of the output only.
-                let out_slice = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
-                    buffer: &out_buf,
-                    offset: (start * 8) as u64,
-                    size: wgpu::BufferSize::new((len * 8) as u64),
-                });
-                let finalize_bg = bind(
-                    "finalize",
-                    &finalize_bgl,
-                    vec![
-                        pbuf.as_entire_binding(),
-                        partial_buf.as_entire_binding(),
-                        out_slice,
-                    ],
-                );
-                Window {
-                    start,
-                    len,
-                    sweep_bg,
-                    finalize_bg,
-                }
-            })
-            .collect();
+        let windows = make_windows(
+            &device,
+            (spans, n_s, block_samples, n_blocks, window),
+            (&sweep_bgl, &finalize_bgl),
+            [
+                &z_buf,
+                &v_buf,
+                &recipe_buf,
+                &cand_buf,
+                &mean_buf,
+                &partial_buf,
+            ],
+            &out_buf,
+        );
 
         let verr = pollster::block_on(val.pop());
         let merr = pollster::block_on(oom.pop());
