@@ -330,83 +330,139 @@ pub fn differentiate_runs(
         d.h = h;
         d.noise_sd = fit.sigma2.sqrt();
     }
-    let mut levels: Vec<f64> = if opts.adaptive {
-        LADDER
-            .iter()
-            .filter(|&&o| o >= 0.0 || opts.smooth_window > 0.0)
-            .map(|o| h * 2f64.powf(*o))
-            .filter(|&l| l == h || l <= H_MAX)
-            .collect()
-    } else {
-        vec![h]
-    };
-    levels.dedup();
-
-    // Covariances per (level, run length), shared by all runs of that length.
-    let mut lengths: Vec<usize> = live_y.iter().map(|y| y.len()).collect();
-    lengths.sort_unstable();
-    lengths.dedup();
-    let cov_for = |hl: f64, lambda: f64| -> Vec<(usize, Cov)> {
-        let d = statespace::discretise(m, hl, lambda);
-        lengths
-            .iter()
-            .map(|&n| (n, Cov::new(&d, n, true)))
-            .collect()
-    };
-    let pick = |covs: &'_ [(usize, Cov)], n: usize| -> usize {
-        covs.iter().position(|(l, _)| *l == n).unwrap()
-    };
-    let level_covs: Vec<Vec<(usize, Cov)>> = levels.iter().map(|&hl| cov_for(hl, 0.0)).collect();
-    let end_covs = opts.end_blend.then(|| cov_for(h, opts.end_lambda));
-    let end_sigma2 = opts
-        .end_blend
-        .then(|| tune::evaluate(m, h, opts.end_lambda, &tune_y).sigma2);
-    let end_width = (1.0 / h).max(2.0);
-    // Held-out check of the end prior (see `end_prior_holds`): round(1/h) samples at each end,
-    // none when fewer than the states (too few to overrule the prior); the chain and the
-    // stationary prior's filters on each run length less its held-out end.
-    let held_out = |n: usize| -> Option<usize> {
-        let w = ((1.0 / h).round() as usize).min(n / 8).max(1);
-        (opts.end_check && w >= m.max(5) && n as f64 > END_RUN_WIDTHS * end_width).then_some(w)
-    };
-    let end_check: Vec<(usize, Cov, Cov)> = match end_sigma2 {
-        Some(_) => {
-            let chain = statespace::discretise(m, h, 0.0);
-            let stationary = statespace::discretise(m, h, opts.end_lambda);
-            lengths
-                .iter()
-                .filter_map(|&n| {
-                    let k = n - held_out(n)?;
-                    Some((
-                        n,
-                        Cov::new(&chain, k, false),
-                        Cov::new(&stationary, k, false),
-                    ))
-                })
-                .collect()
-        }
-        None => Vec::new(),
-    };
-
+    let blend = Blend::new((m, h, fit.sigma2), (tau, max_order), opts, &live_y, &tune_y);
     for (li, &r) in live.iter().enumerate() {
         let y = live_y[li];
-        let n = y.len();
+        let (mut mean, mut second) = blend.levels(y);
+        blend.ends(y, &mut mean, &mut second);
+        blend.finish(&mut out[r], y, mean, &second, means[r]);
+    }
+    Ok(out)
+}
+
+/// The covariances of `covs` for runs of length `n` (every live run's length is there).
+fn pick(covs: &[(usize, Cov)], n: usize) -> usize {
+    covs.iter().position(|(l, _)| *l == n).unwrap()
+}
+
+/// What every live run is smoothed with: the smoothing levels and their covariances per run
+/// length, and the stationary end prior with its held-out check (see the module docs).
+struct Blend<'a> {
+    m: usize,
+    h: f64,
+    sigma2: f64,
+    tau: f64,
+    max_order: usize,
+    opts: &'a DerivativeOptions,
+    levels: Vec<f64>,
+    level_covs: Vec<Vec<(usize, Cov)>>,
+    end_covs: Option<Vec<(usize, Cov)>>,
+    end_sigma2: Option<f64>,
+    end_width: f64,
+    end_check: Vec<(usize, Cov, Cov)>,
+}
+
+impl<'a> Blend<'a> {
+    fn new(
+        (m, h, sigma2): (usize, f64, f64),
+        (tau, max_order): (f64, usize),
+        opts: &'a DerivativeOptions,
+        live_y: &[&[f64]],
+        tune_y: &[&[f64]],
+    ) -> Blend<'a> {
+        let mut levels: Vec<f64> = if opts.adaptive {
+            LADDER
+                .iter()
+                .filter(|&&o| o >= 0.0 || opts.smooth_window > 0.0)
+                .map(|o| h * 2f64.powf(*o))
+                .filter(|&l| l == h || l <= H_MAX)
+                .collect()
+        } else {
+            vec![h]
+        };
+        levels.dedup();
+        // Covariances per (level, run length), shared by all runs of that length.
+        let mut lengths: Vec<usize> = live_y.iter().map(|y| y.len()).collect();
+        lengths.sort_unstable();
+        lengths.dedup();
+        let cov_for = |hl: f64, lambda: f64| -> Vec<(usize, Cov)> {
+            let d = statespace::discretise(m, hl, lambda);
+            lengths
+                .iter()
+                .map(|&n| (n, Cov::new(&d, n, true)))
+                .collect()
+        };
+        let level_covs: Vec<Vec<(usize, Cov)>> =
+            levels.iter().map(|&hl| cov_for(hl, 0.0)).collect();
+        let end_covs = opts.end_blend.then(|| cov_for(h, opts.end_lambda));
+        let end_sigma2 = opts
+            .end_blend
+            .then(|| tune::evaluate(m, h, opts.end_lambda, tune_y).sigma2);
+        let mut blend = Blend {
+            m,
+            h,
+            sigma2,
+            tau,
+            max_order,
+            opts,
+            levels,
+            level_covs,
+            end_covs,
+            end_sigma2,
+            end_width: (1.0 / h).max(2.0),
+            end_check: Vec::new(),
+        };
+        if blend.end_sigma2.is_some() {
+            blend.end_check = blend.end_check_covs(&lengths);
+        }
+        blend
+    }
+
+    /// Held-out check of the end prior (see `end_prior_holds`): round(1/h) samples at each end,
+    /// none when fewer than the states (too few to overrule the prior).
+    fn held_out(&self, n: usize) -> Option<usize> {
+        let w = ((1.0 / self.h).round() as usize).min(n / 8).max(1);
+        (self.opts.end_check && w >= self.m.max(5) && n as f64 > END_RUN_WIDTHS * self.end_width)
+            .then_some(w)
+    }
+
+    /// The chain and the stationary prior's filters on each run length less its held-out end.
+    fn end_check_covs(&self, lengths: &[usize]) -> Vec<(usize, Cov, Cov)> {
+        let chain = statespace::discretise(self.m, self.h, 0.0);
+        let stationary = statespace::discretise(self.m, self.h, self.opts.end_lambda);
+        lengths
+            .iter()
+            .filter_map(|&n| {
+                let k = n - self.held_out(n)?;
+                Some((
+                    n,
+                    Cov::new(&chain, k, false),
+                    Cov::new(&stationary, k, false),
+                ))
+            })
+            .collect()
+    }
+
+    /// Mean and second moment of the blend of the smoothing levels, order by order.
+    fn levels(&self, y: &[f64]) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+        let (n, max_order, sigma2) = (y.len(), self.max_order, self.sigma2);
         let weights = level_weights(
-            &levels,
-            &level_covs,
+            &self.levels,
+            &self.level_covs,
             y,
-            fit.sigma2,
-            (opts.window / h).round() as usize,
-            opts.smooth_window,
+            sigma2,
+            (self.opts.window / self.h).round() as usize,
+            self.opts.smooth_window,
             pick,
         );
-        // Accumulate mean and second moment of the blend, order by order.
         let mut mean = vec![vec![0.0; n]; max_order + 1];
         let mut second = vec![vec![0.0; n]; max_order + 1];
-        for (j, &hl) in levels.iter().enumerate() {
-            let covs = &level_covs[j];
+        for (j, &hl) in self.levels.iter().enumerate() {
+            let covs = &self.level_covs[j];
             let cov = &covs[pick(covs, n)].1;
-            let scale: Vec<f64> = (0..=max_order).map(|k| (hl / tau).powi(k as i32)).collect();
+            let scale: Vec<f64> = (0..=max_order)
+                .map(|k| (hl / self.tau).powi(k as i32))
+                .collect();
             smooth_two_way(cov, y, |i, x, var| {
                 let w = weights[j][i];
                 if w == 0.0 {
@@ -415,45 +471,70 @@ pub fn differentiate_runs(
                 for k in 0..=max_order {
                     let v = x[k] * scale[k];
                     mean[k][i] += w * v;
-                    second[k][i] += w * (var[k] * fit.sigma2 * scale[k] * scale[k] + v * v);
+                    second[k][i] += w * (var[k] * sigma2 * scale[k] * scale[k] + v * v);
                 }
             });
         }
-        let has_middle = n as f64 > END_RUN_WIDTHS * end_width;
-        if let (Some(covs), Some(s2), true) = (&end_covs, end_sigma2, has_middle) {
-            let cov = &covs[pick(covs, n)].1;
-            let scale: Vec<f64> = (0..=max_order).map(|k| (h / tau).powi(k as i32)).collect();
-            let width = end_width;
-            let holds = match (held_out(n), end_check.iter().find(|(l, _, _)| *l == n)) {
-                (Some(w), Some((_, chain, stationary))) => {
-                    let reversed: Vec<f64> = y.iter().rev().copied().collect();
-                    [&reversed[..], y].map(|run| {
-                        end_prior_holds(chain, stationary, run, w, fit.sigma2, s2, h / tau, tau)
-                    })
+        (mean, second)
+    }
+
+    /// Near the ends of a long enough run, the stationary prior's estimate blended in, as far as
+    /// the chain is less certain than it and its held-out check does not reject it.
+    fn ends(&self, y: &[f64], mean: &mut [Vec<f64>], second: &mut [Vec<f64>]) {
+        let n = y.len();
+        let has_middle = n as f64 > END_RUN_WIDTHS * self.end_width;
+        let (Some(covs), Some(s2), true) = (&self.end_covs, self.end_sigma2, has_middle) else {
+            return;
+        };
+        let (h, tau, max_order) = (self.h, self.tau, self.max_order);
+        let cov = &covs[pick(covs, n)].1;
+        let scale: Vec<f64> = (0..=max_order).map(|k| (h / tau).powi(k as i32)).collect();
+        let width = self.end_width;
+        let holds = match (
+            self.held_out(n),
+            self.end_check.iter().find(|(l, _, _)| *l == n),
+        ) {
+            (Some(w), Some((_, chain, stationary))) => {
+                let reversed: Vec<f64> = y.iter().rev().copied().collect();
+                [&reversed[..], y].map(|run| {
+                    end_prior_holds(chain, stationary, run, w, self.sigma2, s2, h / tau, tau)
+                })
+            }
+            _ => [true, true],
+        };
+        smooth_two_way(cov, y, |i, x, var| {
+            let b = end_weight(i.min(n - 1 - i) as f64, width);
+            if b == 0.0 {
+                return;
+            }
+            let rejected = !holds[(i >= n / 2) as usize];
+            for k in 0..=max_order {
+                if rejected && k <= END_CV_ORDER {
+                    continue;
                 }
-                _ => [true, true],
-            };
-            smooth_two_way(cov, y, |i, x, var| {
-                let b = end_weight(i.min(n - 1 - i) as f64, width);
-                if b == 0.0 {
-                    return;
-                }
-                let rejected = !holds[(i >= n / 2) as usize];
-                for k in 0..=max_order {
-                    if rejected && k <= END_CV_ORDER {
-                        continue;
-                    }
-                    let v = x[k] * scale[k];
-                    let vm = var[k] * s2 * scale[k] * scale[k];
-                    // Trust the stationary prior only as far as the chain is less certain than it
-                    // (an exact polynomial keeps the chain's estimate).
-                    let vi = (second[k][i] - mean[k][i] * mean[k][i]).max(0.0);
-                    let bk = b * vi / (vi + vm).max(1e-300);
-                    mean[k][i] = (1.0 - bk) * mean[k][i] + bk * v;
-                    second[k][i] = (1.0 - bk) * second[k][i] + bk * (vm + v * v);
-                }
-            });
-        }
+                let v = x[k] * scale[k];
+                let vm = var[k] * s2 * scale[k] * scale[k];
+                // Trust the stationary prior only as far as the chain is less certain than it
+                // (an exact polynomial keeps the chain's estimate).
+                let vi = (second[k][i] - mean[k][i] * mean[k][i]).max(0.0);
+                let bk = b * vi / (vi + vm).max(1e-300);
+                mean[k][i] = (1.0 - bk) * mean[k][i] + bk * v;
+                second[k][i] = (1.0 - bk) * second[k][i] + bk * (vm + v * v);
+            }
+        });
+    }
+
+    /// Run `d`'s values and sigmas from the blend's moments (or from a sum of exponentials that
+    /// agrees with them), the run's mean `offset` added back.
+    fn finish(
+        &self,
+        d: &mut Derivatives,
+        y: &[f64],
+        mut mean: Vec<Vec<f64>>,
+        second: &[Vec<f64>],
+        offset: f64,
+    ) {
+        let (n, max_order) = (y.len(), self.max_order);
         let sd: Vec<Vec<f64>> = (0..=max_order)
             .map(|k| {
                 (0..n)
@@ -461,10 +542,10 @@ pub fn differentiate_runs(
                     .collect()
             })
             .collect();
-        let d = &mut out[r];
-        let model = opts
+        let model = self
+            .opts
             .exp_sum
-            .then(|| expsum::fit(y, tau, fit.sigma2, h))
+            .then(|| expsum::fit(y, self.tau, self.sigma2, self.h))
             .flatten()
             .map(|es| (es.terms(), es.evaluate(n, max_order)))
             .filter(|(_, (v, s))| expsum::agrees(v, s, &mean, &sd));
@@ -477,11 +558,10 @@ pub fn differentiate_runs(
         }
         for k in 0..=max_order {
             for i in 0..n {
-                d.values[k][i] = mean[k][i] + if k == 0 { means[r] } else { 0.0 };
+                d.values[k][i] = mean[k][i] + if k == 0 { offset } else { 0.0 };
             }
         }
     }
-    Ok(out)
 }
 
 /// Whether the stationary end prior predicts the last `w` samples of `y`, held out, well enough:
