@@ -282,17 +282,7 @@ fn mimo_plant_at_one_percent_noise_finds_every_true_term() {
 /// the cap on the label floor (`identify::FLOOR_CAP`) orders (4, 3, 3), 15 / 18, 10 others.
 #[test]
 fn mimo_plant_at_three_percent_noise_gets_the_true_orders() {
-    let plant = Plant::mimo();
-    let (inputs, outputs) = (plant.input_names(), plant.output_names());
-    let truth = plant.true_model(Some(0.01)).unwrap();
-    let runs = dataset(&plant, 40, 1000, 0.01, 0.03, 1).unwrap();
-    let rs = records(&runs, &inputs, &outputs, 0.01).unwrap();
-    let ids: Vec<String> = (0..40).map(|i| i.to_string()).collect();
-    let split = Split::new((0..25).collect(), None, (25..40).collect(), &ids).unwrap();
-    let mut s = Settings::new(outputs, inputs, 4);
-    s.orders = Orders::Search(vec![1, 2, 3, 4]);
-    s.engine = EngineChoice::Cpu;
-    let id = identify(&rs, &split, &s).unwrap();
+    let (truth, runs, id) = searched_at_three_percent(1);
     let orders: Vec<usize> = id.model.outputs.iter().map(|o| o.order).collect();
     assert_eq!(orders, vec![3, 3, 3], "{}", id.model);
     let (mut found, mut extras) = (0, Vec::new());
@@ -314,4 +304,54 @@ fn mimo_plant_at_three_percent_noise_gets_the_true_orders() {
         "{found} / 18, extra {extras:?}\n{}",
         id.model
     );
+}
+
+/// The plant's truth, its runs (the demo's 40, 3 % noise, `seed`) and identify's model at d = 4
+/// with the orders searched 1..4 on the CPU engine.
+fn searched_at_three_percent(
+    seed: u64,
+) -> (
+    Model,
+    Vec<ctsid::plants::Run>,
+    ctsid::identify::Identification,
+) {
+    let plant = Plant::mimo();
+    let (inputs, outputs) = (plant.input_names(), plant.output_names());
+    let truth = plant.true_model(Some(0.01)).unwrap();
+    let runs = dataset(&plant, 40, 1000, 0.01, 0.03, seed).unwrap();
+    let rs = records(&runs, &inputs, &outputs, 0.01).unwrap();
+    let ids: Vec<String> = (0..40).map(|i| i.to_string()).collect();
+    let split = Split::new((0..25).collect(), None, (25..40).collect(), &ids).unwrap();
+    let mut s = Settings::new(outputs, inputs, 4);
+    s.orders = Orders::Search(vec![1, 2, 3, 4]);
+    s.engine = EngineChoice::Cpu;
+    let id = identify(&rs, &split, &s).unwrap();
+    (truth, runs, id)
+}
+
+/// Seed 3 of the same (d = 4, 3 %): the search's first sweep finds y2's orders 3 and 4 within
+/// 1.2 % of each other (free-run p95 1.4486 against 1.4308); the paper's eta-rule took order 4,
+/// and with y1 and y2 at order 4 y3 fell to order 1: (4, 4, 1), 9 / 18 true terms. The MIMO
+/// search takes the lowest of near-equal orders (`profile::eta_rule_parsimonious`). Measured
+/// with it: orders (3, 3, 3), 16 / 18 true terms, free run within 4.98 / 0.61 / 2.20 % of the
+/// truth (docs/method/identification.md, "The MIMO search over seeds").
+#[test]
+fn mimo_plant_at_three_percent_noise_seed_three_gets_the_true_orders() {
+    let (truth, runs, id) = searched_at_three_percent(3);
+    let orders: Vec<usize> = id.model.outputs.iter().map(|o| o.order).collect();
+    assert_eq!(orders, vec![3, 3, 3], "{}", id.model);
+    let mut found = 0;
+    for i in 0..3 {
+        let (rows, _) = coefficient_errors(&id.model, &truth, i);
+        found += rows.iter().filter(|r| r.2 != 0.0).count();
+        let (_, _, pooled, diverged) = nrmse_vs_truth(&id, &runs, i);
+        eprintln!("seed 3, output {i}: NRMSE vs truth {pooled}");
+        assert_eq!(diverged, 0);
+        assert!(
+            pooled < 0.06,
+            "output {i}: NRMSE vs truth {pooled}\n{}",
+            id.model
+        );
+    }
+    assert!(found >= 15, "{found} / 18\n{}", id.model);
 }
