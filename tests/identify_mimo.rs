@@ -23,6 +23,21 @@ fn fixed_orders_fit(
     Vec<ctsid::plants::Run>,
     ctsid::identify::Identification,
 ) {
+    mimo_fit((n_runs, n_train), noise, seed, Orders::Fixed(vec![3; 3]))
+}
+
+/// The plant's truth, its runs (`n_runs` of 1000 samples at `noise`, the first `n_train` train,
+/// the rest test) and identify's model at d = 4 with `orders` on the CPU engine.
+fn mimo_fit(
+    (n_runs, n_train): (usize, usize),
+    noise: f64,
+    seed: u64,
+    orders: Orders,
+) -> (
+    Model,
+    Vec<ctsid::plants::Run>,
+    ctsid::identify::Identification,
+) {
     let plant = Plant::mimo();
     let (inputs, outputs) = (plant.input_names(), plant.output_names());
     let truth = plant.true_model(Some(0.01)).unwrap();
@@ -37,7 +52,7 @@ fn fixed_orders_fit(
     )
     .unwrap();
     let mut s = Settings::new(outputs, inputs, 4);
-    s.orders = Orders::Fixed(vec![3; 3]);
+    s.orders = orders;
     s.engine = EngineChoice::Cpu;
     let id = identify(&rs, &split, &s).unwrap();
     (truth, runs, id)
@@ -315,18 +330,7 @@ fn searched_at_three_percent(
     Vec<ctsid::plants::Run>,
     ctsid::identify::Identification,
 ) {
-    let plant = Plant::mimo();
-    let (inputs, outputs) = (plant.input_names(), plant.output_names());
-    let truth = plant.true_model(Some(0.01)).unwrap();
-    let runs = dataset(&plant, 40, 1000, 0.01, 0.03, seed).unwrap();
-    let rs = records(&runs, &inputs, &outputs, 0.01).unwrap();
-    let ids: Vec<String> = (0..40).map(|i| i.to_string()).collect();
-    let split = Split::new((0..25).collect(), None, (25..40).collect(), &ids).unwrap();
-    let mut s = Settings::new(outputs, inputs, 4);
-    s.orders = Orders::Search(vec![1, 2, 3, 4]);
-    s.engine = EngineChoice::Cpu;
-    let id = identify(&rs, &split, &s).unwrap();
-    (truth, runs, id)
+    mimo_fit((40, 25), 0.03, seed, Orders::Search(vec![1, 2, 3, 4]))
 }
 
 /// Seed 3 of the same (d = 4, 3 %): the search's first sweep finds y2's orders 3 and 4 within

@@ -355,38 +355,43 @@ fn control_sections(
     // the data's relative level applied to the step (the data's own level, relative to swings of
     // tens of radians at Patm = 0, would bury a 0.5 rad step).
     // A model the design cannot use is a finding of the report, not a failure of the demo.
-    let mut feedback_plot = None;
-    match feedback(plant, model, truth, o.tau, o.noise * STEP, o.seed) {
+    let feedback_plot = report_section(
+        (out, tables),
+        "feedback",
+        feedback(plant, model, truth, o.tau, o.noise * STEP, o.seed),
+        "## Feedback designed on the identified model\n\nNot designed",
+    );
+    // The paper's closed-loop experiment: the d = 1 model in both laws, on the true plant.
+    let tracking_plot = d1.and_then(|m1| {
+        report_section(
+            (out, tables),
+            "tracking",
+            paper_tracking(plant, m1, o.seed),
+            "## The paper's closed-loop experiment\n\nNot run",
+        )
+    });
+    (feedback_plot, tracking_plot)
+}
+
+/// A closed-loop section of the report: its text, its table under `name` and its plot, or where
+/// it failed, `failed` and the reason (a finding of the report, not a failure of the demo).
+fn report_section(
+    (out, tables): (&mut String, &mut Vec<(String, Table)>),
+    name: &str,
+    result: Result<(String, Table, String)>,
+    failed: &str,
+) -> Option<String> {
+    match result {
         Ok((text, table, plot)) => {
             let _ = writeln!(*out, "{text}");
-            tables.push(("feedback".into(), table));
-            feedback_plot = Some(plot);
+            tables.push((name.into(), table));
+            Some(plot)
         }
         Err(e) => {
-            let _ = writeln!(
-                *out,
-                "## Feedback designed on the identified model\n\nNot designed: {e}.\n"
-            );
+            let _ = writeln!(*out, "{failed}: {e}.\n");
+            None
         }
     }
-    // The paper's closed-loop experiment: the d = 1 model in both laws, on the true plant.
-    let mut tracking_plot = None;
-    if let Some(m1) = d1 {
-        match paper_tracking(plant, m1, o.seed) {
-            Ok((text, table, plot)) => {
-                let _ = writeln!(*out, "{text}");
-                tables.push(("tracking".into(), table));
-                tracking_plot = Some(plot);
-            }
-            Err(e) => {
-                let _ = writeln!(
-                    *out,
-                    "## The paper's closed-loop experiment\n\nNot run: {e}.\n"
-                );
-            }
-        }
-    }
-    (feedback_plot, tracking_plot)
 }
 
 /// Refuses a noise, degree, run split or atmospheric pressure the demo cannot use.

@@ -421,7 +421,6 @@ pub(super) fn effect_failure(
     s: &Selected,
     nothing_selected: bool,
 ) -> (Option<String>, Vec<Halves>) {
-    let name_of = |k: usize| format!("{} {}", p.effects[k].family, p.effects[k].formula);
     let (cand, inclusion, intervals) = (&s.cand, &s.boot.inclusion, &s.boot.intervals);
     let mut failed = None;
     if nothing_selected {
@@ -434,13 +433,13 @@ pub(super) fn effect_failure(
         if inclusion[i] < 0.8 {
             failed = Some(format!(
                 "{}: included in {:.0} % of block-bootstrap refits (< 80 %)",
-                name_of(k),
+                p.effect_name(k),
                 100.0 * inclusion[i]
             ));
         } else if !(intervals[i][0] > 0.0 || intervals[i][1] < 0.0) {
             failed = Some(format!(
                 "{}: 95 % interval [{}, {}] contains zero",
-                name_of(k),
+                p.effect_name(k),
                 num(intervals[i][0]),
                 num(intervals[i][1])
             ));
@@ -455,7 +454,7 @@ pub(super) fn effect_failure(
         if failed.is_none() && drifts(dz[i].0, dz[i].1, dz[i].2) {
             failed = Some(format!(
                 "{}: {} on the first half of each training run, {} on the second ({:.1} standard deviations apart): not constant in time (a sensor drift or a slowly changing condition?)",
-                name_of(k),
+                p.effect_name(k),
                 num(dz[i].0),
                 num(dz[i].1),
                 dz[i].2
@@ -468,7 +467,7 @@ pub(super) fn effect_failure(
         if failed.is_none() && !nothing_selected && contradicts(&intervals[i], refined[nt + i]) {
             failed = Some(format!(
                 "{}: refined on simulation error to {}, the sign its 95 % interval [{}, {}] excludes",
-                name_of(k),
+                p.effect_name(k),
                 num(refined[nt + i]),
                 num(intervals[i][0]),
                 num(intervals[i][1])

@@ -633,6 +633,11 @@ fn rss_at(g: &Gram, idx: &[usize], x: &[f64]) -> f64 {
 }
 
 impl Prepared {
+    /// Effect `k` as reports name it: its family and formula.
+    fn effect_name(&self, k: usize) -> String {
+        format!("{} {}", self.effects[k].family, self.effects[k].formula)
+    }
+
     /// The nominal with its free coefficients moved by `delta` and the `effects` (index,
     /// coefficient) appended: monomial effects as monomials, the others as expressions, each
     /// with its family as origin; `sign` smoothed over 1e-3 of its variable's spread.
@@ -948,7 +953,6 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let sim_ret = mean_nrmse(&retuned_model, vruns, gate);
     let sim_cand = mean_nrmse(&cand_model, vruns, gate);
     let simulation_ratio = sim_cand / sim_nom.min(sim_ret);
-    let name_of = |k: usize| format!("{} {}", p.effects[k].family, p.effects[k].formula);
     let (failed, dz) = effect_failure;
     let failed = failed.or_else(|| gate_failure(residual_ratio, (sim_cand, sim_nom, sim_ret)));
     let gates = Gates {
@@ -996,7 +1000,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         closest = Some(match cand.first() {
             Some(&k) => format!(
                 "closest: {} (coefficient {}); failed: {}",
-                name_of(k),
+                p.effect_name(k),
                 num(cand_sol.coef[0]),
                 failed.clone().unwrap_or_default()
             ),
@@ -1081,7 +1085,6 @@ fn found_effects(
     dz: &[Halves],
     sim_shares: &[f64],
 ) -> Vec<FoundEffect> {
-    let name_of = |k: usize| format!("{} {}", p.effects[k].family, p.effects[k].formula);
     cand.iter()
         .enumerate()
         .map(|(i, &k)| {
@@ -1093,7 +1096,7 @@ fn found_effects(
                 weak_coefficient: weak[i],
                 interval: boot.intervals[i],
                 inclusion: boot.inclusion[i],
-                aliases: boot.aliases[i].iter().map(|&a| name_of(a)).collect(),
+                aliases: boot.aliases[i].iter().map(|&a| p.effect_name(a)).collect(),
                 reading: reading(&e.family, refined[i], p),
                 halves: dz.get(i).map_or([f64::NAN; 2], |z| [z.0, z.1]),
                 halves_z: dz.get(i).map_or(f64::NAN, |z| z.2),
