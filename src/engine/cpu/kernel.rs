@@ -197,7 +197,9 @@ pub struct Scratch<T> {
 
 impl<T: Elem> Scratch<T> {
     pub fn new(degree: usize, n_vars: usize, bsz: usize) -> Self {
-        let mut vals = vec![T::ZERO; degree.max(1) * bsz];
+        // Two slots more than the levels: the SIMD loops' sibling groups (three nodes of
+        // degree d-2, in slots d-2, d-1 and d).
+        let mut vals = vec![T::ZERO; (degree.max(1) + 2) * bsz];
         vals[..bsz].fill(T::ONE);
         let pairs = if degree >= 3 {
             n_vars * (n_vars + 1) / 2
@@ -354,7 +356,7 @@ macro_rules! simd_families {
             pub unsafe fn families(plan: &Plan, zb: &[$t], vz: &[$t], w: &[$t], vals: &mut [$t], acc: &mut [f64]) {
                 let nv = plan.n_vars;
                 let deg = plan.degree;
-                assert!(zb.len() >= nv * B && vz.len() >= nv * B && vals.len() >= deg * B);
+                assert!(zb.len() >= nv * B && vz.len() >= nv * B && vals.len() >= (deg + 2) * B);
                 let two = plan.two_level;
                 assert!(!two || w.len() >= nv * (nv + 1) / 2 * B);
                 let zp = zb.as_ptr();
@@ -372,10 +374,27 @@ macro_rules! simd_families {
                     let fv = f.first_var as usize;
                     let out = f.out_start as usize;
                     if two && lvl + 2 == deg {
+                        let m = nv - fv;
+                        // A family of this level right after a node's subtree is its next
+                        // sibling (depth first): up to three go together.
+                        let sib = |j: usize| j < fams.len() && fams[j].level as usize == lvl;
+                        let (j1, j2) = (i + 1 + m, i + 1 + m + m);
+                        let slot = |r: usize| vp.add((lvl + r) * B);
+                        let zv = |j: usize| zp.add(fams[j].var as usize * B) as *const $t;
+                        let os = |j: usize| fams[j].out_start as usize;
+                        if sib(j1) && m >= 2 && sib(j2) {
+                            group::<3>(fv, parent, [zvar, zv(j1), zv(j2)], [slot(0), slot(1), slot(2)], vzp, wp, nv, acc, [out, os(j1), os(j2)]);
+                            i = j2 + 1 + (m - 2);
+                            continue;
+                        }
+                        if sib(j1) {
+                            group::<2>(fv, parent, [zvar, zv(j1)], [slot(0), slot(1)], vzp, wp, nv, acc, [out, os(j1)]);
+                            i = j1 + 1 + (m - 1);
+                            continue;
+                        }
                         // Children against vz, grandchildren against the pair table; the
                         // child families that follow in the plan are covered here (Plan::new
                         // checked that their accumulators continue this one's).
-                        let m = nv - fv;
                         let nw = nv * (nv + 1) / 2 - super::super::pair_offset(fv, nv);
                         run(parent, zvar, me, vzp.add(fv * B), m, &mut acc[out..out + m], true, true);
                         let wv = wp.add(super::super::pair_offset(fv, nv) * B);
@@ -387,6 +406,118 @@ macro_rules! simd_families {
                     let store = lvl + 1 < deg;
                     run(parent, zvar, me, vzp.add(fv * B), nv - fv, &mut acc[out..out + nv - fv], true, store);
                     i += 1;
+                }
+            }
+
+            /// `G` consecutive sibling nodes of degree d-2, `x_r = parent * z_(fv+r)` (accumulators
+            /// from `outs[r]`). Node r's vectors (vz from fv+r, the pairs from
+            /// `pair_offset(fv+r)`) are a suffix of node r-1's, so region r (vz_(fv+r) and the
+            /// pairs (fv+r, b); for the last node all that is left) is shared by nodes 0..=r, and
+            /// one load of each of its vectors feeds them all: the pair table's traffic from L2
+            /// per multiply-add falls to 1/G over the shared suffix.
+            #[inline]
+            #[allow(clippy::too_many_arguments)]
+            #[target_feature(enable = $feat)]
+            unsafe fn group<const G: usize>(fv: usize, parent: *const $t, zs: [*const $t; G], mes: [*mut $t; G], vzp: *const $t, wp: *const $t, nv: usize, acc: &mut [f64], outs: [usize; G]) {
+                let mut c = 0;
+                while c < B {
+                    let p = $load(parent.add(c));
+                    for r in 0..G {
+                        $store(mes[r].add(c), $mul(p, $load(zs[r].add(c))));
+                    }
+                    c += L;
+                }
+                let po = |a: usize| super::super::pair_offset(a, nv);
+                let npairs = nv * (nv + 1) / 2;
+                // Node r's accumulators: m_r children, then its grandchildren.
+                let m = |r: usize| nv - fv - r;
+                for r in 0..G {
+                    let end = outs[r] + m(r) + npairs - po(fv + r);
+                    assert!(end <= acc.len() && (r + 1 == G || end <= outs[r + 1]));
+                }
+                let ap = acc.as_mut_ptr();
+                let xs: [*const $t; G] = std::array::from_fn(|r| mes[r] as *const $t);
+                for r in 0..G {
+                    let last = r + 1 == G;
+                    let nvz = if last { m(r) } else { 1 };
+                    let npr = if last { npairs - po(fv + r) } else { po(fv + r + 1) - po(fv + r) };
+                    let child = |s: usize| ap.add(outs[s] + (r - s));
+                    let grand = |s: usize| ap.add(outs[s] + m(s) + po(fv + r) - po(fv + s));
+                    let (vz, w) = (vzp.add((fv + r) * B), wp.add(po(fv + r) * B));
+                    match r {
+                        0 => {
+                            run_n::<1>([xs[0]], vz, nvz, [child(0)]);
+                            run_n::<1>([xs[0]], w, npr, [grand(0)]);
+                        }
+                        1 => {
+                            run_n::<2>([xs[0], xs[1]], vz, nvz, [child(0), child(1)]);
+                            run_n::<2>([xs[0], xs[1]], w, npr, [grand(0), grand(1)]);
+                        }
+                        _ => {
+                            run_n::<3>([xs[0], xs[1], xs[2]], vz, nvz, [child(0), child(1), child(2)]);
+                            run_n::<3>([xs[0], xs[1], xs[2]], w, npr, [grand(0), grand(1), grand(2)]);
+                        }
+                    }
+                }
+            }
+
+            /// `outs[r][t] += sum_i xs[r]_i vecs_{t,i}` for `count` vectors and R nodes, in
+            /// tiles of up to 8 / 6 / 4 vectors (R = 1 / 2 / 3: at most 12 accumulators, and K
+            /// of them per pair where a tile is narrow, to break the multiply-add latency chain).
+            #[inline]
+            #[target_feature(enable = $feat)]
+            unsafe fn run_n<const R: usize>(xs: [*const $t; R], vecs: *const $t, count: usize, outs: [*mut f64; R]) {
+                let cap = [8, 6, 4][R - 1];
+                let mut k = 0;
+                while k < count {
+                    let n = (count - k).min(cap);
+                    let z = vecs.add(k * B);
+                    let o: [*mut f64; R] = std::array::from_fn(|r| outs[r].add(k));
+                    match (n, R) {
+                        (8, _) => tile_n::<R, 8, 1>(xs, z, o),
+                        (7, _) => tile_n::<R, 7, 1>(xs, z, o),
+                        (6, _) => tile_n::<R, 6, 1>(xs, z, o),
+                        (5, _) => tile_n::<R, 5, 1>(xs, z, o),
+                        (4, 1) => tile_n::<R, 4, 2>(xs, z, o),
+                        (4, _) => tile_n::<R, 4, 1>(xs, z, o),
+                        (3, 1) | (3, 2) => tile_n::<R, 3, 2>(xs, z, o),
+                        (3, _) => tile_n::<R, 3, 1>(xs, z, o),
+                        (2, 3) => tile_n::<R, 2, 2>(xs, z, o),
+                        (2, _) => tile_n::<R, 2, 4>(xs, z, o),
+                        (_, 3) => tile_n::<R, 1, 2>(xs, z, o),
+                        _ => tile_n::<R, 1, 4>(xs, z, o),
+                    }
+                    k += n;
+                }
+            }
+
+            #[inline]
+            #[target_feature(enable = $feat)]
+            unsafe fn tile_n<const R: usize, const NT: usize, const K: usize>(xs: [*const $t; R], vz: *const $t, outs: [*mut f64; R]) {
+                let mut a = [[[$zero(); NT]; R]; K];
+                let mut c = 0;
+                while c < B {
+                    for k in 0..K {
+                        let cc = c + k * L;
+                        let x: [_; R] = std::array::from_fn(|r| $load(xs[r].add(cc)));
+                        for t in 0..NT {
+                            let w = $load(vz.add(t * B + cc));
+                            for r in 0..R {
+                                a[k][r][t] = $fma(x[r], w, a[k][r][t]);
+                            }
+                        }
+                    }
+                    c += K * L;
+                }
+                for k in 1..K {
+                    for r in 0..R {
+                        for t in 0..NT {
+                            a[0][r][t] = $add(a[0][r][t], a[k][r][t]);
+                        }
+                    }
+                }
+                for r in 0..R {
+                    reduce::<NT>(&a[0][r], std::slice::from_raw_parts_mut(outs[r], NT));
                 }
             }
 
