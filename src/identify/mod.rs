@@ -954,8 +954,14 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let mut reports = Vec::new();
     let mut equations = Vec::new();
     let mut fits = Vec::new();
-    for (i, list) in candidates.iter_mut().enumerate() {
-        let (m, report) = final_fit(&prep, i, &ord, split, list)?;
+    // The outputs' fits are independent: in parallel, so that one fit's sequential work (the
+    // path's active-set algebra between sweeps) overlaps another's.
+    let finals: Vec<_> = candidates
+        .par_iter_mut()
+        .enumerate()
+        .map(|(i, list)| final_fit(&prep, i, &ord, split, list))
+        .collect::<Result<_>>()?;
+    for (i, (m, report)) in finals.into_iter().enumerate() {
         equations.push(equation_of(&m, &settings.outputs[i], ord[i]));
         fits.push(m);
         reports.push(report);
@@ -1350,7 +1356,9 @@ fn label_filtered_terms(
         return Ok(vec![Vec::new(); ord.len()]);
     }
     prep.add_label_filter(outputs, ord)?;
+    let prep = &*prep;
     (0..ord.len())
+        .into_par_iter()
         .map(|i| {
             let (f, y, w, _) = prep.design_as(i, ord, &split.train, true);
             let fit = prep.fit_on(i, ord, &split.train, (&f, &y, &w), f64::INFINITY)?;
