@@ -168,20 +168,11 @@ fn settings(a: &IdentifyArgs) -> Result<Settings> {
 /// One output's section of the printed report: the order search's table, the written
 /// equation and the notes that explain it.
 fn output_section(id: &Identification, rep: &OutputReport) -> String {
-    let mut t = Table::new(&[
-        "order",
-        "terms",
-        "validation p50",
-        "p80",
-        "p90",
-        "p95",
-        "p98",
-        "p99",
-        "p100",
-        "free-run p95",
-        "free-run p100",
-        "selected",
-    ]);
+    let q = ctsid::identify::profile::headers("validation");
+    let mut head = vec!["order", "terms"];
+    head.extend(q.iter().map(String::as_str));
+    head.extend(["free-run p95", "free-run p100", "selected"]);
+    let mut t = Table::new(&head);
     let cell = |v: f64| {
         if v.is_finite() {
             ctsid::util::num4(v)

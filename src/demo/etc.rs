@@ -9,7 +9,8 @@
 
 use super::{coefficient_errors, nrmse_vs_truth, records, truth_profile};
 use crate::derivatives::score::percentile;
-use crate::identify::{identify, profile::Profile, Identification, Orders, Settings, Split};
+use crate::identify::profile::{self, Profile};
+use crate::identify::{identify, Identification, Orders, Settings, Split};
 use crate::plants::{dataset, Plant, ThrottlePreset};
 use crate::regression::EngineChoice;
 use crate::report::{svg, write_file, Table};
@@ -220,9 +221,10 @@ fn fixed_order_tests(
     fixed: &dyn Fn(usize, &[crate::plants::Run]) -> Result<Identification>,
     (runs, split): (&[crate::plants::Run], &Split),
 ) -> Result<(Table, Identification, Option<crate::model::Model>)> {
-    let mut test_table = Table::new(&[
-        "model", "against", "p50", "p80", "p90", "p95", "p98", "p99", "p100",
-    ]);
+    let q = profile::headers("");
+    let mut head = vec!["model", "against"];
+    head.extend(q.iter().map(String::as_str));
+    let mut test_table = Table::new(&head);
     test_table.row(
         std::iter::once("paper (n = 3, d = 3)".into())
             .chain(std::iter::once("its own labels".into()))
@@ -273,23 +275,17 @@ fn fixed_order_tests(
 
 /// The columns of the error-profile table (one row per data set and candidate order).
 fn profile_table() -> Table {
-    Table::new(&[
-        "data",
-        "order n",
-        "n terms",
-        "train p50",
-        "p80",
-        "p90",
-        "p95",
-        "p98",
-        "p99",
-        "p100",
+    let q = profile::headers("train");
+    let mut head = vec!["data", "order n", "n terms"];
+    head.extend(q.iter().map(String::as_str));
+    head.extend([
         "5-fold p95",
         "5-fold p100",
         "free-run p95",
         "free-run p100",
         "selected",
-    ])
+    ]);
+    Table::new(&head)
 }
 
 /// The refinement's verdict in one line of the report.

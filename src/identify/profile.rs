@@ -13,6 +13,19 @@ use serde::{Deserialize, Serialize};
 /// The percentiles reported everywhere.
 pub const QUANTILES: [f64; 7] = [50.0, 80.0, 90.0, 95.0, 98.0, 99.0, 100.0];
 
+/// Table headers of a profile's columns, from [`QUANTILES`]: `"{what} p50", "p80", ..., "p100"`
+/// (plain `"p50"` when `what` is empty).
+pub fn headers(what: &str) -> Vec<String> {
+    QUANTILES
+        .iter()
+        .enumerate()
+        .map(|(k, q)| match k {
+            0 if !what.is_empty() => format!("{what} p{q}"),
+            _ => format!("p{q}"),
+        })
+        .collect()
+}
+
 /// Normalised error percentiles, aligned with [`QUANTILES`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Profile(pub [f64; 7]);
@@ -104,6 +117,14 @@ fn best_p100(profiles: &[Profile]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn headers_name_the_quantiles() {
+        let want = ["p80", "p90", "p95", "p98", "p99", "p100"];
+        assert_eq!(headers("train")[0], "train p50");
+        assert_eq!(headers("")[0], "p50");
+        assert_eq!(headers("train")[1..], want);
+    }
 
     #[test]
     fn parsimonious_rule_takes_the_lowest_order_among_near_equals() {

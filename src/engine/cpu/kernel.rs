@@ -396,15 +396,15 @@ macro_rules! simd_families {
                         // child families that follow in the plan are covered here (Plan::new
                         // checked that their accumulators continue this one's).
                         let nw = nv * (nv + 1) / 2 - super::super::pair_offset(fv, nv);
-                        run(parent, zvar, me, vzp.add(fv * B), m, &mut acc[out..out + m], true, true);
+                        run(parent, zvar, me, vzp.add(fv * B), m, &mut acc[out..out + m], true);
                         let wv = wp.add(super::super::pair_offset(fv, nv) * B);
-                        run(parent, zvar, me, wv, nw, &mut acc[out + m..out + m + nw], false, false);
+                        run_n::<1>([me as *const $t], wv, nw, [acc[out + m..out + m + nw].as_mut_ptr()]);
                         i += 1 + m;
                         continue;
                     }
                     // Leaves' parents (level d-1) never need their values again.
                     let store = lvl + 1 < deg;
-                    run(parent, zvar, me, vzp.add(fv * B), nv - fv, &mut acc[out..out + nv - fv], true, store);
+                    run(parent, zvar, me, vzp.add(fv * B), nv - fv, &mut acc[out..out + nv - fv], store);
                     i += 1;
                 }
             }
@@ -521,74 +521,65 @@ macro_rules! simd_families {
                 }
             }
 
-            /// `out[t] += sum_i x_i vecs_{t,i}` for `count` vectors, in tiles of up to eight;
-            /// x = parent * z_var is computed in the first tile when COMPUTE (and stored when
-            /// STORE or when later tiles need it), else read from `me`.
+            /// `acc[t] += sum_i x_i vecs_{t,i}` for `count` vectors: x = parent * z_var is
+            /// computed in the first tile of up to eight (and stored in `me` when STORE asks, or
+            /// when later tiles need it); later tiles read it back through [`run_n`].
             #[inline]
             #[allow(clippy::too_many_arguments)]
             #[target_feature(enable = $feat)]
-            unsafe fn run(parent: *const $t, zvar: *const $t, me: *mut $t, vecs: *const $t, count: usize, acc: &mut [f64], compute: bool, store: bool) {
-                let mut k = 0;
-                let mut first = compute;
-                while k < count {
-                    let m = (count - k).min(8);
-                    let o = &mut acc[k..k + m];
-                    let z = vecs.add(k * B);
-                    // K accumulators per child break the FMA latency chain when a
-                    // family has few children (most have 1 to 3).
-                    macro_rules! go {
-                        ($nt:literal, $k:literal) => {
-                            if first && store {
-                                tile::<$nt, $k, true, true>(parent, zvar, me, z, o)
-                            } else if first {
-                                tile::<$nt, $k, true, false>(parent, zvar, me, z, o)
-                            } else {
-                                tile::<$nt, $k, false, false>(parent, zvar, me, z, o)
-                            }
-                        };
-                    }
-                    match m {
-                        8 => go!(8, 1),
-                        7 => go!(7, 1),
-                        6 => go!(6, 1),
-                        5 => go!(5, 1),
-                        4 => go!(4, 2),
-                        3 => go!(3, 2),
-                        2 => go!(2, 4),
-                        _ => go!(1, 4),
-                    }
-                    // Later tiles of the same family re-read the stored values.
-                    if first && !store && k + m < count {
+            unsafe fn run(parent: *const $t, zvar: *const $t, me: *mut $t, vecs: *const $t, count: usize, acc: &mut [f64], store: bool) {
+                if count == 0 {
+                    return;
+                }
+                let m = count.min(8);
+                let o = &mut acc[..m];
+                // K accumulators per child break the FMA latency chain when a family has few
+                // children (most have 1 to 3); the same K as run_n's for one node.
+                macro_rules! go {
+                    ($nt:literal, $k:literal) => {
+                        if store {
+                            tile::<$nt, $k, true>(parent, zvar, me, vecs, o)
+                        } else {
+                            tile::<$nt, $k, false>(parent, zvar, me, vecs, o)
+                        }
+                    };
+                }
+                match m {
+                    8 => go!(8, 1),
+                    7 => go!(7, 1),
+                    6 => go!(6, 1),
+                    5 => go!(5, 1),
+                    4 => go!(4, 2),
+                    3 => go!(3, 2),
+                    2 => go!(2, 4),
+                    _ => go!(1, 4),
+                }
+                if m < count {
+                    if !store {
                         let mut c = 0;
                         while c < B {
                             $store(me.add(c), $mul($load(parent.add(c)), $load(zvar.add(c))));
                             c += L;
                         }
                     }
-                    first = false;
-                    k += m;
+                    run_n::<1>([me as *const $t], vecs.add(m * B), count - m, [acc[m..count].as_mut_ptr()]);
                 }
             }
 
-            /// `out[t] += sum_i x_i vz_{t,i}` for NT children, x = parent * z_var computed on the fly
-            /// (COMPUTE) and stored for the subtree (STORE), or read back.
+            /// `out[t] += sum_i x_i vz_{t,i}` for NT children, x = parent * z_var computed on the
+            /// fly and stored for the subtree when STORE.
             #[inline]
             #[target_feature(enable = $feat)]
-            unsafe fn tile<const NT: usize, const K: usize, const COMPUTE: bool, const STORE: bool>(parent: *const $t, zvar: *const $t, me: *mut $t, vz: *const $t, out: &mut [f64]) {
+            unsafe fn tile<const NT: usize, const K: usize, const STORE: bool>(parent: *const $t, zvar: *const $t, me: *mut $t, vz: *const $t, out: &mut [f64]) {
                 let mut a = [[$zero(); NT]; K];
                 let mut c = 0;
                 while c < B {
                     for k in 0..K {
                         let cc = c + k * L;
-                        let x = if COMPUTE {
-                            let x = $mul($load(parent.add(cc)), $load(zvar.add(cc)));
-                            if STORE {
-                                $store(me.add(cc), x);
-                            }
-                            x
-                        } else {
-                            $load(me.add(cc))
-                        };
+                        let x = $mul($load(parent.add(cc)), $load(zvar.add(cc)));
+                        if STORE {
+                            $store(me.add(cc), x);
+                        }
                         for t in 0..NT {
                             a[k][t] = $fma(x, $load(vz.add(t * B + cc)), a[k][t]);
                         }
