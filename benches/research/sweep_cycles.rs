@@ -1,5 +1,5 @@
 //! Runs sweeps only, for `perf stat` cycle counts (robust to other load on the machine):
-//! `perf stat -e cycles:u target/release/deps/sweep_cycles-* NZ D REPS` (built by `cargo bench --bench sweep_cycles --no-run`).
+//! `perf stat -e cycles:u target/release/deps/sweep_cycles-* NZ D REPS [32|64] [1: column statistics instead]` (built by `cargo bench --bench sweep_cycles --no-run`).
 use ctsid::basis::{Basis, BasisLimits};
 use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
 
@@ -37,6 +37,18 @@ fn main() {
     )
     .unwrap();
     let v: Vec<f64> = (0..n).map(|_| u()).collect();
+    if a.get(4) == Some(&1) {
+        // Column statistics under weights (the robust passes' case).
+        let w: Vec<f64> = v.iter().map(|x| 0.5 + 0.5 * x.abs()).collect();
+        let t = std::time::Instant::now();
+        let mut c = 0.0;
+        for _ in 0..reps {
+            c += e.column_stats(Some(&w)).unwrap().norm.iter().sum::<f64>();
+        }
+        let dt = t.elapsed().as_secs_f64() / reps as f64;
+        eprintln!("column stats: wall {dt:.4} s each; checksum {c:.9e}");
+        return;
+    }
     let mut out = vec![0.0; b.len()];
     let t = std::time::Instant::now();
     for _ in 0..reps {

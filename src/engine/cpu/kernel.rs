@@ -601,6 +601,43 @@ macro_rules! simd_families {
 mod simd {
     use std::arch::x86_64::*;
 
+    /// [`super::centred_child`] with AVX2: the same eight lane sums (two vectors), the same
+    /// operations in the same order (no fused multiply-add), so the same bits; written out
+    /// because the compiler's version of the portable loop ran at a quarter of this speed
+    /// (column statistics at 25,000 x 12,376: 0.14 s, the centred squares 81 % of it).
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn centred_child_avx2(x: &[f64], z: &[f64], w: &[f64], m: f64) -> f64 {
+        let n = x.len();
+        assert!(n.is_multiple_of(8) && z.len() >= n && w.len() >= n);
+        let (xp, zp, wp) = (x.as_ptr(), z.as_ptr(), w.as_ptr());
+        let mv = _mm256_set1_pd(m);
+        let (mut a0, mut a1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+        let mut c = 0;
+        while c < n {
+            let d0 = _mm256_sub_pd(
+                _mm256_mul_pd(_mm256_loadu_pd(xp.add(c)), _mm256_loadu_pd(zp.add(c))),
+                mv,
+            );
+            let d1 = _mm256_sub_pd(
+                _mm256_mul_pd(
+                    _mm256_loadu_pd(xp.add(c + 4)),
+                    _mm256_loadu_pd(zp.add(c + 4)),
+                ),
+                mv,
+            );
+            let t0 = _mm256_mul_pd(_mm256_mul_pd(_mm256_loadu_pd(wp.add(c)), d0), d0);
+            let t1 = _mm256_mul_pd(_mm256_mul_pd(_mm256_loadu_pd(wp.add(c + 4)), d1), d1);
+            a0 = _mm256_add_pd(a0, t0);
+            a1 = _mm256_add_pd(a1, t1);
+            c += 8;
+        }
+        let mut part = [0.0f64; 8];
+        _mm256_storeu_pd(part.as_mut_ptr(), a0);
+        _mm256_storeu_pd(part.as_mut_ptr().add(4), a1);
+        part.iter().sum::<f64>()
+    }
+
     /// Adds the lane sums of up to 8 f32 accumulators to `out` with one horizontal-add tree
     /// (10 instructions for 8 candidates instead of a full reduction each).
     #[inline]
@@ -712,14 +749,35 @@ pub fn centred_block(
                 mean: &[f64],
                 acc: &mut [f64],
             ) {
-                centred_block_impl(plan, zb, bsz, s, mean, acc)
+                centred_block_impl(plan, zb, bsz, s, mean, acc, |x, z, w, m| {
+                    // SAFETY: called only here, where the CPU has AVX2 + FMA.
+                    unsafe { simd::centred_child_avx2(x, z, w, m) }
+                })
             }
             // SAFETY: the CPU has AVX2 + FMA (simd_level checked it).
             unsafe { avx2(plan, zb, bsz, s, mean, acc) };
             return;
         }
     }
-    centred_block_impl(plan, zb, bsz, s, mean, acc)
+    centred_block_impl(plan, zb, bsz, s, mean, acc, centred_child)
+}
+
+/// `sum_i w_i (x_i z_i - m)^2` over a block whose length is a multiple of 8, as eight lane sums
+/// added in order at the end (the AVX2 version, [`simd::centred_child_avx2`], gives the same
+/// bits).
+fn centred_child(x: &[f64], z: &[f64], w: &[f64], m: f64) -> f64 {
+    let mut part = [0.0f64; 8];
+    for ((x, z), wc) in x
+        .chunks_exact(8)
+        .zip(z.chunks_exact(8))
+        .zip(w.chunks_exact(8))
+    {
+        for l in 0..8 {
+            let d = x[l] * z[l] - m;
+            part[l] += wc[l] * d * d;
+        }
+    }
+    part.iter().sum::<f64>()
 }
 
 #[inline(always)]
@@ -730,6 +788,7 @@ fn centred_block_impl(
     s: &mut Scratch<f64>,
     mean: &[f64],
     acc: &mut [f64],
+    child: impl Fn(&[f64], &[f64], &[f64], f64) -> f64,
 ) {
     let nv = plan.n_vars;
     let w = &s.vb;
@@ -749,25 +808,16 @@ fn centred_block_impl(
             let j = f.child_start as usize + t;
             let m = mean[j];
             let zk = &zb[k * bsz..(k + 1) * bsz];
-            let mut part = [0.0f64; 8];
-            if bsz.is_multiple_of(8) {
-                for ((x, z), wc) in me
-                    .chunks_exact(8)
-                    .zip(zk.chunks_exact(8))
-                    .zip(w.chunks_exact(8))
-                {
-                    for l in 0..8 {
-                        let d = x[l] * z[l] - m;
-                        part[l] += wc[l] * d * d;
-                    }
-                }
+            acc[j] += if bsz.is_multiple_of(8) {
+                child(me, zk, w, m)
             } else {
-                for i in 0..bsz {
-                    let d = me[i] * zk[i] - m;
-                    part[0] += w[i] * d * d;
-                }
-            }
-            acc[j] += part.iter().sum::<f64>();
+                (0..bsz)
+                    .map(|i| {
+                        let d = me[i] * zk[i] - m;
+                        w[i] * d * d
+                    })
+                    .sum::<f64>()
+            };
         }
     }
 }
