@@ -1007,7 +1007,16 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     };
     if let Some(report) = refinement.as_mut() {
         let asked = completion_asks(&model, report, &mut prep, (&outputs, &ord), split, &fits)?;
-        model = complete_selected(&model, report, &prep, &outputs, split, &asked)?;
+        let swaps = if asked.iter().all(Vec::is_empty) {
+            vec![Vec::new(); ord.len()]
+        } else {
+            lower_degree_offers(&prep, &ord, split, &fits)?
+        };
+        let asks = complete::Asks {
+            terms: asked,
+            swaps,
+        };
+        model = complete_selected(&model, report, &prep, &outputs, split, &asks)?;
     }
     derivative_std_errors(&mut model, &prep, &ord, split)?;
 
@@ -1341,6 +1350,78 @@ fn completion_asks(
     Ok(asked)
 }
 
+/// Most lower-degree stand-ins offered per term ([`lower_degree_offers`]).
+pub const OFFERS_PER_TERM: usize = 3;
+
+/// Path steps of a stand-in fit ([`lower_degree_offers`]): enough for [`OFFERS_PER_TERM`]
+/// candidates beyond the model's own terms, which enter too.
+const OFFER_STEPS: usize = 12;
+
+/// For each nonlinear term of each output's derivative fit `fits[i]`, the monomials of lower
+/// degree that would best stand in for it: the first [`OFFERS_PER_TERM`] to enter a path fitted
+/// to the residual with the term's share added back, on the basis of one degree less (not
+/// already terms of the fit). Offered to the completion as swaps (replacement, replaced), judged
+/// there on held-out free runs. Where two outputs move together, a high-degree product can fit
+/// the derivative labels better than the true low-degree one: the MIMO plant at d = 6 and 1 %
+/// noise keeps `u1*y2_d1^2*y3^2` for the true `u1*y2*y2_d1`, which no neighbour of one changed
+/// factor reaches (it is one of these stand-ins, docs/method/identification.md).
+fn lower_degree_offers(
+    prep: &Prepared,
+    ord: &[usize],
+    split: &Split,
+    fits: &[crate::regression::Model],
+) -> Result<Vec<Vec<(String, String)>>> {
+    (0..ord.len())
+        .into_par_iter()
+        .map(|i| {
+            let fit = &fits[i];
+            let nonlinear: Vec<&crate::regression::Term> = fit
+                .terms
+                .iter()
+                .filter(|t| t.expression.is_none() && t.exponents.values().sum::<u32>() >= 2)
+                .collect();
+            if nonlinear.is_empty() {
+                return Ok(Vec::new());
+            }
+            let (f, y, w, _) = prep.design(i, ord, &split.train);
+            let pred = fit.predict(&f)?;
+            let label = derivative_name(&prep.settings.outputs[i], ord[i]);
+            let mut out = Vec::new();
+            for t in nonlinear {
+                let share = crate::regression::Model {
+                    terms: vec![t.clone()],
+                    ..fit.clone()
+                }
+                .predict(&f)?;
+                let r: Vec<f64> = (0..y.len()).map(|s| y[s] - pred[s] + share[s]).collect();
+                let degree = t.exponents.values().sum::<u32>() as usize - 1;
+                let stand_in = Regression::builder()
+                    .degree(degree)
+                    .method(prep.settings.method)
+                    .max_steps(OFFER_STEPS)
+                    .engine(prep.settings.engine)
+                    .build()?
+                    .fit(&f, &r, &label, Some(&w))?;
+                let mut names: Vec<String> = Vec::new();
+                for p in &stand_in.path {
+                    for a in &p.active {
+                        if !names.contains(a) && !fit.terms.iter().any(|x| &x.name == a) {
+                            names.push(a.clone());
+                        }
+                    }
+                }
+                out.extend(
+                    names
+                        .into_iter()
+                        .take(OFFERS_PER_TERM)
+                        .map(|n| (n, t.name.clone())),
+                );
+            }
+            Ok(out)
+        })
+        .collect()
+}
+
 /// The terms each output's fit takes, beyond those of `model`, when its regressors pass through
 /// the label's own filter ([`label_filtered`]): that fit is not attenuated, so a small true term
 /// the default fit masks can show there (MIMO plant, 1 % noise: `y1^3`, which the default fit's
@@ -1383,17 +1464,18 @@ fn label_filtered_terms(
         .collect()
 }
 
-/// The terms `asked` (per output) tried on simulation error ([`complete`]): the completed
-/// model, with the trials (and the refined equations, when a term was kept) in `report`.
+/// The terms and swaps `asks` (per output) tried on simulation error
+/// ([`complete`]): the completed model, with the trials (and the refined equations, when a term
+/// was kept) in `report`.
 fn complete_selected(
     model: &ModelFile,
     report: &mut RefinementReport,
     prep: &Prepared,
     outputs: &[usize],
     split: &Split,
-    asked: &[Vec<(String, f64)>],
+    asks: &complete::Asks,
 ) -> Result<ModelFile> {
-    let (completed, trials) = completion_trials(model, report, prep, outputs, split, asked)?;
+    let (completed, trials) = completion_trials(model, report, prep, outputs, split, asks)?;
     for t in trials.iter().filter(|t| t.kept) {
         if let Some(p) = prep.settings.progress {
             let what = match (&t.replaced, t.removed) {
@@ -1420,7 +1502,7 @@ fn completion_trials(
     prep: &Prepared,
     outputs: &[usize],
     split: &Split,
-    asked: &[Vec<(String, f64)>],
+    asks: &complete::Asks,
 ) -> Result<(ModelFile, Vec<complete::Trial>)> {
     let (fit, gate_runs, _) = gate_split(prep, split);
     // Terms are judged on runs the refinement does not see; with none (one training run and no
@@ -1443,7 +1525,7 @@ fn completion_trials(
     let refined = report.kept && report.fit_runs == fit_ids;
     complete::complete(
         (model, refined),
-        asked,
+        asks,
         (&data(&fit), &data(&gate_runs)),
         &noise,
         &prep.settings.refine_options,
