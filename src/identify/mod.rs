@@ -1006,16 +1006,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         _ => None,
     };
     if let Some(report) = refinement.as_mut() {
-        let asked = completion_asks(&model, report, &mut prep, (&outputs, &ord), split, &fits)?;
-        let swaps = if asked.iter().all(Vec::is_empty) {
-            vec![Vec::new(); ord.len()]
-        } else {
-            lower_degree_offers(&prep, &ord, split, &fits)?
-        };
-        let asks = complete::Asks {
-            terms: asked,
-            swaps,
-        };
+        let asks = completion_asks(&model, report, &mut prep, (&outputs, &ord), split, &fits)?;
         model = complete_selected(&model, report, &prep, &outputs, split, &asks)?;
     }
     derivative_std_errors(&mut model, &prep, &ord, split)?;
@@ -1318,8 +1309,10 @@ fn gate_split(prep: &Prepared, split: &Split) -> (Vec<usize>, Vec<usize>, &'stat
 }
 
 /// The terms the completion tries, per output: the label-filtered fit's ([`label_filtered_terms`])
-/// then the derivative fit's near misses. A model that already simulates the gate runs below the
-/// refinement's skip level (noise-free data) gets no completion: the second fit would be wasted.
+/// then the derivative fit's near misses; and the swaps, stand-ins of lower degree for the fit's
+/// nonlinear terms ([`lower_degree_offers`]). A model that already simulates the gate runs below
+/// the refinement's skip level (noise-free data) gets no completion: the second fit would be
+/// wasted.
 fn completion_asks(
     model: &ModelFile,
     report: &RefinementReport,
@@ -1327,7 +1320,7 @@ fn completion_asks(
     (outputs, ord): (&[usize], &[usize]),
     split: &Split,
     fits: &[crate::regression::Model],
-) -> Result<Vec<Vec<(String, f64)>>> {
+) -> Result<complete::Asks> {
     let gate = if report.kept {
         &report.validation_after
     } else {
@@ -1335,19 +1328,22 @@ fn completion_asks(
     };
     let simulates =
         !gate.is_empty() && refine::overall(gate) < prep.settings.refine_options.skip_below;
-    let mut asked = if simulates {
-        vec![Vec::new(); ord.len()]
+    let (mut terms, swaps) = if simulates {
+        (vec![Vec::new(); ord.len()], vec![Vec::new(); ord.len()])
     } else {
-        label_filtered_terms(model, prep, outputs, ord, split)?
+        (
+            label_filtered_terms(model, prep, outputs, ord, split)?,
+            lower_degree_offers(prep, ord, split, fits)?,
+        )
     };
-    for (a, f) in asked.iter_mut().zip(fits) {
+    for (a, f) in terms.iter_mut().zip(fits) {
         a.extend(
             complete::near_misses(f)
                 .into_iter()
                 .take(complete::CANDIDATES),
         );
     }
-    Ok(asked)
+    Ok(complete::Asks { terms, swaps })
 }
 
 /// Most lower-degree stand-ins offered per term ([`lower_degree_offers`]).
