@@ -42,7 +42,8 @@
 //! degree-5 `u1*y2_d1^2*y3^2`, whose stand-in `u1*y2_d1*y3` has the true term as a neighbour.
 //! The screen predicts each swap's drop of the fit runs' residual (the replaced
 //! term's coefficient taken to zero, the others re-optimised); the [`SWAP_TRIALS`] largest
-//! drops above [`SWAP_SCREEN`] are refined and judged as additions are.
+//! drops above [`SWAP_SCREEN`] are refined and judged as additions are (those for a divisor as
+//! said above).
 //!
 //! Last, pruning ([`prune`]): the terms whose removal the screen expects the fit runs not to
 //! notice (growth below [`PRUNE_SCREEN`]) are removed together and stay out when the gate runs'
@@ -877,6 +878,12 @@ fn neighbours(
     out
 }
 
+/// The model file's name of the monomial `ex` (variable -> exponent).
+fn monomial_name(ex: &BTreeMap<String, u32>) -> String {
+    let pairs: Vec<(&str, u32)> = ex.iter().map(|(n, e)| (n.as_str(), *e)).collect();
+    Term::new(&pairs, 1.0).monomial()
+}
+
 /// Adds the swap of term `k` of output `i` (equation `eq`) for the monomial `ex`, unless `ex`
 /// is a term of `eq` already or the swap is listed.
 fn push_swap(
@@ -893,25 +900,24 @@ fn push_swap(
     {
         return;
     }
-    let pairs: Vec<(&str, u32)> = ex.iter().map(|(n, e)| (n.as_str(), *e)).collect();
-    let name = Term::new(&pairs, 1.0).monomial();
+    let name = monomial_name(ex);
     if !out.iter().any(|((j, n, _), _)| *j == i && *n == name) {
         out.push(((i, name, 0.0), Some(k)));
     }
 }
 
-/// The swaps `offered[i]` (a replacement's name, the name of the term of output `i` it would
-/// replace) that `m` allows, each with the replacement's neighbours ([`neighbours`]): the
-/// replaced term still in the model, the replacement not yet. (The MIMO plant at d = 6, 1 %:
-/// `u1*y2_d1*y3` is offered for `u1*y2_d1^2*y3^2`, and its neighbour `u1*y2*y2_d1` is the true
-/// term.)
-fn offered_swaps(
+/// Adds to `out` the swaps `offered[i]` (a replacement's name, the name of the term of output
+/// `i` it would replace) that `m` allows, each with the replacement's neighbours
+/// ([`neighbours`]): the replaced term still in the model, the replacement not yet, the swap not
+/// listed. (The MIMO plant at d = 6, 1 %: `u1*y2_d1*y3` is offered for `u1*y2_d1^2*y3^2`, and
+/// its neighbour `u1*y2*y2_d1` is the true term.)
+fn add_offered_swaps(
     m: &Model,
     vars: &[String],
     offered: &[Vec<(String, String)>],
-) -> Vec<(Move, Option<usize>)> {
+    out: &mut Vec<(Move, Option<usize>)>,
+) {
     let kind = kinds(m);
-    let mut out: Vec<(Move, Option<usize>)> = Vec::new();
     for (i, list) in offered.iter().enumerate() {
         let Some(eq) = m.outputs.get(i) else { break };
         for (new, old) in list {
@@ -934,13 +940,12 @@ fn offered_swaps(
             {
                 continue;
             }
-            push_swap(&mut out, eq, i, &n.exponents, k);
+            push_swap(out, eq, i, &n.exponents, k);
             for ex in neighbours(&n.exponents, vars, &kind) {
-                push_swap(&mut out, eq, i, &ex, k);
+                push_swap(out, eq, i, &ex, k);
             }
         }
     }
-    out
 }
 
 /// Tries the terms `asks.terms[i]` (name, starting coefficient) of every output `i`, in order
@@ -1025,14 +1030,7 @@ pub fn complete(
     // y3 kept `u1*y2_d1*y3` for the true `u1*y2*y2_d1`), and free runs on held-out runs can.
     for _ in 0..MAX_SWAPS {
         let mut all = swaps(&best, &vars);
-        for o in offered_swaps(&best, &vars, &asks.swaps) {
-            if !all
-                .iter()
-                .any(|((i, n, _), _)| *i == o.0 .0 && *n == o.0 .1)
-            {
-                all.push(o);
-            }
-        }
+        add_offered_swaps(&best, &vars, &asks.swaps, &mut all);
         let (moves, replaces): (Vec<_>, Vec<_>) = all.into_iter().unzip();
         match best_move(&best, &best_sims, &moves, &replaces, &ctx, &mut trials) {
             (Some((_, m, sims)), _) => (best, best_sims) = (m, sims),
@@ -1090,7 +1088,8 @@ mod tests {
             Vec::new(),
             vec![("y2_d1*y3*u1".to_string(), "y2_d1^2*y3^2*u1".to_string())],
         ];
-        let swaps = offered_swaps(&m, &vars, &offered);
+        let mut swaps = Vec::new();
+        add_offered_swaps(&m, &vars, &offered, &mut swaps);
         let names: Vec<&str> = swaps.iter().map(|((_, n, _), _)| n.as_str()).collect();
         // The stand-in itself, then its neighbours (one factor changed within its kind): the
         // true term u1*y2*y2_d1 among them, each replacing y3's term 1 (the degree-5 product).
@@ -1104,19 +1103,15 @@ mod tests {
             vec![("y2".to_string(), "y2".to_string())],
             Vec::new(),
         ];
-        assert!(offered_swaps(&m, &vars, &stale).is_empty());
+        let mut none = Vec::new();
+        add_offered_swaps(&m, &vars, &stale, &mut none);
+        assert!(none.is_empty());
     }
 
     #[test]
     fn divisors_are_proper_and_not_constant_and_a_swap_for_one_is_simpler() {
         let ex: BTreeMap<String, u32> = [("u1".to_string(), 1), ("y2".to_string(), 2)].into();
-        let mut got: Vec<String> = divisors(&ex)
-            .iter()
-            .map(|n| {
-                let p: Vec<(&str, u32)> = n.iter().map(|(v, e)| (v.as_str(), *e)).collect();
-                Term::new(&p, 1.0).monomial()
-            })
-            .collect();
+        let mut got: Vec<String> = divisors(&ex).iter().map(monomial_name).collect();
         got.sort();
         assert_eq!(got, vec!["u1", "u1*y2", "y2", "y2^2"]);
         let t = Term::new(&[("u1", 1), ("y2", 2)], 1.0);
@@ -1133,10 +1128,7 @@ mod tests {
         let ex: BTreeMap<String, u32> = [("u1".to_string(), 1), ("y3".to_string(), 2)].into();
         let got: Vec<String> = neighbours(&ex, &vars, &kinds(&m))
             .iter()
-            .map(|n| {
-                let p: Vec<(&str, u32)> = n.iter().map(|(v, e)| (v.as_str(), *e)).collect();
-                Term::new(&p, 1.0).monomial()
-            })
+            .map(monomial_name)
             .collect();
         // u1 -> u2; one y3 -> y1 or y2 (outputs, no derivative); never a derivative.
         assert_eq!(got, vec!["u2*y3^2", "u1*y1*y3", "u1*y2*y3"]);

@@ -1383,12 +1383,18 @@ fn lower_degree_offers(
             let pred = fit.predict(&f)?;
             let label = derivative_name(&prep.settings.outputs[i], ord[i]);
             let mut out = Vec::new();
+            // One term at a time through the fit's own evaluation (its path not copied).
+            let mut one = crate::regression::Model {
+                label: fit.label.clone(),
+                features: fit.features.clone(),
+                degree: fit.degree,
+                terms: Vec::new(),
+                diagnostics: fit.diagnostics.clone(),
+                path: Vec::new(),
+            };
             for t in nonlinear {
-                let share = crate::regression::Model {
-                    terms: vec![t.clone()],
-                    ..fit.clone()
-                }
-                .predict(&f)?;
+                one.terms = vec![t.clone()];
+                let share = one.predict(&f)?;
                 let r: Vec<f64> = (0..y.len()).map(|s| y[s] - pred[s] + share[s]).collect();
                 let degree = t.exponents.values().sum::<u32>() as usize - 1;
                 let stand_in = Regression::builder()
