@@ -54,15 +54,21 @@ fn silverbox_beats_the_linear_baseline_and_its_model_file_simulates_to_the_print
         return;
     }
     let (out, _) = bench("silverbox");
-    // Measured: 0.393 mV (arrow full) and 0.318 mV (without extrapolation; 0.927 and 0.737
+    // Measured: 0.364 mV (arrow full) and 0.263 mV (without extrapolation) with the nonlinear
+    // damping `y_V^2*y_V_d1` the second look adds (0.393 and 0.318 without it; 0.927 and 0.737
     // with the input read by straight lines); published linear 14.4 and 6.58, polynomial NARX
-    // 2.25 and 0.571.
+    // 2.25 and 0.571, best 0.26 and 0.32 (PNLSS); the goal 0.39 on the full arrow.
     for (ours, _, linear, pnarx) in rows(&out) {
         assert!(
             ours < linear / 5.0 && ours < pnarx,
             "ours {ours} against linear {linear}, polynomial NARX {pnarx}\n{out}"
         );
     }
+    assert!(rows(&out)[0].0 <= 0.39, "{out}");
+    assert!(
+        out.contains("y_V^2*y_V_d1: validation NRMSE") && out.contains("from zero: added"),
+        "{out}"
+    );
     let printed = rows(&out)[0].0;
     let simulated = 1e3 * simulated_rms(&out);
     assert!(

@@ -285,3 +285,21 @@ fn a_nominal_that_diverges_on_every_run_is_refused() {
         .to_string();
     assert!(e.contains("diverges in free run on every run"), "{e}");
 }
+
+#[test]
+fn without_test_runs_nothing_is_scored_on_them_and_refused_candidates_are_offered() {
+    // The negative control: nothing to add, so every candidate the gates refused comes back as
+    // the nominal plus that one effect (what `ctsid benchmark`'s second look refits).
+    let case = generate("negative_none", 0, 0.03).unwrap();
+    let mut o = options(&case, 0);
+    o.test.clear();
+    let d = discover(&case.records, &case.nominal, &o).unwrap();
+    assert!(d.nrmse_before.is_nan() && d.nrmse_after.is_nan());
+    assert!(d.runs.iter().all(|r| r.role != "test"), "{}", d.text());
+    assert_ne!(d.verdict, "added", "{}", d.text());
+    assert!(!d.refused.is_empty(), "{}", d.text());
+    let n = case.nominal.outputs[0].terms.len();
+    for m in &d.refused {
+        assert_eq!(m.outputs[0].terms.len(), n + 1);
+    }
+}

@@ -58,6 +58,16 @@ pub fn run(a: BenchmarkArgs) -> Result<()> {
         if let Some(why) = &r.closest {
             outln!("  {why}")?;
         }
+        for t in &r.tried {
+            outln!(
+                "  second look on simulation error: {}: validation NRMSE {:.4} -> {:.4}, {:.1} standard errors from zero: {}",
+                t.effect,
+                t.validation_before,
+                t.validation_after,
+                t.t_ratio,
+                if t.kept { "added" } else { "refused" }
+            )?;
+        }
     }
     for r in &o.removals {
         outln!(

@@ -257,6 +257,8 @@ pub(super) struct Selected {
     pub boot: Bootstrapped,
     /// The effects left out, each with the gate it failed.
     pub dropped: Vec<String>,
+    /// The same effects, as indices into the dictionary.
+    pub dropped_effects: Vec<usize>,
     /// The time-invariance figures of the last set they were computed for.
     pub last_drift: Option<(Vec<usize>, Vec<Halves>)>,
 }
@@ -274,6 +276,7 @@ pub(super) fn select(rs: &Resampling, fit: &Refitter, cand: Vec<usize>) -> Resul
     let mut cand = cand;
     let mut boot = rs.bootstrap(&cand);
     let mut dropped = Vec::new();
+    let mut dropped_effects = Vec::new();
     let mut last_drift = None;
     loop {
         let fails = match regression_failures(rs, &cand, &boot, &mut last_drift) {
@@ -287,6 +290,7 @@ pub(super) fn select(rs: &Resampling, fit: &Refitter, cand: Vec<usize>) -> Resul
                         shares,
                         boot,
                         dropped,
+                        dropped_effects,
                         last_drift,
                     })
                 }
@@ -296,6 +300,7 @@ pub(super) fn select(rs: &Resampling, fit: &Refitter, cand: Vec<usize>) -> Resul
         for (i, why) in &fails {
             let e = &fit.p.effects[cand[*i]];
             dropped.push(format!("{} {} ({why})", e.family, e.formula));
+            dropped_effects.push(cand[*i]);
         }
         cand = (0..cand.len())
             .filter(|i| fails.iter().all(|(j, _)| j != i))

@@ -189,12 +189,19 @@ pub struct Discovery {
     /// (run, start s, end s) where the nominal's free-run error exceeds three noise levels, in the
     /// record's time (a piece cut by `--segment` keeps its place in the record).
     pub windows: Vec<(String, f64, f64)>,
+    /// Mean free-run NRMSE of the test runs with the nominal and the final model (NaN without
+    /// test runs).
     pub nrmse_before: f64,
     pub nrmse_after: f64,
     pub half_width: usize,
     /// The final model (nominal terms, re-tuned or refined, plus added effects).
     #[serde(skip)]
     pub final_model: Option<Model>,
+    /// When nothing was added: each candidate the gates refused (the closest set's effects and
+    /// those left out), as the nominal plus that one effect at its weak-form coefficient, for a
+    /// second look on simulation error (`ctsid benchmark`'s rounds).
+    #[serde(skip)]
+    pub refused: Vec<Model>,
     #[serde(skip)]
     pub nominal_model: Option<Model>,
     #[serde(skip)]
@@ -251,10 +258,10 @@ fn check_setup(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<(usize, V
     if n == 0 {
         return Err(Error::param("nominal", "output order must be at least 1"));
     }
-    if o.train.is_empty() || o.validation.is_empty() || o.test.is_empty() {
+    if o.train.is_empty() || o.validation.is_empty() {
         return Err(Error::param(
             "split",
-            "discover needs at least one train, one validation and one test run",
+            "discover needs at least one train and one validation run",
         ));
     }
     // The same rules as identify's split: indices in range, no run in two lists.
@@ -716,6 +723,14 @@ fn run_nrmse(m: &Model, run: &RunData, opts: &SimOptions) -> f64 {
     simulated(m, run, opts).map_or(f64::INFINITY, |s| nrmse(&s, &run.y[0]))
 }
 
+/// [`mean_nrmse`] of the test runs; NaN without any (nothing was scored on unseen runs).
+fn test_nrmse(m: &Model, runs: &[RunData], opts: &SimOptions) -> f64 {
+    if runs.is_empty() {
+        return f64::NAN;
+    }
+    mean_nrmse(m, runs, opts)
+}
+
 /// Mean free-run NRMSE over runs (in parallel).
 fn mean_nrmse(m: &Model, runs: &[RunData], opts: &SimOptions) -> f64 {
     use rayon::prelude::*;
@@ -942,6 +957,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         shares: sim_shares,
         boot,
         dropped,
+        dropped_effects,
         ..
     } = selected;
     let idx_cand: Vec<usize> = (0..n_nom).chain(cand.iter().map(|&k| n_nom + k)).collect();
@@ -969,7 +985,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
 
     // Verdict; the models were refined on simulation error above (f).
     let test_runs = p.runs(&o.test);
-    let nrmse_before = mean_nrmse(&nominal_model, &test_runs, &report_opts);
+    let nrmse_before = test_nrmse(&nominal_model, &test_runs, &report_opts);
     let mut effects = Vec::new();
     let mut retuned = Vec::new();
     let mut closest = None;
@@ -1008,8 +1024,13 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         });
         final_model = nominal_model.clone();
     }
+    let refused = if verdict == "added" {
+        Vec::new()
+    } else {
+        refused_models(&p, &pb, &train, cand.iter().chain(&dropped_effects))
+    };
     score_final(&mut runs, &p, &final_model, &report_opts);
-    let nrmse_after = mean_nrmse(&final_model, &test_runs, &report_opts);
+    let nrmse_after = test_nrmse(&final_model, &test_runs, &report_opts);
     Ok(Discovery {
         verdict: verdict.into(),
         effects,
@@ -1024,9 +1045,29 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         nrmse_after,
         half_width: p.half_width,
         final_model: Some(final_model),
+        refused,
         nominal_model: Some(nominal_model),
         test_runs,
     })
+}
+
+/// [`Discovery::refused`]: the nominal plus each of `effects` (once) at its weak-form
+/// coefficient fitted alone on the training runs.
+fn refused_models<'a>(
+    p: &Prepared,
+    pb: &Problem,
+    train: &Gram,
+    effects: impl Iterator<Item = &'a usize>,
+) -> Vec<Model> {
+    let mut seen = Vec::new();
+    effects
+        .filter(|k| {
+            let new = !seen.contains(*k);
+            seen.push(**k);
+            new
+        })
+        .filter_map(|&k| pb.fit(train, &[k]).map(|s| p.model(&[], &[(k, s.coef[0])])))
+        .collect()
 }
 
 /// The regression problem: the nominal's free coefficients with their prior standard deviations
@@ -1414,11 +1455,13 @@ impl Discovery {
                 r.rms_final.map(num).unwrap_or_default()
             );
         }
-        s += &format!(
-            "test runs: mean free-run NRMSE before {}, after {}\n",
-            num4(self.nrmse_before),
-            num4(self.nrmse_after)
-        );
+        if !self.test_runs.is_empty() {
+            s += &format!(
+                "test runs: mean free-run NRMSE before {}, after {}\n",
+                num4(self.nrmse_before),
+                num4(self.nrmse_after)
+            );
+        }
         s
     }
 
