@@ -386,11 +386,14 @@ pub fn run(b: &Benchmark) -> Result<Outcome> {
         let added = d.verdict == "added";
         let kept = added && d.final_model.is_some() && validation_after < validation_before;
         // Nothing added: the refused candidates get a second look on simulation error.
+        // Not again what was refused before, nor what discover's own simulation gate (the same
+        // refit on the training runs, scored on the validation runs) found short of the gain.
         let fresh: Vec<Model> = d
             .refused
             .iter()
-            .filter(|m| !refused.contains(&last_term(m)))
-            .cloned()
+            .filter(|r| !refused.contains(&last_term(&r.model)))
+            .filter(|r| r.simulation_ratio.is_none_or(|q| q <= SECOND_LOOK_RATIO))
+            .map(|r| r.model.clone())
             .collect();
         let tried = if added {
             Vec::new()

@@ -299,7 +299,7 @@ fn without_test_runs_nothing_is_scored_on_them_and_refused_candidates_are_offere
     assert_ne!(d.verdict, "added", "{}", d.text());
     assert!(!d.refused.is_empty(), "{}", d.text());
     let n = case.nominal.outputs[0].terms.len();
-    for m in &d.refused {
-        assert_eq!(m.outputs[0].terms.len(), n + 1);
+    for r in &d.refused {
+        assert_eq!(r.model.outputs[0].terms.len(), n + 1);
     }
 }

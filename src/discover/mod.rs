@@ -151,6 +151,17 @@ pub struct Retuned {
     pub outside_confidence: bool,
 }
 
+/// A candidate the gates refused, offered for a second look ([`Discovery::refused`]).
+#[derive(Debug, Clone)]
+pub struct Refused {
+    /// The nominal plus the candidate, last, at its weak-form coefficient.
+    pub model: Model,
+    /// The simulation gate's ratio (validation free-run NRMSE of the candidate refitted on
+    /// simulation error, over the better of nominal and re-tuned nominal), when the candidate
+    /// was judged alone; `None` when it was judged in a set or left out before.
+    pub simulation_ratio: Option<f64>,
+}
+
 /// Coordinate shares of the derivative-space residual.
 #[derive(Debug, Clone, Serialize)]
 pub struct Share {
@@ -166,6 +177,8 @@ pub struct RunScore {
     pub run: String,
     pub role: String,
     pub nrmse_nominal: f64,
+    /// RMS free-run error of the nominal, in the output's units.
+    pub rms_nominal: f64,
     pub above_noise: f64,
     pub nrmse_final: Option<f64>,
     /// RMS free-run error of the final model, in the output's units.
@@ -201,7 +214,7 @@ pub struct Discovery {
     /// those left out), as the nominal plus that one effect at its weak-form coefficient, for a
     /// second look on simulation error (`ctsid benchmark`'s rounds).
     #[serde(skip)]
-    pub refused: Vec<Model>,
+    pub refused: Vec<Refused>,
     #[serde(skip)]
     pub nominal_model: Option<Model>,
     #[serde(skip)]
@@ -813,13 +826,13 @@ fn compare(
         };
         let sim = simulated(nominal_model, sr, report_opts);
         diverged += sim.is_none() as usize;
-        let (nr, above) = match &sim {
+        let (rms, nr, above) = match &sim {
             Some(s) => {
-                let (_, nr) = rms_nrmse(s, &sr.y[0]);
+                let (rms, nr) = rms_nrmse(s, &sr.y[0]);
                 let floor = p.noise_sd[ri] / crate::metrics::std_dev(&sr.y[0]).max(1e-300);
-                (nr, (nr * nr - floor * floor).max(0.0).sqrt())
+                (rms, nr, (nr * nr - floor * floor).max(0.0).sqrt())
             }
-            None => (f64::INFINITY, f64::INFINITY),
+            None => (f64::INFINITY, f64::INFINITY, f64::INFINITY),
         };
         if let Some(s) = &sim {
             let t0 = rs.runs[ri].t0;
@@ -833,6 +846,7 @@ fn compare(
             run: sr.id.clone(),
             role: role.into(),
             nrmse_nominal: nr,
+            rms_nominal: rms,
             above_noise: above,
             nrmse_final: None,
             rms_final: None,
@@ -1027,9 +1041,18 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let refused = if verdict == "added" {
         Vec::new()
     } else {
-        refused_models(&p, &pb, &train, cand.iter().chain(&dropped_effects))
+        let alone = (cand.len() == 1).then(|| (cand[0], simulation_ratio));
+        refused_models(&p, &pb, &train, cand.iter().chain(&dropped_effects), alone)
     };
-    score_final(&mut runs, &p, &final_model, &report_opts);
+    if verdict == "none" {
+        // The final model is the nominal, scored in (a) already.
+        for r in runs.iter_mut() {
+            r.nrmse_final = Some(r.nrmse_nominal);
+            r.rms_final = Some(r.rms_nominal);
+        }
+    } else {
+        score_final(&mut runs, &p, &final_model, &report_opts);
+    }
     let nrmse_after = test_nrmse(&final_model, &test_runs, &report_opts);
     Ok(Discovery {
         verdict: verdict.into(),
@@ -1052,13 +1075,15 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
 }
 
 /// [`Discovery::refused`]: the nominal plus each of `effects` (once) at its weak-form
-/// coefficient fitted alone on the training runs.
+/// coefficient fitted alone on the training runs; `alone` is the effect the simulation gate
+/// judged by itself, with its ratio.
 fn refused_models<'a>(
     p: &Prepared,
     pb: &Problem,
     train: &Gram,
     effects: impl Iterator<Item = &'a usize>,
-) -> Vec<Model> {
+    alone: Option<(usize, f64)>,
+) -> Vec<Refused> {
     let mut seen = Vec::new();
     effects
         .filter(|k| {
@@ -1066,7 +1091,13 @@ fn refused_models<'a>(
             seen.push(**k);
             new
         })
-        .filter_map(|&k| pb.fit(train, &[k]).map(|s| p.model(&[], &[(k, s.coef[0])])))
+        .filter_map(|&k| {
+            let s = pb.fit(train, &[k])?;
+            Some(Refused {
+                model: p.model(&[], &[(k, s.coef[0])]),
+                simulation_ratio: alone.filter(|a| a.0 == k).map(|a| a.1),
+            })
+        })
         .collect()
 }
 
