@@ -113,6 +113,27 @@ pub struct Gates {
     pub failed: Option<String>,
 }
 
+impl Gates {
+    fn of(
+        boot: &gates::Bootstrapped,
+        residual_ratio: f64,
+        simulation_ratio: f64,
+        failed: Option<String>,
+    ) -> Gates {
+        Gates {
+            inclusion: boot.inclusion.clone(),
+            interval_excludes_zero: boot
+                .intervals
+                .iter()
+                .map(|iv| iv[0] > 0.0 || iv[1] < 0.0)
+                .collect(),
+            residual_ratio,
+            simulation_ratio,
+            failed,
+        }
+    }
+}
+
 /// One effect as reported.
 #[derive(Debug, Clone, Serialize)]
 pub struct FoundEffect {
@@ -985,17 +1006,7 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let simulation_ratio = sim_cand / sim_nom.min(sim_ret);
     let (failed, dz) = effect_failure;
     let failed = failed.or_else(|| gate_failure(residual_ratio, (sim_cand, sim_nom, sim_ret)));
-    let gates = Gates {
-        inclusion: boot.inclusion.clone(),
-        interval_excludes_zero: boot
-            .intervals
-            .iter()
-            .map(|iv| iv[0] > 0.0 || iv[1] < 0.0)
-            .collect(),
-        residual_ratio,
-        simulation_ratio,
-        failed: failed.clone(),
-    };
+    let gates = Gates::of(&boot, residual_ratio, simulation_ratio, failed.clone());
 
     // Verdict; the models were refined on simulation error above (f).
     let test_runs = p.runs(&o.test);
@@ -1038,21 +1049,16 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
         });
         final_model = nominal_model.clone();
     }
-    let refused = if verdict == "added" {
-        Vec::new()
-    } else {
-        let alone = (cand.len() == 1).then(|| (cand[0], simulation_ratio));
-        refused_models(&p, &pb, &train, cand.iter().chain(&dropped_effects), alone)
+    let refused = match verdict {
+        "added" => Vec::new(),
+        _ => refused_models(&p, &pb, &train, (&cand, &dropped_effects), simulation_ratio),
     };
-    if verdict == "none" {
-        // The final model is the nominal, scored in (a) already.
-        for r in runs.iter_mut() {
-            r.nrmse_final = Some(r.nrmse_nominal);
-            r.rms_final = Some(r.rms_nominal);
-        }
-    } else {
-        score_final(&mut runs, &p, &final_model, &report_opts);
-    }
+    score_final(
+        &mut runs,
+        &p,
+        (&final_model, verdict == "none"),
+        &report_opts,
+    );
     let nrmse_after = test_nrmse(&final_model, &test_runs, &report_opts);
     Ok(Discovery {
         verdict: verdict.into(),
@@ -1074,16 +1080,18 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     })
 }
 
-/// [`Discovery::refused`]: the nominal plus each of `effects` (once) at its weak-form
-/// coefficient fitted alone on the training runs; `alone` is the effect the simulation gate
-/// judged by itself, with its ratio.
-fn refused_models<'a>(
+/// [`Discovery::refused`]: the nominal plus each effect of the refused set `cand` and of those
+/// left out before (`dropped`), once each, at its weak-form coefficient fitted alone on the
+/// training runs; a set of one carries the simulation gate's `ratio`.
+fn refused_models(
     p: &Prepared,
     pb: &Problem,
     train: &Gram,
-    effects: impl Iterator<Item = &'a usize>,
-    alone: Option<(usize, f64)>,
+    (cand, dropped): (&[usize], &[usize]),
+    ratio: f64,
 ) -> Vec<Refused> {
+    let alone = (cand.len() == 1).then(|| (cand[0], ratio));
+    let effects = cand.iter().chain(dropped);
     let mut seen = Vec::new();
     effects
         .filter(|k| {
@@ -1179,7 +1187,20 @@ fn found_effects(
 }
 
 /// Each run's RMS and NRMSE under the final model.
-fn score_final(runs: &mut [RunScore], p: &Prepared, model: &Model, opts: &SimOptions) {
+fn score_final(
+    runs: &mut [RunScore],
+    p: &Prepared,
+    (model, is_nominal): (&Model, bool),
+    opts: &SimOptions,
+) {
+    if is_nominal {
+        // Scored in (a) already.
+        for r in runs.iter_mut() {
+            r.nrmse_final = Some(r.nrmse_nominal);
+            r.rms_final = Some(r.rms_nominal);
+        }
+        return;
+    }
     for r in runs.iter_mut() {
         if let Some(sr) = p.simruns.iter().find(|s| s.id == r.run) {
             let (rms, nr) = simulated(model, sr, opts)
