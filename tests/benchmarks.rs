@@ -78,7 +78,7 @@ fn silverbox_beats_the_linear_baseline_and_its_model_file_simulates_to_the_print
 }
 
 #[test]
-fn emps_beats_the_linear_baseline_after_discover_and_simplify() {
+fn emps_beats_the_linear_baseline_after_discover_and_simplify_and_its_model_file_simulates() {
     if shared_data("emps/EMPS_train_DATA_EMPS.csv").is_none() {
         return;
     }
@@ -97,6 +97,9 @@ fn emps_beats_the_linear_baseline_after_discover_and_simplify() {
         out.contains("simplify: term q_m of q_m_d2") && out.contains("): dropped"),
         "{out}"
     );
+    // The model file simulates the pulses record to the printed RMS (mm; the record is in m).
+    let simulated = 1e3 * simulated_rms(&out);
+    assert!((simulated - ours).abs() < 1e-3 * ours, "{simulated} vs {ours}");
 }
 
 #[test]
