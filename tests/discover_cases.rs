@@ -295,11 +295,27 @@ fn without_test_runs_nothing_is_scored_on_them_and_refused_candidates_are_offere
     o.test.clear();
     let d = discover(&case.records, &case.nominal, &o).unwrap();
     assert!(d.nrmse_before.is_nan() && d.nrmse_after.is_nan());
-    assert!(d.runs.iter().all(|r| r.role != "test"), "{}", d.text());
-    assert_ne!(d.verdict, "added", "{}", d.text());
+    assert!(!d.text().contains("test runs:"), "{}", d.text());
+    assert_eq!(d.verdict, "none", "{}", d.text());
+    // Nothing added: the final scores are the nominal's, reused.
+    assert!(d
+        .runs
+        .iter()
+        .all(|r| r.nrmse_final == Some(r.nrmse_nominal)));
     assert!(!d.refused.is_empty(), "{}", d.text());
-    let n = case.nominal.outputs[0].terms.len();
+    let nominal = &case.nominal.outputs[0].terms;
     for r in &d.refused {
-        assert_eq!(r.model.outputs[0].terms.len(), n + 1);
+        let terms = &r.model.outputs[0].terms;
+        assert_eq!(terms.len(), nominal.len() + 1);
+        for (a, b) in terms.iter().zip(nominal) {
+            assert_eq!(a.monomial(), b.monomial());
+        }
+        let last = terms.last().unwrap();
+        assert!(
+            matches!(last.origin, Some(ctsid::model::Origin::Effect(_))),
+            "{:?}",
+            last.origin
+        );
+        assert!(last.coefficient.is_finite() && last.coefficient != 0.0);
     }
 }

@@ -104,9 +104,6 @@ fn main() {
                 last.coefficient / last.std_error.unwrap_or(f64::NAN),
                 t.elapsed().as_secs_f64()
             );
-            if tol < 1e-5 || label != "train" {
-                continue;
-            }
         }
     }
 }

@@ -1,5 +1,6 @@
 //! `ctsid benchmark NAME [--data DIR] [--out DIR]`: the one workflow of [`ctsid::benchmark`]
-//! (a linear nominal by identify, discover in rounds, then the undetermined terms dropped) on a
+//! (a linear nominal by identify, discover in rounds with a second look on simulation error at
+//! what its gates refuse, then the undetermined terms dropped) on a
 //! public benchmark record, scored by the benchmark's protocol beside the published rows.
 //! `--out` writes `NAME.model.json`,
 //! `NAME.csv` (benchmark, metric, ours, linear, pnarx, best), the test run as `NAME_test.csv`

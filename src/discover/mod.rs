@@ -17,8 +17,9 @@
 //!   remaining effects together);
 //! - (e) names, formulas and aliases (partial correlation > 0.95 after the nominal columns);
 //! - (f) the accepted structure is refined on simulation error (the one refit of
-//!   [`crate::identify::refine`], nominal terms the user fixed held) and scored on the test runs
-//!   from the one initial-state convention of [`crate::simulate::initial_state`], as
+//!   [`crate::identify::refine`], nominal terms the user fixed held) and scored on the test runs,
+//!   if any (the library takes an empty test list; `ctsid discover` asks for one), from the one
+//!   initial-state convention of [`crate::simulate::initial_state`], as
 //!   `ctsid simulate` scores the model file.
 //!
 //! Every model here, nominal, re-tuned or augmented, is a [`Model`]: effects are its expression
@@ -273,7 +274,8 @@ fn monomial_exponents(t: &Term, vars: &[String]) -> Vec<(usize, u32)> {
 }
 
 /// The checks of [`discover`]'s inputs that need no computation (see its docs): one output of
-/// order at least 1, a split of three non-empty lists that identify's rules accept, the
+/// order at least 1, non-empty train and validation lists (test may be empty) that identify's
+/// split rules accept, the
 /// channels present and varying over the training runs, and confidences only for nominal
 /// terms. Returns the record set's channel of the output and of each input.
 fn check_setup(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<(usize, Vec<usize>)> {
@@ -908,7 +910,8 @@ fn hot_windows(sim: &[f64], y: &[f64], m: usize, level: f64) -> Vec<(usize, usiz
 }
 
 /// Runs the workflow. Refuses a nominal model that [`Model::validate`] refuses or that has more
-/// than one output, an empty train, validation or test list, lists that
+/// than one output, an empty train or validation list (an empty test list is allowed: nothing is
+/// then scored on unseen runs and the test figures are NaN), lists that
 /// [`crate::identify::Split::new`] refuses, a channel the record set lacks, an output or input that
 /// is constant over the training runs, a confidence for a term the nominal lacks, runs too short
 /// for the derivatives or for the weak-form windows, a half width below 2, user effects that
