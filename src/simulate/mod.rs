@@ -41,7 +41,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::{Error, Result};
-use stage::{ErrorLu, StageLu};
+use stage::{ErrorLu, Pool, StageLu};
 
 mod input;
 mod records;
@@ -400,6 +400,8 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     /// The input at the three stage times of the step being iterated (`3 x n_inputs`): every
     /// Newton iteration evaluates the right-hand side at the same three times.
     stage_u: Vec<f64>,
+    /// Vectors of factors no longer used, for the next factorisation ([`Pool`]).
+    pool: Pool,
 }
 
 /// The factors one step size and Jacobian need: the simplified-Newton stage matrix and the
@@ -407,6 +409,24 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
 struct StepLu {
     stage: StageLu,
     error: ErrorLu,
+}
+
+impl Recycle for StepLu {
+    fn recycle(self, pool: &mut Pool) {
+        self.stage.recycle(pool);
+        self.error.recycle(pool);
+    }
+}
+
+impl Recycle for StageLu {
+    fn recycle(self, pool: &mut Pool) {
+        StageLu::recycle(self, pool);
+    }
+}
+
+/// Factors whose vectors go back to a [`Pool`] when they are dropped from a cache.
+trait Recycle {
+    fn recycle(self, pool: &mut Pool);
 }
 
 /// The last few LU factors by (step, Jacobian), oldest dropped first.
@@ -418,26 +438,36 @@ impl<T> Default for LuCache<T> {
     }
 }
 
-impl<T> LuCache<T> {
+impl<T: Recycle> LuCache<T> {
     const CAPACITY: usize = 4;
 
-    /// The cached factors for step `h` whose Jacobian `same` accepts, or those of `factor()`,
-    /// cached under `jac` (`None` when `factor` finds the matrix singular).
+    /// The cached factors for step `h` whose Jacobian `same` accepts, or those of
+    /// `factor(pool)`, cached under `jac` (`None` when `factor` finds the matrix singular). The
+    /// entry a new one replaces gives its vectors to `pool` (its factors only when no step
+    /// holds them any more).
     fn get_or_factor(
         &mut self,
         h: f64,
         jac: &[f64],
         same: impl Fn(&[f64]) -> bool,
-        factor: impl FnOnce() -> Option<T>,
+        pool: &mut Pool,
+        factor: impl FnOnce(&mut Pool) -> Option<T>,
     ) -> Option<std::rc::Rc<T>> {
         if let Some((_, _, lu)) = self.0.iter().find(|(hh, j, _)| *hh == h && same(j)) {
             return Some(lu.clone());
         }
-        let lu = std::rc::Rc::new(factor()?);
+        let lu = std::rc::Rc::new(factor(pool)?);
+        let mut key = Vec::new();
         if self.0.len() >= Self::CAPACITY {
-            self.0.remove(0);
+            let (_, old_key, old) = self.0.remove(0);
+            key = old_key;
+            if let Ok(old) = std::rc::Rc::try_unwrap(old) {
+                old.recycle(pool);
+            }
         }
-        self.0.push((h, jac.to_vec(), lu.clone()));
+        key.clear();
+        key.extend_from_slice(jac);
+        self.0.push((h, key, lu.clone()));
         Some(lu)
     }
 }
@@ -497,13 +527,15 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
             })
         };
         let mut fresh = false;
-        let lu = self.lu_cache.get_or_factor(h, jac, close, || {
-            fresh = true;
-            Some(StepLu {
-                stage: StageLu::factor(rk_a, n, h, [jac, jac, jac], chains)?,
-                error: ErrorLu::factor(n, gamma0 * h, jac, chains)?,
-            })
-        });
+        let lu = self
+            .lu_cache
+            .get_or_factor(h, jac, close, &mut self.pool, |pool| {
+                fresh = true;
+                Some(StepLu {
+                    stage: StageLu::factor(rk_a, n, h, [jac, jac, jac], chains, pool)?,
+                    error: ErrorLu::factor(n, gamma0 * h, jac, chains, pool)?,
+                })
+            });
         if fresh && self.fast_rate_jac != jac {
             self.fast_rate = fast_growth_rate(jac, n, h);
             self.fast_rate_jac.clear();
@@ -687,12 +719,15 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         // reuse the factors of an identical stage matrix (exactly identical, unlike the Newton
         // cache, because these factors give the sensitivities themselves).
         let chains = self.chains.as_deref();
-        let factor = || StageLu::factor(&a, n, h, [stage(0), stage(1), stage(2)], chains);
+        let factor = |pool: &mut Pool| {
+            StageLu::factor(&a, n, h, [stage(0), stage(1), stage(2)], chains, pool)
+        };
+        let pool = &mut self.pool;
         let lu = if stage(0) == stage(1) && stage(1) == stage(2) {
             self.sens_lu
-                .get_or_factor(h, stage(0), |j| j == stage(0), factor)
+                .get_or_factor(h, stage(0), |j| j == stage(0), pool, factor)
         } else {
-            factor().map(std::rc::Rc::new)
+            factor(pool).map(std::rc::Rc::new)
         };
         let Some(lu) = lu else {
             return false;
@@ -713,6 +748,10 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         }
         lu.solve_many(&mut sens.rhs, q, &mut sens.work);
         sens.s.copy_from_slice(&sens.rhs[2 * n * q..3 * n * q]);
+        // Factors of this step alone (not cached) give their vectors to the next step's.
+        if let Ok(lu) = std::rc::Rc::try_unwrap(lu) {
+            lu.recycle(&mut self.pool);
+        }
         sens.s.iter().all(|v| v.is_finite())
     }
 
@@ -1176,6 +1215,7 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
         chains: sys.chains(),
         spare: Vec::new(),
         stage_u: Vec::new(),
+        pool: Pool::default(),
     };
     let mut x = x0.to_vec();
     if let Some(e) = it.diverged(times[0], &x) {

@@ -21,10 +21,59 @@ pub(super) struct DenseLu {
     perm: Vec<usize>,
 }
 
+/// The work vectors of factors no longer used, handed to the next factorisation: a nonlinear
+/// model's Jacobian changes at every step, and allocating and freeing a step's factors was about
+/// 15 % of a benchmark's time (docs/method/simulation.md). Every vector comes out empty.
+#[derive(Default)]
+pub(super) struct Pool {
+    f64s: Vec<Vec<f64>>,
+    usizes: Vec<Vec<usize>>,
+    pairs: Vec<Vec<(usize, f64)>>,
+    chains: Vec<Vec<(usize, usize)>>,
+    m3s: Vec<Vec<M3>>,
+    works: Vec<Work>,
+}
+
+type Work = std::cell::RefCell<(Vec<f64>, Vec<f64>, Vec<f64>)>;
+
+/// Most vectors of one kind a pool keeps (a step's factors hold a handful).
+const POOL_DEPTH: usize = 8;
+
+fn take<T>(v: &mut Vec<Vec<T>>) -> Vec<T> {
+    let mut x = v.pop().unwrap_or_default();
+    x.clear();
+    x
+}
+
+fn give<T>(v: &mut Vec<Vec<T>>, x: Vec<T>) {
+    if v.len() < POOL_DEPTH {
+        v.push(x);
+    }
+}
+
+impl Pool {
+    fn f64s(&mut self) -> Vec<f64> {
+        take(&mut self.f64s)
+    }
+    fn zeros(&mut self, len: usize) -> Vec<f64> {
+        let mut x = self.f64s();
+        x.resize(len, 0.0);
+        x
+    }
+}
+
 impl DenseLu {
     /// Factors `a` (n x n, row-major) in place; `None` when a pivot is zero or not finite.
-    pub(super) fn factor(n: usize, mut a: Vec<f64>) -> Option<DenseLu> {
-        let mut perm: Vec<usize> = (0..n).collect();
+    #[cfg(test)]
+    fn factor(n: usize, a: Vec<f64>) -> Option<DenseLu> {
+        DenseLu::factor_with(n, a, Vec::new())
+    }
+
+    /// Factors `a` (n x n, row-major) in place into `perm`'s vector; `None` when a pivot is
+    /// zero or not finite.
+    fn factor_with(n: usize, mut a: Vec<f64>, mut perm: Vec<usize>) -> Option<DenseLu> {
+        perm.clear();
+        perm.extend(0..n);
         for k in 0..n {
             let mut p = k;
             for i in k + 1..n {
@@ -53,6 +102,16 @@ impl DenseLu {
             }
         }
         Some(DenseLu { n, a, perm })
+    }
+
+    fn pooled(n: usize, a: Vec<f64>, pool: &mut Pool) -> Option<DenseLu> {
+        let perm = take(&mut pool.usizes);
+        DenseLu::factor_with(n, a, perm)
+    }
+
+    fn recycle(self, pool: &mut Pool) {
+        give(&mut pool.f64s, self.a);
+        give(&mut pool.usizes, self.perm);
     }
 
     /// Solves `A x = b`.
@@ -131,12 +190,21 @@ impl StageLu {
         h: f64,
         jacs: [&[f64]; 3],
         chains: Option<&[(usize, usize)]>,
+        pool: &mut Pool,
     ) -> Option<StageLu> {
         match chains {
             Some(c) if has_chains(n, c, &jacs) => {
-                ChainLu::factor(a, n, h, jacs, c).map(StageLu::Chain)
+                ChainLu::factor(a, n, h, jacs, c, pool).map(StageLu::Chain)
             }
-            _ => dense_stage_matrix(a, n, h, jacs).map(StageLu::Dense),
+            _ => dense_stage_matrix(a, n, h, jacs, pool).map(StageLu::Dense),
+        }
+    }
+
+    /// Hands the factors' vectors to `pool` for the next factorisation.
+    pub(super) fn recycle(self, pool: &mut Pool) {
+        match self {
+            StageLu::Dense(lu) => lu.recycle(pool),
+            StageLu::Chain(lu) => lu.recycle(pool),
         }
     }
 
@@ -182,14 +250,16 @@ impl ErrorLu {
         s: f64,
         jac: &[f64],
         chains: Option<&[(usize, usize)]>,
+        pool: &mut Pool,
     ) -> Option<ErrorLu> {
         let Some(chains) = chains.filter(|c| has_chains(n, c, &[jac])) else {
-            let mut m: Vec<f64> = jac.iter().map(|v| -s * v).collect();
+            let mut m = pool.f64s();
+            m.extend(jac.iter().map(|v| -s * v));
             (0..n).for_each(|d| m[d * n + d] += 1.0);
-            return DenseLu::factor(n, m).map(ErrorLu::Dense);
+            return DenseLu::pooled(n, m, pool).map(ErrorLu::Dense);
         };
         // e_k = a_k e_top + (terms of b): a_k = s^(top - k).
-        let mut a = vec![0.0; n];
+        let mut a = pool.zeros(n);
         for &(off, len) in chains {
             let mut p = 1.0;
             for k in (off..off + len).rev() {
@@ -198,8 +268,8 @@ impl ErrorLu {
             }
         }
         let nc = chains.len();
-        let mut mat = vec![0.0; nc * nc];
-        let mut top_rows = Vec::with_capacity(nc * n);
+        let mut mat = pool.zeros(nc * nc);
+        let mut top_rows = pool.f64s();
         for (o, &(off, len)) in chains.iter().enumerate() {
             let row = &jac[(off + len - 1) * n..(off + len) * n];
             top_rows.extend_from_slice(row);
@@ -208,12 +278,32 @@ impl ErrorLu {
                 mat[o * nc + o2] = if o == o2 { 1.0 } else { 0.0 } - s * g;
             }
         }
+        give(&mut pool.f64s, a);
+        let mut chain_list = take(&mut pool.chains);
+        chain_list.extend_from_slice(chains);
         Some(ErrorLu::Chain {
             s,
-            chains: chains.to_vec(),
+            chains: chain_list,
             top_rows,
-            lu: DenseLu::factor(nc, mat)?,
+            lu: DenseLu::pooled(nc, mat, pool)?,
         })
+    }
+
+    /// Hands the factors' vectors to `pool` for the next factorisation.
+    pub(super) fn recycle(self, pool: &mut Pool) {
+        match self {
+            ErrorLu::Dense(lu) => lu.recycle(pool),
+            ErrorLu::Chain {
+                chains,
+                top_rows,
+                lu,
+                ..
+            } => {
+                give(&mut pool.chains, chains);
+                give(&mut pool.f64s, top_rows);
+                lu.recycle(pool);
+            }
+        }
     }
 
     /// Solves `(I - s J) x = b`; `work` is scratch.
@@ -285,9 +375,15 @@ fn has_chains(n: usize, chains: &[(usize, usize)], jacs: &[&[f64]]) -> bool {
 }
 
 /// The whole 3n x 3n stage matrix, factored.
-fn dense_stage_matrix(a: &[[f64; 3]; 3], n: usize, h: f64, jacs: [&[f64]; 3]) -> Option<DenseLu> {
+fn dense_stage_matrix(
+    a: &[[f64; 3]; 3],
+    n: usize,
+    h: f64,
+    jacs: [&[f64]; 3],
+    pool: &mut Pool,
+) -> Option<DenseLu> {
     let m = 3 * n;
-    let mut mat = vec![0.0; m * m];
+    let mut mat = pool.zeros(m * m);
     for d in 0..m {
         mat[d * m + d] = 1.0;
     }
@@ -301,7 +397,7 @@ fn dense_stage_matrix(a: &[[f64; 3]; 3], n: usize, h: f64, jacs: [&[f64]; 3]) ->
             }
         }
     }
-    DenseLu::factor(m, mat)
+    DenseLu::pooled(m, mat, pool)
 }
 
 type M3 = [[f64; 3]; 3];
@@ -339,7 +435,7 @@ pub(super) struct ChainLu {
     lu: DenseLu,
     /// Work space of the solves (the reduced right-hand sides, the top rows' sums, the reduced
     /// solve's scratch), kept with the factors so that a Newton iteration allocates nothing.
-    work: std::cell::RefCell<(Vec<f64>, Vec<f64>, Vec<f64>)>,
+    work: Work,
 }
 
 impl ChainLu {
@@ -349,11 +445,13 @@ impl ChainLu {
         h: f64,
         jacs: [&[f64]; 3],
         chains: &[(usize, usize)],
+        pool: &mut Pool,
     ) -> Option<ChainLu> {
         let nc = chains.len();
         let longest = chains.iter().map(|c| c.1).max().unwrap_or(0);
         let b: M3 = std::array::from_fn(|i| std::array::from_fn(|j| h * a[i][j]));
-        let mut bp = vec![[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]];
+        let mut bp = take(&mut pool.m3s);
+        bp.push([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]);
         for p in 1..=longest {
             bp.push(mat_mul(&bp[p - 1], &b));
         }
@@ -363,7 +461,7 @@ impl ChainLu {
             &jacs[j][top * n..(top + 1) * n]
         };
         let m = 3 * nc;
-        let mut mat = vec![0.0; m * m];
+        let mut mat = pool.zeros(m * m);
         for o in 0..nc {
             for (o2, &(off, len)) in chains.iter().enumerate() {
                 // v[j][l] = sum_k g_o^j[off + k] (B^(len-1-k))_jl
@@ -389,9 +487,9 @@ impl ChainLu {
                 }
             }
         }
-        let lu = DenseLu::factor(m, mat)?;
-        let mut g = Vec::new();
-        let mut g_start = Vec::with_capacity(3 * nc + 1);
+        let lu = DenseLu::pooled(m, mat, pool)?;
+        let mut g = take(&mut pool.pairs);
+        let mut g_start = take(&mut pool.usizes);
         for j in 0..3 {
             for o in 0..nc {
                 g_start.push(g.len());
@@ -400,15 +498,28 @@ impl ChainLu {
             }
         }
         g_start.push(g.len());
+        let mut chain_list = take(&mut pool.chains);
+        chain_list.extend_from_slice(chains);
         Some(ChainLu {
             n,
-            chains: chains.to_vec(),
+            chains: chain_list,
             bp,
             g,
             g_start,
             lu,
-            work: Default::default(),
+            work: pool.works.pop().unwrap_or_default(),
         })
+    }
+
+    fn recycle(self, pool: &mut Pool) {
+        give(&mut pool.chains, self.chains);
+        give(&mut pool.m3s, self.bp);
+        give(&mut pool.pairs, self.g);
+        give(&mut pool.usizes, self.g_start);
+        self.lu.recycle(pool);
+        if pool.works.len() < POOL_DEPTH {
+            pool.works.push(self.work);
+        }
     }
 
     /// [`ChainLu::solve_many`] for one right-hand side (every Newton iteration), written out:
@@ -584,9 +695,10 @@ mod tests {
         }
         let a = [[0.2, -0.05, 0.02], [0.4, 0.2, -0.03], [0.38, 0.5, 0.11]];
         let stages = [&jacs[0][..], &jacs[1][..], &jacs[2][..]];
-        let chain = StageLu::factor(&a, n, 0.7, stages, Some(&chains)).unwrap();
+        let chain =
+            StageLu::factor(&a, n, 0.7, stages, Some(&chains), &mut Pool::default()).unwrap();
         assert!(matches!(chain, StageLu::Chain(_)));
-        let dense = StageLu::factor(&a, n, 0.7, stages, None).unwrap();
+        let dense = StageLu::factor(&a, n, 0.7, stages, None, &mut Pool::default()).unwrap();
         let q = 4;
         let b: Vec<f64> = (0..3 * n * q).map(|_| rnd(&mut seed)).collect();
         let (mut bc, mut bd) = (b.clone(), b.clone());
@@ -608,7 +720,15 @@ mod tests {
         // A Jacobian that breaks a chain (an entry off the shift) is factored densely.
         let mut broken = jacs[0].clone();
         broken[n + 3] = 0.5;
-        let f = StageLu::factor(&a, n, 0.7, [&broken, &broken, &broken], Some(&chains)).unwrap();
+        let f = StageLu::factor(
+            &a,
+            n,
+            0.7,
+            [&broken, &broken, &broken],
+            Some(&chains),
+            &mut Pool::default(),
+        )
+        .unwrap();
         assert!(matches!(f, StageLu::Dense(_)));
     }
 
@@ -627,9 +747,9 @@ mod tests {
             }
         }
         let s = 0.3;
-        let chain = ErrorLu::factor(n, s, &jac, Some(&chains)).unwrap();
+        let chain = ErrorLu::factor(n, s, &jac, Some(&chains), &mut Pool::default()).unwrap();
         assert!(matches!(chain, ErrorLu::Chain { .. }));
-        let dense = ErrorLu::factor(n, s, &jac, None).unwrap();
+        let dense = ErrorLu::factor(n, s, &jac, None, &mut Pool::default()).unwrap();
         let b: Vec<f64> = (0..n).map(|_| rnd(&mut seed)).collect();
         let (mut xc, mut xd, mut work) = (vec![0.0; n], vec![0.0; n], Vec::new());
         chain.solve(&b, &mut xc, &mut work);
