@@ -41,7 +41,7 @@
 use nalgebra::{DMatrix, DVector};
 
 use crate::error::{Error, Result};
-use stage::{ErrorLu, Pool, StageLu};
+use stage::{ErrorLu, Pool, Recycle, StageLu};
 
 mod input;
 mod records;
@@ -418,17 +418,6 @@ impl Recycle for StepLu {
     }
 }
 
-impl Recycle for StageLu {
-    fn recycle(self, pool: &mut Pool) {
-        StageLu::recycle(self, pool);
-    }
-}
-
-/// Factors whose vectors go back to a [`Pool`] when they are dropped from a cache.
-trait Recycle {
-    fn recycle(self, pool: &mut Pool);
-}
-
 /// The last few LU factors by (step, Jacobian), oldest dropped first.
 struct LuCache<T>(Vec<(f64, Vec<f64>, std::rc::Rc<T>)>);
 
@@ -457,14 +446,15 @@ impl<T: Recycle> LuCache<T> {
             return Some(lu.clone());
         }
         let lu = std::rc::Rc::new(factor(pool)?);
-        let mut key = Vec::new();
-        if self.0.len() >= Self::CAPACITY {
+        let mut key = if self.0.len() >= Self::CAPACITY {
             let (_, old_key, old) = self.0.remove(0);
-            key = old_key;
             if let Ok(old) = std::rc::Rc::try_unwrap(old) {
                 old.recycle(pool);
             }
-        }
+            old_key
+        } else {
+            Vec::new()
+        };
         key.clear();
         key.extend_from_slice(jac);
         self.0.push((h, key, lu.clone()));

@@ -23,7 +23,8 @@ pub(super) struct DenseLu {
 
 /// The work vectors of factors no longer used, handed to the next factorisation: a nonlinear
 /// model's Jacobian changes at every step, and allocating and freeing a step's factors was about
-/// 15 % of a benchmark's time (docs/method/simulation.md). Every vector comes out empty.
+/// 15 % of a benchmark's time (docs/method/simulation.md). Every vector comes out empty; a
+/// chain solve's work space comes out as it was left (its solves clear what they use).
 #[derive(Default)]
 pub(super) struct Pool {
     f64s: Vec<Vec<f64>>,
@@ -45,9 +46,23 @@ fn take<T>(v: &mut Vec<Vec<T>>) -> Vec<T> {
     x
 }
 
-fn give<T>(v: &mut Vec<Vec<T>>, x: Vec<T>) {
+fn give<T>(v: &mut Vec<T>, x: T) {
     if v.len() < POOL_DEPTH {
         v.push(x);
+    }
+}
+
+/// Factors whose vectors go back to a [`Pool`] when they are no longer used.
+pub(super) trait Recycle {
+    fn recycle(self, pool: &mut Pool);
+}
+
+impl Recycle for StageLu {
+    fn recycle(self, pool: &mut Pool) {
+        match self {
+            StageLu::Dense(lu) => lu.recycle(pool),
+            StageLu::Chain(lu) => lu.recycle(pool),
+        }
     }
 }
 
@@ -59,6 +74,9 @@ impl Pool {
         let mut x = self.f64s();
         x.resize(len, 0.0);
         x
+    }
+    fn work(&mut self) -> Work {
+        self.works.pop().unwrap_or_default()
     }
 }
 
@@ -197,14 +215,6 @@ impl StageLu {
                 ChainLu::factor(a, n, h, jacs, c, pool).map(StageLu::Chain)
             }
             _ => dense_stage_matrix(a, n, h, jacs, pool).map(StageLu::Dense),
-        }
-    }
-
-    /// Hands the factors' vectors to `pool` for the next factorisation.
-    pub(super) fn recycle(self, pool: &mut Pool) {
-        match self {
-            StageLu::Dense(lu) => lu.recycle(pool),
-            StageLu::Chain(lu) => lu.recycle(pool),
         }
     }
 
@@ -507,7 +517,7 @@ impl ChainLu {
             g,
             g_start,
             lu,
-            work: pool.works.pop().unwrap_or_default(),
+            work: pool.work(),
         })
     }
 
@@ -517,9 +527,7 @@ impl ChainLu {
         give(&mut pool.pairs, self.g);
         give(&mut pool.usizes, self.g_start);
         self.lu.recycle(pool);
-        if pool.works.len() < POOL_DEPTH {
-            pool.works.push(self.work);
-        }
+        give(&mut pool.works, self.work);
     }
 
     /// [`ChainLu::solve_many`] for one right-hand side (every Newton iteration), written out:
