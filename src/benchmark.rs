@@ -456,28 +456,19 @@ pub fn run(b: &Benchmark) -> Result<Outcome> {
     let pruned = simplify(b, &model)?;
     model = pruned.model;
     let prune_seconds = clock.elapsed().as_secs_f64();
-    let test_run = &b.records.runs[b.split.test[0]];
-    let data = run_data(&model, &b.records, test_run)?;
-    let simulate = |m: &Model| -> Result<Vec<f64>> {
-        let c = m.compile()?;
-        Ok(free_run(&c, &data, b.init, &SimOptions::default())?.remove(0))
-    };
-    let ours = simulate(&model)?;
-    let nominal_sim = simulate(&nominal)?;
-    let y = &data.y[0];
-    let rms_of = |s: &[f64], m: &Metric| {
-        let end = m.end.unwrap_or(y.len()).min(y.len());
-        b.scale * crate::metrics::rms(&s[b.init..end], &y[b.init..end])
-    };
+    let (ours_rms, ours) = test_scores(b, &model)?;
+    let (nominal_rms, _) = test_scores(b, &nominal)?;
     let scores = b
         .metrics
         .iter()
-        .map(|m| Score {
+        .zip(ours_rms.into_iter().zip(nominal_rms))
+        .map(|(m, (ours, nominal))| Score {
             metric: m.clone(),
-            ours: rms_of(&ours, m),
-            nominal: rms_of(&nominal_sim, m),
+            ours,
+            nominal,
         })
         .collect();
+    let data = run_data(&model, &b.records, &b.records.runs[b.split.test[0]])?;
     Ok(Outcome {
         nominal,
         model,
@@ -485,12 +476,31 @@ pub fn run(b: &Benchmark) -> Result<Outcome> {
         removals: pruned.removals,
         prune_seconds,
         scores,
-        test_t: data.t.clone(),
-        test_measured: y.clone(),
+        test_t: data.t,
+        test_measured: data.y.into_iter().next().unwrap_or_default(),
         test_simulated: ours,
         identify_seconds,
         seconds: started.elapsed().as_secs_f64(),
     })
+}
+
+/// `model`'s free run of the benchmark's test run by its protocol (initial state from the first
+/// `init` samples): the RMS of each metric in the benchmark's unit, and the simulated output.
+/// Errs when the model cannot be compiled or run on the test record.
+pub fn test_scores(b: &Benchmark, model: &Model) -> Result<(Vec<f64>, Vec<f64>)> {
+    let data = run_data(model, &b.records, &b.records.runs[b.split.test[0]])?;
+    let c = model.compile()?;
+    let sim = free_run(&c, &data, b.init, &SimOptions::default())?.remove(0);
+    let y = &data.y[0];
+    let rms = b
+        .metrics
+        .iter()
+        .map(|m| {
+            let end = m.end.unwrap_or(y.len()).min(y.len());
+            b.scale * crate::metrics::rms(&sim[b.init..end], &y[b.init..end])
+        })
+        .collect();
+    Ok((rms, sim))
 }
 
 /// The mean free-run NRMSE of a discovery's validation runs with its nominal and its final
@@ -577,8 +587,9 @@ fn simplify(b: &Benchmark, model: &Model) -> Result<Pruned> {
 }
 
 /// Runs `ids` of the benchmark's records for `model`, each with the initial state fitted on its
-/// first [`INIT_WINDOW`] samples (the refinement's starting states).
-fn fit_runs(b: &Benchmark, model: &Model, ids: &[usize]) -> Result<Vec<RunData>> {
+/// first [`INIT_WINDOW`] samples (the refinement's starting states). Errs when the model cannot
+/// be compiled or an initial state cannot be fitted.
+pub fn fit_runs(b: &Benchmark, model: &Model, ids: &[usize]) -> Result<Vec<RunData>> {
     let c = model.compile()?;
     let opts = SimOptions::fitting();
     ids.iter()

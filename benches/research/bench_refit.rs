@@ -6,9 +6,8 @@
 //!
 //! `cargo bench --bench bench_refit -- NAME MODEL.json [discover]` (`discover`: one discover
 //! round against the model on the benchmark's split instead, its report printed).
-use ctsid::benchmark::load;
+use ctsid::benchmark::{fit_runs, load, test_scores};
 use ctsid::identify::refine::{refine, RefineOptions};
-use ctsid::simulate::{free_run, initial_state, run_data, SimOptions, INIT_WINDOW};
 use ctsid::Model;
 
 fn main() {
@@ -21,22 +20,7 @@ fn main() {
         Ok(b) => b,
         Err(e) => return println!("skipped: {e}"),
     };
-    let score = |m: &Model| {
-        let test = &b.records.runs[b.split.test[0]];
-        let data = run_data(m, &b.records, test).unwrap();
-        let c = m.compile().unwrap();
-        let s = free_run(&c, &data, b.init, &SimOptions::default())
-            .unwrap()
-            .remove(0);
-        let y = &data.y[0];
-        b.metrics
-            .iter()
-            .map(|mt| {
-                let end = mt.end.unwrap_or(y.len()).min(y.len());
-                b.scale * ctsid::metrics::rms(&s[b.init..end], &y[b.init..end])
-            })
-            .collect::<Vec<_>>()
-    };
+    let score = |m: &Model| test_scores(&b, m).unwrap().0;
     println!("start {:?}", score(&model));
     if args.get(3).map(|s| s.as_str()) == Some("discover") {
         let mut o = ctsid::discover::Options::new(
@@ -63,16 +47,7 @@ fn main() {
     ];
     for (label, ids) in sets {
         for (tol, it) in [(1e-4, 15), (1e-7, 60)] {
-            let c = model.compile().unwrap();
-            let opts = SimOptions::fitting();
-            let runs: Vec<_> = ids
-                .iter()
-                .map(|&i| {
-                    let mut r = run_data(&model, &b.records, &b.records.runs[i]).unwrap();
-                    r.x0 = initial_state(&c, &r.t, &r.y, &r.u, INIT_WINDOW, &opts).unwrap();
-                    r
-                })
-                .collect();
+            let runs = fit_runs(&b, &model, &ids).unwrap();
             let ro = RefineOptions {
                 max_iterations: it,
                 polish_iterations: 20,
@@ -82,19 +57,8 @@ fn main() {
             };
             let t = std::time::Instant::now();
             let r = refine(&model, &runs, &ro).unwrap();
-            let val: Vec<_> = b
-                .split
-                .validation
-                .as_ref()
-                .unwrap()
-                .iter()
-                .map(|&i| {
-                    let mut rr = run_data(&r.model, &b.records, &b.records.runs[i]).unwrap();
-                    let cc = r.model.compile().unwrap();
-                    rr.x0 = initial_state(&cc, &rr.t, &rr.y, &rr.u, INIT_WINDOW, &opts).unwrap();
-                    rr
-                })
-                .collect();
+            let validation = b.split.validation.as_deref().unwrap_or_default();
+            let val = fit_runs(&b, &r.model, validation).unwrap();
             let nv = ctsid::identify::refine::free_run_nrmse(&r.model, &val).unwrap();
             let last = r.model.outputs[0].terms.last().unwrap();
             println!(
