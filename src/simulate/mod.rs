@@ -352,16 +352,16 @@ enum StepOutcome {
 }
 
 /// The Newton iterations' stopping level for a relative tolerance `rtol`, in units of the
-/// tolerance: RADAU5's `max(10 eps / r, min(0.03, sqrt(r)))` with its internal tolerance
-/// `r = 0.1 rtol^(2/3)` (Hairer and Wanner, Solving ODEs II, IV.8), 6.8e-3 at the fitting
-/// tolerance. Only for simulations at [`FIT_RTOL`] or looser, which compare model errors on
-/// noisy data: there it took about a quarter of the Newton iterations out of a Silverbox
-/// simulation and nearly half of the benchmark's processor time (docs/method/simulation.md). Tighter ones (the
-/// reports, `ctsid simulate`) iterate until a correction is below 1e-3 of the tolerance, as
-/// before, so their figures did not move (`None`).
+/// tolerance: RADAU5's `min(0.03, sqrt(r))` with its internal tolerance `r = 0.1 rtol^(2/3)`
+/// (Hairer and Wanner, Solving ODEs II, IV.8), 6.8e-3 at the fitting tolerance (RADAU5's lower
+/// bound `10 eps / r` only binds near machine precision). Only for simulations at [`FIT_RTOL`]
+/// or looser, which compare model errors on noisy data: there it took about a quarter of the
+/// Newton iterations out of a Silverbox simulation and nearly half of the benchmark's processor
+/// time (docs/method/simulation.md). Tighter ones (the reports, `ctsid simulate`) iterate until
+/// a correction is below 1e-3 of the tolerance, as before, so their figures did not move
+/// (`None`).
 fn newton_stop(rtol: f64) -> Option<f64> {
-    let r = 0.1 * rtol.powf(2.0 / 3.0);
-    (rtol >= FIT_RTOL).then(|| (10.0 * f64::EPSILON / r).max(r.sqrt().min(0.03)))
+    (rtol >= FIT_RTOL).then(|| (0.1 * rtol.powf(2.0 / 3.0)).sqrt().min(0.03))
 }
 
 /// The step size factor of the standard controller for an error estimate `err` (in units of
