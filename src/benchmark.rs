@@ -55,7 +55,7 @@ pub const SECOND_LOOK_RATIO: f64 = 0.9;
 pub const INPUT_INTERPOLATION: Interpolation = Interpolation::Cubic;
 
 /// The benchmarks `ctsid benchmark` knows.
-pub const NAMES: [&str; 3] = ["silverbox", "emps", "tanks"];
+pub const NAMES: [&str; 4] = ["silverbox", "emps", "tanks", "unbalanced-disk"];
 
 /// A published free-run test RMS row, in the benchmark's unit.
 #[derive(Debug, Clone, Copy)]
@@ -121,13 +121,14 @@ fn too_short(path: &str, need: usize, have: usize) -> Error {
 }
 
 /// Loads benchmark `name` (one of [`NAMES`]) from `data` (the folder holding `silverbox/`,
-/// `emps/`, `cascaded_tanks/`). Refuses an unknown name and records that are missing, lack the
-/// benchmark's columns or are shorter than its protocol needs.
+/// `emps/`, `cascaded_tanks/`, `unbalanced_disk/`). Refuses an unknown name and records that
+/// are missing, lack the benchmark's columns or are shorter than its protocol needs.
 pub fn load(name: &str, data: &str) -> Result<Benchmark> {
     match name {
         "silverbox" => silverbox(data),
         "emps" => emps(data),
         "tanks" => tanks(data),
+        "unbalanced-disk" => unbalanced_disk(data),
         _ => Err(Error::param(
             "benchmark",
             format!(
@@ -286,6 +287,43 @@ fn tanks(data: &str) -> Result<Benchmark> {
             },
         }],
         protocol: "train on the estimation record (2 runs of 512 samples: 1 trains, 1 validates), simulate the test record from the input; the first 5 samples set the initial state, RMS on the rest",
+    })
+}
+
+fn unbalanced_disk(data: &str) -> Result<Benchmark> {
+    let path = format!("{data}/unbalanced_disk/unbalanced_disk_training_val_test.csv");
+    let cols = columns(&path, &["theta_rad", "u_V"], 0.025)?;
+    if cols[0].len() < 35_000 {
+        return Err(too_short(&path, 35_000, cols[0].len()));
+    }
+    // One continuous record of 35,000 samples (875 s) that the user is to split: seven runs of
+    // 5,000 (125 s, about 230 periods of the pendulum's 0.55 s), the first four train, the next
+    // two validate, the last is the test. The published figures are on a hidden test record of
+    // the same setup, so they give a scale, not a ranking.
+    let runs = segments(&cols, 0, 35_000, 7, "rec");
+    let records = RecordSet::new(0.025, vec!["theta_rad".into(), "u_V".into()], runs)?;
+    let split = split(&records, 4, 2)?;
+    Ok(Benchmark {
+        name: "unbalanced-disk",
+        title: "Unbalanced disk (DC motor and an off-centre mass)",
+        unit: "rad",
+        scale: 1.0,
+        records,
+        output: "theta_rad".into(),
+        input: "u_V".into(),
+        split,
+        init: 50,
+        metrics: vec![Metric {
+            name: "last seventh of the record",
+            end: None,
+            published: Published {
+                linear: 0.255,
+                pnarx: f64::NAN,
+                best: 0.0271,
+                best_by: "a neural network, on a hidden test record: a scale only",
+            },
+        }],
+        protocol: "one record of 35,000 samples in 7 runs of 5,000: 4 train, 2 validate, the last is the test (the published figures are on a hidden test record: a scale, not a ranking); the first 50 samples set the initial state, RMS on the rest",
     })
 }
 

@@ -1,6 +1,7 @@
 //! `ctsid benchmark` on the public benchmarks (skipped with a notice without `../shared`): the
 //! model files it writes simulate with `ctsid simulate` to the RMS it printed; Silverbox beats
-//! the published linear and polynomial-NARX baselines, EMPS the published linear one.
+//! the published linear and polynomial-NARX baselines, EMPS the published linear one, the
+//! unbalanced disk its own linear nominal and (as a scale) the published linear figure.
 
 mod common;
 
@@ -17,8 +18,8 @@ fn bench(name: &str) -> (String, String) {
     (stdout, format!("{dir}/{name}.model.json"))
 }
 
-/// (ours, our linear nominal, the published linear baseline, the published polynomial NARX) of
-/// each metric row.
+/// (ours, our linear nominal, the published linear baseline, the published polynomial NARX, NaN
+/// where none is published) of each metric row.
 fn rows(out: &str) -> Vec<(f64, f64, f64, f64)> {
     out.lines()
         .filter(|l| l.starts_with("| ") && !l.starts_with("| metric"))
@@ -28,7 +29,8 @@ fn rows(out: &str) -> Vec<(f64, f64, f64, f64)> {
                 c[2].parse().unwrap(),
                 c[3].parse().unwrap(),
                 c[4].parse().unwrap(),
-                c[5].parse().unwrap(),
+                // "-" where the benchmark publishes no such row.
+                c[5].parse().unwrap_or(f64::NAN),
             )
         })
         .collect()
@@ -123,8 +125,35 @@ fn tanks_model_file_simulates_to_the_printed_rms() {
 }
 
 #[test]
+fn unbalanced_disk_halves_its_linear_nominal_and_its_model_file_simulates() {
+    if shared_data("unbalanced_disk/unbalanced_disk_training_val_test.csv").is_none() {
+        return;
+    }
+    let (out, _) = bench("unbalanced-disk");
+    // Measured: our linear nominal (order 3: the motor adds a pole) 0.2075 rad on the record's
+    // last seventh; the rounds add the softening of gravity's sin (theta^3, +450 against the
+    // linear -3404: 0.13, sin's 1/6 at order 3) and a nonlinear damping, 0.1032 rad. The
+    // published linear 0.255 rad is on a hidden test record of the same setup (a scale only).
+    let (ours, nominal, linear, pnarx) = rows(&out)[0];
+    assert!(pnarx.is_nan(), "{out}");
+    assert!(
+        ours < 0.6 * nominal && ours < linear,
+        "ours {ours}, nominal {nominal}, published linear {linear}\n{out}"
+    );
+    assert!(out.contains("theta_rad^3"), "{out}");
+    let simulated = simulated_rms(&out);
+    assert!(
+        (simulated - ours).abs() < 1e-3 * ours,
+        "{simulated} vs {ours}"
+    );
+}
+
+#[test]
 fn unknown_benchmarks_and_missing_data_are_one_line_errors() {
-    fails(&["benchmark", "nope"], &["silverbox, emps, tanks"]);
+    fails(
+        &["benchmark", "nope"],
+        &["silverbox, emps, tanks, unbalanced-disk"],
+    );
     fails(
         &["benchmark", "emps", "--data", "/nonexistent"],
         &["EMPS_train"],

@@ -14,9 +14,10 @@ use std::path::PathBuf;
 
 #[derive(Args, Debug)]
 pub struct BenchmarkArgs {
-    /// silverbox, emps or tanks.
+    /// silverbox, emps, tanks or unbalanced-disk.
     pub name: String,
-    /// The folder holding the records (`silverbox/`, `emps/`, `cascaded_tanks/`).
+    /// The folder holding the records (`silverbox/`, `emps/`, `cascaded_tanks/`,
+    /// `unbalanced_disk/`).
     #[arg(long, default_value = "../shared/data")]
     pub data: PathBuf,
     /// Write the final model, the scores and the test plot into this folder.
@@ -119,12 +120,21 @@ fn table(b: &Benchmark, o: &Outcome) -> String {
             num4(sc.ours),
             num4(sc.nominal),
             p.linear,
-            p.pnarx,
+            published(p.pnarx, "-"),
             p.best,
             p.best_by
         );
     }
     s
+}
+
+/// A published figure, or `none` where the benchmark has none (NaN).
+fn published(x: f64, none: &str) -> String {
+    if x.is_finite() {
+        x.to_string()
+    } else {
+        none.to_string()
+    }
 }
 
 fn write_outputs(dir: &std::path::Path, b: &Benchmark, o: &Outcome) -> Result<()> {
@@ -137,7 +147,13 @@ fn write_outputs(dir: &std::path::Path, b: &Benchmark, o: &Outcome) -> Result<()
         let p = &sc.metric.published;
         csv += &format!(
             "{},{} ({}),{},{},{},{}\n",
-            b.name, sc.metric.name, b.unit, sc.ours, p.linear, p.pnarx, p.best
+            b.name,
+            sc.metric.name,
+            b.unit,
+            sc.ours,
+            p.linear,
+            published(p.pnarx, ""),
+            p.best
         );
     }
     write_file(dir, &format!("{}.csv", b.name), &csv)?;

@@ -62,7 +62,7 @@ pub enum Command {
     Control(control::ControlArgs),
     /// Print a model file: its equations, then each term's coefficient, standard error, interval and origin.
     Show(show::ShowArgs),
-    /// A public benchmark (silverbox, emps, tanks) by one workflow: a linear nominal by identify, discover in rounds (with a second look on simulation error at what its gates refuse), the terms the data do not determine dropped, scored by the benchmark's protocol beside the published rows.
+    /// A public benchmark (silverbox, emps, tanks, unbalanced-disk) by one workflow: a linear nominal by identify, discover in rounds (with a second look on simulation error at what its gates refuse), the terms the data do not determine dropped, scored by the benchmark's protocol beside the published rows.
     Benchmark(benchmark::BenchmarkArgs),
 }
 
