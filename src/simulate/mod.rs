@@ -332,10 +332,15 @@ fn fast_growth_rate(jac: &[f64], n: usize, h: f64) -> f64 {
     if let Some(rate) = LAST.with_borrow(|(j, r)| (j.as_slice() == jac).then_some(*r)) {
         return rate;
     }
-    let m = nalgebra::DMatrix::from_row_slice(n, n, jac);
-    let rate = match crate::linalg::eigenvalues(&m) {
-        Ok(e) => e.iter().map(|z| z.0).fold(f64::NEG_INFINITY, f64::max),
-        Err(_) => f64::NEG_INFINITY,
+    let rate = match max_real_part_small(jac, n) {
+        Some(r) => r,
+        None => {
+            let m = nalgebra::DMatrix::from_row_slice(n, n, jac);
+            match crate::linalg::eigenvalues(&m) {
+                Ok(e) => e.iter().map(|z| z.0).fold(f64::NEG_INFINITY, f64::max),
+                Err(_) => f64::NEG_INFINITY,
+            }
+        }
     };
     LAST.with_borrow_mut(|last| {
         last.0.clear();
@@ -343,6 +348,64 @@ fn fast_growth_rate(jac: &[f64], n: usize, h: f64) -> f64 {
         last.1 = rate;
     });
     rate
+}
+
+/// The largest real part among the eigenvalues of a row-major `n x n` matrix with `n <= 3`, from
+/// its characteristic polynomial in closed form (`None` for larger `n` or a result that is not
+/// finite). The growth check needs it once per fresh factorisation, and for the one-output
+/// models of the benchmarks (orders 1 to 3) a balanced Schur iteration on a heap matrix was a
+/// tenth of a nonlinear model's free run (`ctsid benchmark unbalanced-disk`, perf).
+fn max_real_part_small(j: &[f64], n: usize) -> Option<f64> {
+    let r = match n {
+        1 => j[0],
+        2 => {
+            let (tr, det) = (j[0] + j[3], j[0] * j[3] - j[1] * j[2]);
+            let disc = 0.25 * tr * tr - det;
+            if disc >= 0.0 {
+                // The larger root without cancellation: tr/2 + sqrt(disc) when tr >= 0, else
+                // det / (the smaller one).
+                let big = 0.5 * tr + disc.sqrt().copysign(tr);
+                if tr >= 0.0 {
+                    big
+                } else if big != 0.0 {
+                    det / big
+                } else {
+                    0.0
+                }
+            } else {
+                0.5 * tr
+            }
+        }
+        3 => {
+            // lambda^3 + a lambda^2 + b lambda + c: a = -trace, b = the principal minors' sum,
+            // c = -det; depressed by lambda = t - a/3 to t^3 + p t + q.
+            let a = -(j[0] + j[4] + j[8]);
+            let b =
+                j[0] * j[4] - j[1] * j[3] + j[0] * j[8] - j[2] * j[6] + j[4] * j[8] - j[5] * j[7];
+            let det = j[0] * (j[4] * j[8] - j[5] * j[7]) - j[1] * (j[3] * j[8] - j[5] * j[6])
+                + j[2] * (j[3] * j[7] - j[4] * j[6]);
+            let c = -det;
+            let p = b - a * a / 3.0;
+            let q = 2.0 * a * a * a / 27.0 - a * b / 3.0 + c;
+            let disc = 0.25 * q * q + p * p * p / 27.0;
+            let shift = -a / 3.0;
+            if disc > 0.0 {
+                // One real root t and a pair with real part -t/2 (the roots sum to zero).
+                let u = (-0.5 * q - disc.sqrt().copysign(q)).cbrt();
+                let t = if u != 0.0 { u - p / (3.0 * u) } else { 0.0 };
+                shift + t.max(-0.5 * t)
+            } else if p < 0.0 {
+                // Three real roots: the largest of 2 sqrt(-p/3) cos(phi/3 - 2 pi k / 3) is k = 0.
+                let m = (-p / 3.0).sqrt();
+                let x = (-0.5 * q / (m * m * m)).clamp(-1.0, 1.0);
+                shift + 2.0 * m * (x.acos() / 3.0).cos()
+            } else {
+                shift
+            }
+        }
+        _ => return None,
+    };
+    r.is_finite().then_some(r)
 }
 
 enum StepOutcome {
@@ -1495,6 +1558,40 @@ impl crate::lm::LeastSquares for InitialState<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn closed_form_growth_rates_match_the_schur_eigenvalues() {
+        let mut rng = crate::plants::rng::Rng::new(7);
+        let mut mats: Vec<Vec<f64>> = vec![
+            vec![0.0, 1.0, 0.0, 0.0, 0.0, 1.0, -3344.0, -160.0, -27.2],
+            vec![0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 6.0, 11.0, 6.0],
+            vec![0.0, 1.0, 0.0, 0.0, 0.0, 1.0, -1e6, -3e4, -300.0],
+            vec![0.0, 1.0, -1e4, -2.0],
+            vec![0.0, 1.0, 1e4, -2.0],
+            vec![-2.0, 0.0, 0.0, 0.0, -2.0, 0.0, 0.0, 0.0, -2.0],
+            vec![0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0],
+            vec![-0.5],
+        ];
+        for n in [2usize, 3, 3, 3] {
+            for _ in 0..50 {
+                let scale = 10f64.powf(4.0 * rng.uniform() - 2.0);
+                mats.push((0..n * n).map(|_| scale * (rng.uniform() - 0.5)).collect());
+            }
+        }
+        for m in &mats {
+            let n = (m.len() as f64).sqrt().round() as usize;
+            let mine = max_real_part_small(m, n).unwrap();
+            let d = nalgebra::DMatrix::from_row_slice(n, n, m);
+            let schur = crate::linalg::eigenvalues(&d).unwrap();
+            let want = schur.iter().map(|z| z.0).fold(f64::NEG_INFINITY, f64::max);
+            let size = schur.iter().map(|z| z.0.hypot(z.1)).fold(0.0, f64::max);
+            // A triple root moves by eps^(1/3) of its size under rounding: Schur puts the
+            // triple -100 at -99.9988.
+            let tol = 1e-4 * size.max(1e-300) + 1e-12;
+            assert!((mine - want).abs() <= tol, "{m:?}: {mine} vs {want}");
+        }
+        assert_eq!(max_real_part_small(&[0.0; 16], 4), None);
+    }
 
     /// x' = A x + b u, row-major A.
     struct Linear {
