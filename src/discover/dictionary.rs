@@ -93,6 +93,17 @@ pub fn build(
         "stribeck",
         format!("sign({v})*exp(-({v}/{})^2)", num(scales.sd[vi] * 0.3)),
     );
+    if order >= 3 {
+        // A mechanism behind an actuator pole (a motor's current, a drive's filter): its
+        // friction acts on the velocity y_d1, which the pole's balance carries into the
+        // order-3 equation (y_d3 = ... + a f(y, y_d1) for y_d2 = f + K x, x_d1 = -a x + b u).
+        let w = &vars[1];
+        add("coulomb_friction", format!("sign({w})"));
+        add(
+            "coulomb_friction",
+            format!("tanh({w}/{})", num(scales.sd[1] * 0.05)),
+        );
+    }
     add("quadratic_drag", format!("abs({v})*{v}"));
     add("cubic_damping", format!("{v}^3"));
     add("cubic_stiffness", format!("{y}^3"));
