@@ -66,20 +66,9 @@ pub fn check_user_names(user: &[(String, String)]) -> Result<()> {
     Ok(())
 }
 
-/// Builds the dictionary for an output of order `order` over `vars` (the `order` state names
-/// first, then the inputs), leaving out monomials already in the nominal model
-/// (`nominal_monomials`, as exponent lists over `vars`). Refuses user effects that
-/// [`check_user_names`] refuses, one named like a built-in family, one whose expression does not
-/// parse over `vars`, and one already in the dictionary (or a term of the nominal model). Panics
-/// when `order` is 0 or above `vars.len()`, or when `scales.sd` has fewer than `order` entries,
-/// `scales.median` none, or `scales.p99` fewer than `vars.len()` (with inputs in `vars`).
-pub fn build(
-    vars: &[String],
-    order: usize,
-    scales: &Scales,
-    nominal_monomials: &[Vec<(usize, u32)>],
-    user: &[(String, String)],
-) -> Result<Vec<Effect>> {
+/// The named families (friction, drag, stiffness, trigonometric, outflow, input nonlinearities)
+/// for an output of order `order` over `vars`, as (family, formula), scales from `scales`.
+fn named_effects(vars: &[String], order: usize, scales: &Scales) -> Vec<(String, String)> {
     let y = &vars[0];
     let vi = order - 1;
     let v = &vars[vi];
@@ -140,7 +129,17 @@ pub fn build(
         add("input_dead_zone", format!("{d}*sat({u}/{d})"));
         add("input_relay", format!("sign({u})"));
     }
-    // Polynomial: the monomials of degree <= 3 over all variables not already present.
+    list
+}
+
+/// The monomials of degree 1 to 3 over `vars` that are not among `nominal_monomials`, as
+/// ("polynomial", formula).
+fn polynomial_effects(
+    vars: &[String],
+    nominal_monomials: &[Vec<(usize, u32)>],
+) -> Vec<(String, String)> {
+    let mut list: Vec<(String, String)> = Vec::new();
+    let mut add = |f: &str, e: String| list.push((f.to_string(), e));
     let nv = vars.len();
     let mut monos: Vec<Vec<u32>> = Vec::new();
     for deg in 1..=3u32 {
@@ -182,6 +181,25 @@ pub fn build(
             .join("*");
         add("polynomial", txt);
     }
+    list
+}
+
+/// Builds the dictionary for an output of order `order` over `vars` (the `order` state names
+/// first, then the inputs), leaving out monomials already in the nominal model
+/// (`nominal_monomials`, as exponent lists over `vars`). Refuses user effects that
+/// [`check_user_names`] refuses, one named like a built-in family, one whose expression does not
+/// parse over `vars`, and one already in the dictionary (or a term of the nominal model). Panics
+/// when `order` is 0 or above `vars.len()`, or when `scales.sd` has fewer than `order` entries,
+/// `scales.median` none, or `scales.p99` fewer than `vars.len()` (with inputs in `vars`).
+pub fn build(
+    vars: &[String],
+    order: usize,
+    scales: &Scales,
+    nominal_monomials: &[Vec<(usize, u32)>],
+    user: &[(String, String)],
+) -> Result<Vec<Effect>> {
+    let mut list = named_effects(vars, order, scales);
+    list.extend(polynomial_effects(vars, nominal_monomials));
     let built_in = list.len();
     check_user_names(user)?;
     for (name, e) in user {
