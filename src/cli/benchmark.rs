@@ -128,13 +128,9 @@ fn table(b: &Benchmark, o: &Outcome) -> String {
     s
 }
 
-/// A published figure, or `none` where the benchmark has none (NaN).
-fn published(x: f64, none: &str) -> String {
-    if x.is_finite() {
-        x.to_string()
-    } else {
-        none.to_string()
-    }
+/// A published figure, or `none` where the benchmark has none.
+fn published(x: Option<f64>, none: &str) -> String {
+    x.map_or_else(|| none.to_string(), |x| x.to_string())
 }
 
 fn write_outputs(dir: &std::path::Path, b: &Benchmark, o: &Outcome) -> Result<()> {
