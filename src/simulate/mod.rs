@@ -356,21 +356,22 @@ fn fast_growth_rate(jac: &[f64], n: usize, h: f64) -> f64 {
 /// models of the benchmarks (orders 1 to 3) a balanced Schur iteration on a heap matrix was a
 /// tenth of a nonlinear model's free run (`ctsid benchmark unbalanced-disk`, perf).
 fn max_real_part_small(j: &[f64], n: usize) -> Option<f64> {
+    // A NaN would fall through every comparison below to a finite answer.
+    if n > 3 || j[..n * n].iter().any(|v| !v.is_finite()) {
+        return None;
+    }
     let r = match n {
         1 => j[0],
         2 => {
             let (tr, det) = (j[0] + j[3], j[0] * j[3] - j[1] * j[2]);
             let disc = 0.25 * tr * tr - det;
             if disc >= 0.0 {
-                // The larger root without cancellation: tr/2 + sqrt(disc) when tr >= 0, else
-                // det / (the smaller one).
-                let big = 0.5 * tr + disc.sqrt().copysign(tr);
+                // The larger root without cancellation: tr/2 + sqrt(disc) when tr >= 0 (-0.0
+                // included), else det / (the smaller root, which is then negative).
                 if tr >= 0.0 {
-                    big
-                } else if big != 0.0 {
-                    det / big
+                    0.5 * tr + disc.sqrt()
                 } else {
-                    0.0
+                    det / (0.5 * tr - disc.sqrt())
                 }
             } else {
                 0.5 * tr
@@ -1591,6 +1592,11 @@ mod tests {
             assert!((mine - want).abs() <= tol, "{m:?}: {mine} vs {want}");
         }
         assert_eq!(max_real_part_small(&[0.0; 16], 4), None);
+        // A trace of -0.0 is not negative: the larger of +-1.
+        assert_eq!(max_real_part_small(&[-0.0, 1.0, 1.0, -0.0], 2), Some(1.0));
+        let nan = [0.0, 1.0, 0.0, 0.0, 0.0, 1.0, f64::NAN, -1.0, -1.0];
+        assert_eq!(max_real_part_small(&nan, 3), None);
+        assert_eq!(max_real_part_small(&[f64::NAN, 1.0, 0.0, 0.0], 2), None);
     }
 
     /// x' = A x + b u, row-major A.
