@@ -134,3 +134,37 @@ fn no_shared_record_or_signal_has_a_suspect_sample() {
         assert!(checked >= 2, "{f}: only {checked} numeric columns");
     }
 }
+
+/// The completion's screen refits what is left after removing a term; an order-3 fit of the tanks
+/// keeps one term (`y_V_d3 = -0.00064 y_V_d1`), and removing it left nothing, where nalgebra's
+/// pseudo-inverse panicked on the empty matrix (found with the benchmark's order fixed at 3).
+#[test]
+fn identify_of_a_one_term_model_screens_its_removal_without_a_panic() {
+    let Some(est) = shared_data("cascaded_tanks/cascaded_tanks_estimation.csv") else {
+        return;
+    };
+    let (ok, stdout, err) = ctsid(&[
+        "identify",
+        &est,
+        "--output",
+        "y_V",
+        "--input",
+        "u_V",
+        "--time-column",
+        "t_s",
+        "--segment",
+        "2048",
+        "--train",
+        "0",
+        "--validation",
+        "1",
+        "--order",
+        "3",
+        "--degree",
+        "1",
+        "--input-interpolation",
+        "cubic",
+    ]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("y_V_d3 = "), "{stdout}");
+}

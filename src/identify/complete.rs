@@ -617,6 +617,11 @@ fn screen(
             ),
             None => (rr, b.clone()),
         };
+        // No column left to refit (a removal of a model's only coefficient): nothing to step
+        // on, and nalgebra's pseudo-inverse panics on an empty matrix.
+        if set.is_empty() {
+            return (r0, DVector::zeros(0));
+        }
         let sa = DMatrix::from_fn(set.len(), set.len(), |x, y| a[(set[x], set[y])]);
         let sb = DVector::from_fn(set.len(), |x, _| b0[set[x]]);
         match sa.pseudo_inverse(1e-12) {
