@@ -163,6 +163,19 @@ fn errors_are_one_line() {
         &["simulate", m, dp, "--run-column", "batch"],
         &["no column named 'batch'"],
     );
+    // Scoring from past a run's end: an error, not an RMS of nothing (it printed 0).
+    fails(
+        &[
+            "simulate",
+            m,
+            dp,
+            "--run-column",
+            "run",
+            "--score-from",
+            "40",
+        ],
+        &["'score-from': 40 leaves nothing to score in run '0' (40 samples)"],
+    );
     fails(
         &[
             "simulate",

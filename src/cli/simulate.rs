@@ -20,7 +20,7 @@ use ctsid::report::compare::write_record_report;
 use ctsid::report::write_file;
 use ctsid::simulate::{free_run, run_data, SimOptions, INIT_WINDOW};
 use ctsid::util::num4;
-use ctsid::Result;
+use ctsid::{Error, Result};
 use rayon::prelude::*;
 
 #[derive(Args, Debug)]
@@ -79,6 +79,18 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     let rs = args
         .segment
         .apply(super::load_records(&args.data, &spec)?)?;
+    // Scoring from past a run's end would print an RMS of nothing (0), not an error.
+    if let Some(run) = rs.runs.iter().find(|r| args.score_from >= r.len()) {
+        return Err(Error::param(
+            "score-from",
+            format!(
+                "{} leaves nothing to score in run '{}' ({} samples); give a sample before its end",
+                args.score_from,
+                run.id,
+                run.len()
+            ),
+        ));
+    }
     // A continuous-time model simulates at any sampling, but a ratio of 1e3, 1e6, 1/60 or
     // 1/3600 to the identification's is mostly a time column in ms, us, min or h.
     if let Some(mt) = model.tau {
