@@ -154,7 +154,8 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             )?;
         }
         for (run, per_run) in runs.iter().zip(results) {
-            let from = args.score_from.min(run.len());
+            // Below every run's length: checked after reading the records.
+            let from = args.score_from;
             for (i, o) in model.outputs.iter().enumerate() {
                 let (sim, meas) = (&per_run[i][from..], &run.channels[i][from..]);
                 let (rms, nrmse) = rms_nrmse(sim, meas);

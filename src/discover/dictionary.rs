@@ -75,9 +75,16 @@ fn named_effects(vars: &[String], order: usize, scales: &Scales) -> Vec<(String,
     let inputs: Vec<usize> = (order..vars.len()).collect();
     let mut list: Vec<(String, String)> = Vec::new();
     let mut add = |f: &str, e: String| list.push((f.to_string(), e));
-    let eps_v = scales.sd[vi] * 0.05;
-    add("coulomb_friction", format!("sign({v})"));
-    add("coulomb_friction", format!("tanh({v}/{})", num(eps_v)));
+    // Coulomb friction on a velocity w of spread sd: a step, and a tanh at 5 % of the spread.
+    let coulomb = |w: &str, sd: f64| {
+        [
+            format!("sign({w})"),
+            format!("tanh({w}/{})", num(sd * 0.05)),
+        ]
+    };
+    for f in coulomb(v, scales.sd[vi]) {
+        add("coulomb_friction", f);
+    }
     add(
         "stribeck",
         format!("sign({v})*exp(-({v}/{})^2)", num(scales.sd[vi] * 0.3)),
@@ -86,12 +93,9 @@ fn named_effects(vars: &[String], order: usize, scales: &Scales) -> Vec<(String,
         // A mechanism behind an actuator pole (a motor's current, a drive's filter): its
         // friction acts on the velocity y_d1, which the pole's balance carries into the
         // order-3 equation (y_d3 = ... + a f(y, y_d1) for y_d2 = f + K x, x_d1 = -a x + b u).
-        let w = &vars[1];
-        add("coulomb_friction", format!("sign({w})"));
-        add(
-            "coulomb_friction",
-            format!("tanh({w}/{})", num(scales.sd[1] * 0.05)),
-        );
+        for f in coulomb(&vars[1], scales.sd[1]) {
+            add("coulomb_friction", f);
+        }
     }
     add("quadratic_drag", format!("abs({v})*{v}"));
     add("cubic_damping", format!("{v}^3"));

@@ -332,16 +332,12 @@ fn fast_growth_rate(jac: &[f64], n: usize, h: f64) -> f64 {
     if let Some(rate) = LAST.with_borrow(|(j, r)| (j.as_slice() == jac).then_some(*r)) {
         return rate;
     }
-    let rate = match max_real_part_small(jac, n) {
-        Some(r) => r,
-        None => {
-            let m = nalgebra::DMatrix::from_row_slice(n, n, jac);
-            match crate::linalg::eigenvalues(&m) {
-                Ok(e) => e.iter().map(|z| z.0).fold(f64::NEG_INFINITY, f64::max),
-                Err(_) => f64::NEG_INFINITY,
-            }
-        }
-    };
+    let rate = max_real_part_small(jac, n).unwrap_or_else(|| {
+        let m = nalgebra::DMatrix::from_row_slice(n, n, jac);
+        crate::linalg::eigenvalues(&m).map_or(f64::NEG_INFINITY, |e| {
+            e.iter().map(|z| z.0).fold(f64::NEG_INFINITY, f64::max)
+        })
+    });
     LAST.with_borrow_mut(|last| {
         last.0.clear();
         last.0.extend_from_slice(jac);
