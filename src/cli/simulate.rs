@@ -79,18 +79,7 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     let rs = args
         .segment
         .apply(super::load_records(&args.data, &spec)?)?;
-    // Scoring from past a run's end would print an RMS of nothing (0), not an error.
-    if let Some(run) = rs.runs.iter().find(|r| args.score_from >= r.len()) {
-        return Err(Error::param(
-            "score-from",
-            format!(
-                "{} leaves nothing to score in run '{}' ({} samples); give a sample before its end",
-                args.score_from,
-                run.id,
-                run.len()
-            ),
-        ));
-    }
+    check_score_from(&rs, args.score_from)?;
     // A continuous-time model simulates at any sampling, but a ratio of 1e3, 1e6, 1/60 or
     // 1/3600 to the identification's is mostly a time column in ms, us, min or h.
     if let Some(mt) = model.tau {
@@ -237,5 +226,21 @@ fn percent(nrmse: f64) -> String {
         "-".into()
     } else {
         num4(100.0 * nrmse)
+    }
+}
+
+/// Refuses a `--score-from` at or past the end of a run: scoring from there would print an RMS
+/// of nothing (0), not an error.
+fn check_score_from(rs: &ctsid::records::RecordSet, from: usize) -> Result<()> {
+    match rs.runs.iter().find(|r| from >= r.len()) {
+        Some(run) => Err(Error::param(
+            "score-from",
+            format!(
+                "{from} leaves nothing to score in run '{}' ({} samples); give a sample before its end",
+                run.id,
+                run.len()
+            ),
+        )),
+        None => Ok(()),
     }
 }
