@@ -299,9 +299,11 @@ impl Basis {
         if d > self.degree {
             return None;
         }
-        let start = count(self.n_vars(), d.wrapping_sub(1))
-            .filter(|_| d > 0)
-            .unwrap_or(0) as usize;
+        // (Not `count(n, d - 1)` for d = 0: a wrapped degree made it loop for 2^64 steps.)
+        let start = match d {
+            0 => 0,
+            _ => count(self.n_vars(), d - 1).unwrap_or(0) as usize,
+        };
         let end = count(self.n_vars(), d).unwrap() as usize;
         let key = |c: Code| c.vars().collect::<Vec<_>>();
         let target = key(code);
@@ -377,6 +379,10 @@ mod tests {
         }
         let z = [2.0, 3.0];
         assert_eq!(b.code(4).eval(&z), 6.0);
+        // The constant of a one-variable basis (its lookup once looped for 2^64 steps).
+        let one = Basis::new(&["a".into()], 3, BasisLimits::default()).unwrap();
+        assert_eq!(one.index_of(Code::ONE), Some(0));
+        assert_eq!(one.index_of(one.code(3)), Some(3));
     }
 
     #[test]
