@@ -363,3 +363,68 @@ fn mimo_plant_at_three_percent_noise_seed_three_gets_the_true_orders() {
     }
     assert!(found >= 15, "{found} / 18\n{}", id.model);
 }
+
+/// A two-output record with Coulomb friction on the first output, identified with
+/// `--term 'sign(a_d1)'`: each output's candidate order is scored as a model of its own, and the
+/// sign's smoothing width was looked up with the whole search's orders for a one-output model
+/// (an index out of range: a panic before the fix). Truth: `a'' = -2 a - 0.8 a' + u - 0.3
+/// sign(a')`, `b' = -b + a`; measured: orders (2, 1), the sign term at -0.2999.
+#[test]
+fn mimo_identify_with_a_sign_term_scores_each_order_without_a_panic() {
+    let dir = std::env::temp_dir().join(format!("ctsid-mimo-sign-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let csv = dir.join("sign.csv");
+    let mut text = String::from("run,t,u,a,b\n");
+    let mut seed = 3u64;
+    for r in 0..10 {
+        let (mut a, mut ad, mut b, mut u) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for k in 0..1000 {
+            if k % 50 == 0 {
+                seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                u = ((seed >> 11) as f64 / (1u64 << 53) as f64) * 4.0 - 2.0;
+            }
+            text += &format!("{r},{:.4},{u:.6},{a:.8},{b:.8}\n", k as f64 * 0.01);
+            for _ in 0..10 {
+                let h = 0.001;
+                let add = -2.0 * a - 0.8 * ad + u - 0.3 * (ad / 1e-3).tanh();
+                ad += h * add;
+                a += h * ad;
+                b += h * (a - b);
+            }
+        }
+    }
+    std::fs::write(&csv, text).unwrap();
+    let out = dir.join("sign.model.json");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_ctsid"))
+        .args([
+            "identify",
+            csv.to_str().unwrap(),
+            "--output",
+            "a,b",
+            "--input",
+            "u",
+        ])
+        .args(["--run-column", "run", "--time-column", "t", "--degree", "1"])
+        .args(["--orders", "1..2", "--term", "sign(a_d1)", "--train", "0-6"])
+        .args(["--test", "7-9", "--engine", "cpu", "--quiet"])
+        .args(["-o", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let found = Model::read(out.to_str().unwrap()).unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+    let orders: Vec<usize> = found.outputs.iter().map(|o| o.order).collect();
+    assert_eq!(orders, vec![2, 1], "{found}");
+    let sign = found.outputs[0]
+        .terms
+        .iter()
+        .find(|t| t.expression.as_deref() == Some("sign(a_d1)"))
+        .unwrap_or_else(|| panic!("no sign term\n{found}"));
+    assert!((sign.coefficient + 0.3).abs() < 0.03, "{found}");
+}

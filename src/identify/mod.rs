@@ -701,10 +701,24 @@ impl Prepared<'_> {
     /// variable's spread over the training runs (as discover uses), written into the model so
     /// it simulates the same everywhere.
     fn sign_smoothing(&self, model: &mut ModelFile, train: &[usize]) {
-        let names = model.variable_names();
         let ord: Vec<usize> = model.outputs.iter().map(|o| o.order).collect();
-        for i in 0..model.outputs.len() {
-            let vars: Vec<usize> = model.outputs[i]
+        let all: Vec<usize> = (0..ord.len()).collect();
+        self.sign_smoothing_of(model, &all, &ord, train);
+    }
+
+    /// [`Prepared::sign_smoothing`] for a model whose output m is the search's output `of[m]`,
+    /// the search's outputs at orders `ord` (a scoring model has one output and takes the other
+    /// outputs' variables as inputs: their spreads come from the same design).
+    fn sign_smoothing_of(
+        &self,
+        model: &mut ModelFile,
+        of: &[usize],
+        ord: &[usize],
+        train: &[usize],
+    ) {
+        let names = model.variable_names();
+        for (m, &i) in of.iter().enumerate() {
+            let vars: Vec<usize> = model.outputs[m]
                 .terms
                 .iter()
                 .filter_map(|t| t.expression.as_deref())
@@ -1936,7 +1950,7 @@ fn scoring_model(
     );
     model.degree = prep.settings.degree;
     model.input_interpolation = prep.settings.input_interpolation;
-    prep.sign_smoothing(&mut model, train);
+    prep.sign_smoothing_of(&mut model, &[i], ord, train);
     model.validate()?;
     Ok((model, exogenous))
 }
