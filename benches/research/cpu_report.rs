@@ -1,6 +1,6 @@
 //! Prints measured CPU-engine times against references measured in the same run:
 //! the arithmetic limit (pairs / (single-core f32 multiply-add throughput x cores), the
-//! throughput measured here by a register-resident AVX2 FMA loop), scikit-learn's `lars_path`
+//! throughput measured here by a register-resident FMA loop in the sweep kernel's instruction set), scikit-learn's `lars_path`
 //! on the same problem (when `CTSID_SKLEARN_PYTHON` names a Python with scikit-learn, as
 //! `benches/cpu_report.sh` arranges) and the targets.
 //!
@@ -22,9 +22,10 @@ impl Rng {
     }
 }
 
-/// Single-core f32 multiply-adds per second: AVX2 FMAs (8 lanes, the ISA of the sweep kernel)
-/// on 12 independent register accumulators, best of 3. `None` without AVX2 + FMA.
-/// (The development machine also has AVX-512, whose peak is 2x this; the kernel does not use it.)
+/// Single-core f32 multiply-adds per second in the instruction set the sweep kernel uses
+/// (`ctsid::engine::cpu::simd_level`): AVX-512 FMAs (16 lanes) where it uses AVX-512, AVX2 FMAs
+/// (8 lanes) otherwise, on 12 independent register accumulators, best of 3. `None` without
+/// AVX2 + FMA.
 fn fma_throughput() -> Option<f64> {
     #[cfg(target_arch = "x86_64")]
     {
@@ -46,20 +47,46 @@ fn fma_throughput() -> Option<f64> {
             _mm256_storeu_ps(s.as_mut_ptr(), t);
             s.iter().sum()
         }
+        #[target_feature(enable = "avx512f,avx2,fma")]
+        unsafe fn run16(iters: u64) -> f32 {
+            let mut acc = [_mm512_set1_ps(0.0); 12];
+            let (a, b) = (_mm512_set1_ps(0.999_999), _mm512_set1_ps(1e-7));
+            for _ in 0..iters {
+                for x in acc.iter_mut() {
+                    *x = _mm512_fmadd_ps(*x, a, b);
+                }
+            }
+            let mut t = acc[0];
+            for x in &acc[1..] {
+                t = _mm512_add_ps(t, *x);
+            }
+            _mm512_reduce_add_ps(t)
+        }
         if !(std::arch::is_x86_feature_detected!("avx2")
             && std::arch::is_x86_feature_detected!("fma"))
         {
             return None;
         }
-        let iters = 50_000_000u64;
-        // SAFETY: the CPU has AVX2 + FMA (checked above).
-        let go = |n: u64| unsafe { run8(n) };
+        let wide = ctsid::engine::cpu::simd_level() == "avx512";
+        let (iters, lanes) = if wide {
+            (25_000_000u64, 16)
+        } else {
+            (50_000_000u64, 8)
+        };
+        // SAFETY: the CPU has AVX2 + FMA (checked above), and AVX-512F where simd_level says so.
+        let go = |n: u64| unsafe {
+            if wide {
+                run16(n)
+            } else {
+                run8(n)
+            }
+        };
         std::hint::black_box(go(iters / 10));
         let mut best = 0.0f64;
         for _ in 0..3 {
             let t = Instant::now();
             std::hint::black_box(go(std::hint::black_box(iters)));
-            best = best.max((iters * 12 * 8) as f64 / t.elapsed().as_secs_f64());
+            best = best.max((iters * 12 * lanes) as f64 / t.elapsed().as_secs_f64());
         }
         return Some(best);
     }
@@ -224,7 +251,7 @@ fn main() {
     let simd = ctsid::engine::cpu::simd_level();
     let mut fma =
         fma_throughput().expect("the report needs AVX2 + FMA to measure the arithmetic limit");
-    println!("machine: {cores} threads; single-core f32 multiply-adds/s measured now (AVX2 FMA): {fma:.3e}; sweep kernel uses {simd}");
+    println!("machine: {cores} threads; single-core f32 multiply-adds/s measured now ({simd} FMA, the sweep kernel's instruction set): {fma:.3e}");
     println!("(each sweep figure: the fastest of its repetitions, each right after a measurement of the FMA rate; the limit from the fastest FMA rate of the run so far)");
 
     // 25,000 x 12,376.
