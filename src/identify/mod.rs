@@ -728,7 +728,7 @@ impl Prepared<'_> {
             if vars.is_empty() {
                 continue;
             }
-            let f = self.design(i, &ord, train).0;
+            let f = self.design(i, ord, train).0;
             for v in vars {
                 let name = &names[v];
                 if let Some(k) = f.names.iter().position(|n| n == name) {
