@@ -251,7 +251,8 @@ fn main() {
     let simd = ctsid::engine::cpu::simd_level();
     let mut fma =
         fma_throughput().expect("the report needs AVX2 + FMA to measure the arithmetic limit");
-    println!("machine: {cores} threads; single-core f32 multiply-adds/s measured now ({simd} FMA, the sweep kernel's instruction set): {fma:.3e}");
+    let measured = if simd == "avx512" { "AVX-512" } else { "AVX2" };
+    println!("machine: {cores} threads; single-core f32 multiply-adds/s measured now ({measured} FMA): {fma:.3e}; sweep kernel uses {simd}");
     println!("(each sweep figure: the fastest of its repetitions, each right after a measurement of the FMA rate; the limit from the fastest FMA rate of the run so far)");
 
     // 25,000 x 12,376.

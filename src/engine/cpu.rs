@@ -388,7 +388,12 @@ impl SweepEngine for CpuEngine {
         let mode = if self.dense.is_some() {
             "materialised f64".to_string()
         } else {
-            format!("on-the-fly {:?}, {}", self.precision, kernel::simd_level()).to_lowercase()
+            // f64 sweeps have no AVX-512 instance: they run AVX2 there.
+            let simd = match (self.precision, kernel::simd_level()) {
+                (Precision::F64, "avx512") => "avx2",
+                (_, level) => level,
+            };
+            format!("on-the-fly {:?}, {simd}", self.precision).to_lowercase()
         };
         format!(
             "cpu ({mode}, {} threads, {} x {})",

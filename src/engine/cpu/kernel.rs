@@ -244,6 +244,19 @@ pub fn sweep_block<T: Elem>(
     s: &mut Scratch<T>,
     acc: &mut [f64],
 ) {
+    sweep_block_at(simd_level(), plan, zb, bsz, s, acc)
+}
+
+/// [`sweep_block`] with the instruction set named (as [`simd_level`] names them); a level the
+/// CPU lacks must not be asked for (the tests ask only for what the CPU has).
+fn sweep_block_at<T: Elem>(
+    level: &str,
+    plan: &Plan,
+    zb: &[T],
+    bsz: usize,
+    s: &mut Scratch<T>,
+    acc: &mut [f64],
+) {
     let nv = plan.n_vars;
     // vz_k and the constant / degree-1 candidates.
     acc[0] += s.vb.iter().map(|x| x.to_f64()).sum::<f64>();
@@ -262,7 +275,6 @@ pub fn sweep_block<T: Elem>(
     #[cfg(target_arch = "x86_64")]
     {
         use std::any::TypeId;
-        let level = simd_level();
         if bsz == SIMD_B && level != "none" {
             if plan.two_level {
                 for a in 0..nv {
@@ -850,6 +862,63 @@ fn centred_block_impl(
                     })
                     .sum::<f64>()
             };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::basis::{Basis, BasisLimits};
+
+    /// Every instruction set this CPU has gives the portable loops' block sums (f32, to the
+    /// rounding of different summation orders): on a CPU with AVX-512 the engine no longer runs
+    /// the AVX2 instance, which only this test then checks.
+    #[test]
+    fn every_simd_instance_gives_the_portable_block_sums() {
+        let mut levels = vec!["none"];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                levels.push("avx2");
+            }
+            if std::arch::is_x86_feature_detected!("avx512f") && levels.contains(&"avx2") {
+                levels.push("avx512");
+            }
+        }
+        let mut seed = 11u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        for (nz, d) in [(4, 6), (7, 3), (11, 4), (3, 2)] {
+            let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
+            let basis = Basis::new(&names, d, BasisLimits::default()).unwrap();
+            let plan = Plan::new(&basis);
+            let zb: Vec<f32> = (0..nz * SIMD_B).map(|_| next() as f32).collect();
+            let v: Vec<f64> = (0..SIMD_B).map(|_| next()).collect();
+            let sums = |level: &str| {
+                let mut s = Scratch::<f32>::new(d, nz, SIMD_B);
+                s.load_v(&v, 1.0);
+                let mut acc = vec![0.0; basis.len()];
+                sweep_block_at(level, &plan, &zb, SIMD_B, &mut s, &mut acc);
+                acc
+            };
+            let reference = sums("none");
+            for level in &levels[1..] {
+                let got = sums(level);
+                for (p, (g, r)) in got.iter().zip(&reference).enumerate() {
+                    // Sums of 256 products of values below 1: f32 rounding of either order.
+                    assert!(
+                        (g - r).abs() <= 1e-4,
+                        "{level}, n {nz} d {d}, position {p}: {g} vs {r}"
+                    );
+                }
+            }
         }
     }
 }
