@@ -142,6 +142,34 @@ fn mimo_orders_are_chosen_on_free_run_simulation() {
 /// coupled through products, 20 runs at `noise`, written as CSV and identified by `ctsid
 /// identify` with the orders searched (1..4 each, chosen on free-run simulation) at d = 3.
 /// Returns the true model and the model file written.
+/// `ctsid identify CSV` (runs in column `run`, time in `t`, the CPU engine, quietly) with `args`,
+/// which must succeed; the model file it writes beside the record.
+fn identify_csv(csv: &std::path::Path, args: &[&str]) -> Model {
+    let out = csv.with_extension("model.json");
+    let run = std::process::Command::new(env!("CARGO_BIN_EXE_ctsid"))
+        .args(["identify", csv.to_str().unwrap()])
+        .args([
+            "--run-column",
+            "run",
+            "--time-column",
+            "t",
+            "--engine",
+            "cpu",
+            "--quiet",
+        ])
+        .args(args)
+        .args(["-o", out.to_str().unwrap()])
+        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    Model::read(out.to_str().unwrap()).unwrap()
+}
+
 fn own_record_through_identify(noise: f64) -> (Model, Model) {
     let t = Term::new;
     let truth = Model::new(
@@ -192,37 +220,19 @@ fn own_record_through_identify(noise: f64) -> (Model, Model) {
     let dir = std::env::temp_dir().join(format!("ctsid-mimo-csv-{}-{noise}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let csv = dir.join("own.csv");
-    let out = dir.join("own.model.json");
     write_csv(&plant, &runs, csv.to_str().unwrap(), false).unwrap();
     let t0 = std::time::Instant::now();
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_ctsid"))
-        .args(["identify", csv.to_str().unwrap()])
-        .args([
-            "--output",
-            "a,b,c",
-            "--input",
-            "u1,u2",
-            "--run-column",
-            "run",
-        ])
-        .args(["--time-column", "t", "--degree", "3", "--orders", "1..4"])
-        .args([
-            "--train", "0-13", "--test", "14-19", "--engine", "cpu", "--quiet",
-        ])
-        .args(["-o", out.to_str().unwrap()])
-        .env("XDG_RUNTIME_DIR", std::env::temp_dir())
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+    let found = identify_csv(
+        &csv,
+        &[
+            "--output", "a,b,c", "--input", "u1,u2", "--degree", "3", "--orders", "1..4",
+            "--train", "0-13", "--test", "14-19",
+        ],
     );
     eprintln!(
         "noise {noise}: identified in {:.1} s",
         t0.elapsed().as_secs_f64()
     );
-    let found = Model::read(out.to_str().unwrap()).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
     (truth, found)
 }
@@ -396,28 +406,25 @@ fn mimo_identify_with_a_sign_term_scores_each_order_without_a_panic() {
         }
     }
     std::fs::write(&csv, text).unwrap();
-    let out = dir.join("sign.model.json");
-    let run = std::process::Command::new(env!("CARGO_BIN_EXE_ctsid"))
-        .args([
-            "identify",
-            csv.to_str().unwrap(),
+    let found = identify_csv(
+        &csv,
+        &[
             "--output",
             "a,b",
             "--input",
             "u",
-        ])
-        .args(["--run-column", "run", "--time-column", "t", "--degree", "1"])
-        .args(["--orders", "1..2", "--term", "sign(a_d1)", "--train", "0-6"])
-        .args(["--test", "7-9", "--engine", "cpu", "--quiet"])
-        .args(["-o", out.to_str().unwrap()])
-        .output()
-        .unwrap();
-    assert!(
-        run.status.success(),
-        "{}",
-        String::from_utf8_lossy(&run.stderr)
+            "--degree",
+            "1",
+            "--orders",
+            "1..2",
+            "--term",
+            "sign(a_d1)",
+            "--train",
+            "0-6",
+            "--test",
+            "7-9",
+        ],
     );
-    let found = Model::read(out.to_str().unwrap()).unwrap();
     let _ = std::fs::remove_dir_all(&dir);
     let orders: Vec<usize> = found.outputs.iter().map(|o| o.order).collect();
     assert_eq!(orders, vec![2, 1], "{found}");
