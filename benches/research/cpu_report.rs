@@ -5,6 +5,7 @@
 //! `benches/cpu_report.sh` arranges) and the targets.
 //!
 //! Run: `bash benches/cpu_report.sh` (or `cargo bench --bench cpu_report` without scikit-learn).
+//! `CTSID_REPORT_PATHS=N` runs only the first sweeps and N LARS paths (for `perf record`).
 use ctsid::basis::{Basis, BasisLimits};
 use ctsid::engine::{ColumnStats, CpuEngine, CpuOptions, Features, Precision, SweepEngine};
 use ctsid::regression::{lars_path, Method, PathOptions, Regression};
@@ -124,6 +125,8 @@ fn time_beside_fma<F: FnMut()>(reps: usize, fma: &mut f64, mut f: F) -> f64 {
 struct Timed<'a> {
     inner: &'a mut CpuEngine,
     sweeps: f64,
+    /// The fastest single sweep.
+    fastest: f64,
     stats: f64,
 }
 
@@ -146,7 +149,9 @@ impl SweepEngine for Timed<'_> {
     fn sweep(&mut self, v: &[f64], out: &mut [f64]) -> ctsid::Result<()> {
         let t = Instant::now();
         let r = self.inner.sweep(v, out);
-        self.sweeps += t.elapsed().as_secs_f64();
+        let dt = t.elapsed().as_secs_f64();
+        self.sweeps += dt;
+        self.fastest = self.fastest.min(dt);
         r
     }
     fn columns(&mut self, idx: &[usize]) -> ctsid::Result<Vec<Vec<f64>>> {
@@ -315,6 +320,7 @@ fn main() {
             let mut timed = Timed {
                 inner: &mut e,
                 sweeps: 0.0,
+                fastest: f64::INFINITY,
                 stats: 0.0,
             };
             let t0 = Instant::now();
@@ -323,12 +329,13 @@ fn main() {
             ours.push(total);
             sweep_times.push(timed.sweeps);
             println!(
-                "  path: {} steps, {} sweeps ({} refreshes), {total:.2} s = sweeps {:.2} s ({:.1} ms each) + column stats {:.2} s + the rest {:.2} s",
+                "  path: {} steps, {} sweeps ({} refreshes), {total:.2} s = sweeps {:.2} s ({:.1} ms each, fastest {:.1}) + column stats {:.2} s + the rest {:.2} s",
                 path.breakpoints.len() - 1,
                 path.sweeps,
                 path.refreshes,
                 timed.sweeps,
                 timed.sweeps / path.sweeps as f64 * 1e3,
+                timed.fastest * 1e3,
                 timed.stats,
                 total - timed.sweeps - timed.stats
             );
@@ -338,6 +345,17 @@ fn main() {
         }
         Vec::new()
     };
+    // `CTSID_REPORT_PATHS=N`: only N paths (three per round), for a profiler.
+    if let Some(rounds) = std::env::var("CTSID_REPORT_PATHS")
+        .ok()
+        .and_then(|s| s.parse::<usize>().ok())
+    {
+        for _ in 0..rounds.div_ceil(3) {
+            ours.clear();
+            run_ours(&mut ours, &mut sweep_times);
+        }
+        return;
+    }
     let order = run_ours(&mut ours, &mut sweep_times);
     let theirs = std::env::var("CTSID_SKLEARN_PYTHON")
         .ok()
