@@ -256,4 +256,12 @@ fn prune_drops_a_term_the_data_do_not_determine_and_keeps_the_true_ones() {
     let q = prune(&p.model, &train, &val, &PruneOptions::default()).unwrap();
     assert!(q.removals.is_empty(), "{:?}", q.removals);
     assert_eq!(q.model, p.model);
+
+    // A gate run the model cannot simulate judges nothing: every removal used to pass against
+    // an infinite starting error.
+    let mut blown = val.clone();
+    blown[0].u[0][300..].iter_mut().for_each(|u| *u = 1e300);
+    let b = prune(&fitted, &train, &blown, &PruneOptions::default()).unwrap();
+    assert!(b.removals.iter().all(|r| !r.dropped), "{:?}", b.removals);
+    assert_eq!(b.model, fitted);
 }

@@ -482,3 +482,23 @@ fn initial_state_fit_recovers_the_state_from_noisy_samples() {
         "fit {fit:?} not better than guess {guess:?}"
     );
 }
+
+#[test]
+fn an_initial_state_window_beyond_the_run_is_the_whole_run() {
+    use ctsid::simulate::initial_state;
+    // y' = -2 y + u from y(0) = 3, u = 1. A window of usize::MAX once wrapped the fit's doubling
+    // windows to zero and never returned (`ctsid simulate --init-window 18446744073709551615`).
+    let m = siso(
+        1,
+        vec![Term::new(&[("y", 1)], -2.0), Term::new(&[("u", 1)], 1.0)],
+    );
+    let t = grid(120, 0.01);
+    let y: Vec<f64> = t.iter().map(|tk| 0.5 + 2.5 * (-2.0 * tk).exp()).collect();
+    let u = vec![vec![1.0; t.len()]];
+    let ys = std::slice::from_ref(&y);
+    let opts = SimOptions::default();
+    let huge = initial_state(&m, &t, ys, &u, usize::MAX, &opts).unwrap();
+    let whole = initial_state(&m, &t, ys, &u, t.len(), &opts).unwrap();
+    assert_eq!(huge, whole);
+    assert!((huge[0] - 3.0).abs() < 1e-6, "{huge:?}");
+}

@@ -293,11 +293,18 @@ pub fn chain_observer_gains(n: usize, p: f64) -> Vec<f64> {
 }
 
 /// Whether the one-output model's right-hand side is affine in its (only) input: every
-/// monomial has the input to the power 0 or 1 and no named term uses it.
+/// monomial has the input to the power 0 or 1 and no named term uses it (by the parsed
+/// expression's variables: a text search took `sign(w)` for a use of an input named `i`).
 pub fn affine_in_input(model: &Model) -> bool {
     let input = &model.inputs[0];
+    let names = model.variable_names();
+    let Some(at) = names.iter().position(|n| n == input) else {
+        return false;
+    };
     model.outputs[0].terms.iter().all(|t| match &t.expression {
-        Some(text) => !text.contains(input.as_str()),
+        Some(text) => {
+            crate::model::Expr::parse(text, &names).is_ok_and(|e| !e.variables().contains(&at))
+        }
         None => t.exponents.get(input).copied().unwrap_or(0) <= 1,
     })
 }
@@ -564,6 +571,27 @@ mod tests {
         );
         // (s + 7)(s + 14)(s + 21) = s^3 + 42 s^2 + 539 s + 2058
         assert_eq!(c, vec![2058.0, 539.0, 42.0]);
+    }
+
+    #[test]
+    fn affinity_reads_the_variables_of_named_terms_not_their_text() {
+        let model = |terms: &str| {
+            Model::from_json_str(
+                &format!(r#"{{"format":"ctsid-model/2","inputs":["i"],"outputs":[{{"name":"w","order":1,"terms":[{{"exponents":{{"w":1}},"coefficient":-2}},{terms}]}}]}}"#),
+                "m.json",
+            )
+            .unwrap()
+        };
+        // "sign" contains the input's name "i".
+        assert!(affine_in_input(&model(
+            r#"{"expression":"sign(w)","coefficient":-0.1},{"exponents":{"i":1},"coefficient":3}"#
+        )));
+        assert!(!affine_in_input(&model(
+            r#"{"expression":"tanh(i)","coefficient":3}"#
+        )));
+        assert!(!affine_in_input(&model(
+            r#"{"exponents":{"i":2},"coefficient":3}"#
+        )));
     }
 
     #[test]

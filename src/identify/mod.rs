@@ -272,14 +272,36 @@ impl Settings {
             ));
         }
         crate::basis::check_degree(self.degree)?;
+        // A channel named like an output's derivative (`y_d1` beside output `y`) would be taken
+        // for that state (the fits' name tables refuse it only after the search has started).
+        for c in &all {
+            for o in &self.outputs {
+                let k = c
+                    .strip_prefix(o.as_str())
+                    .and_then(|r| r.strip_prefix("_d"));
+                if k.is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit())) {
+                    return Err(Error::param(
+                        "channels",
+                        format!("'{c}' is named like a derivative of output '{o}'; rename it"),
+                    ));
+                }
+            }
+        }
+        // Fixed orders: a named term over a derivative at or above its output's order would be
+        // left out of every equation without a word.
+        if let Orders::Fixed(c) = &self.orders {
+            let names = self.names_at(c);
+            for t in &self.terms {
+                crate::model::Expr::parse(t, &names).map_err(|e| {
+                    Error::param(
+                        "term",
+                        format!("{e} (at the fixed orders {c:?} the states are y .. y_d(n-1))"),
+                    )
+                })?;
+            }
+        }
         // Every named term must make sense at the highest order searched.
-        let top = self.max_order();
-        let mut names: Vec<String> = self
-            .outputs
-            .iter()
-            .flat_map(|o| (0..top).map(move |k| derivative_name(o, k)))
-            .collect();
-        names.extend(self.inputs.iter().cloned());
+        let names = self.names_at(&vec![self.max_order(); self.outputs.len()]);
         for t in &self.terms {
             crate::model::Expr::parse(t, &names)
                 .map_err(|e| Error::param("term", e.to_string()))?;
@@ -297,6 +319,19 @@ impl Settings {
             ));
         }
         Ok(())
+    }
+
+    /// The variables of the equations at orders `ord`: each output's derivatives below its
+    /// order, then the inputs.
+    fn names_at(&self, ord: &[usize]) -> Vec<String> {
+        let mut names: Vec<String> = self
+            .outputs
+            .iter()
+            .zip(ord)
+            .flat_map(|(o, &n)| (0..n).map(move |k| derivative_name(o, k)))
+            .collect();
+        names.extend(self.inputs.iter().cloned());
+        names
     }
 
     fn max_order(&self) -> usize {
@@ -472,14 +507,7 @@ impl Prepared<'_> {
     }
 
     fn names(&self, ord: &[usize]) -> Vec<String> {
-        let mut names = Vec::new();
-        for (j, o) in self.settings.outputs.iter().enumerate() {
-            for k in 0..ord[j] {
-                names.push(derivative_name(o, k));
-            }
-        }
-        names.extend(self.settings.inputs.iter().cloned());
-        names
+        self.settings.names_at(ord)
     }
 
     /// Features, label and weights of output i on the given runs.
@@ -2038,6 +2066,40 @@ mod settings_tests {
             assert!(s.validate().is_err(), "{bad}");
         }
         s.label_floor = 0.0;
+        assert!(s.validate().is_ok());
+    }
+
+    #[test]
+    fn a_channel_named_like_a_derivative_is_refused_before_any_fit() {
+        for (outputs, input) in [
+            (vec!["y"], "y_d1"),
+            (vec!["y"], "y_d0"),
+            (vec!["a", "a_d2"], "u"),
+        ] {
+            let s = Settings::new(
+                outputs.iter().map(|o| o.to_string()).collect(),
+                vec![input.into()],
+                2,
+            );
+            let e = s.validate().unwrap_err().to_string();
+            assert!(e.contains("named like a derivative"), "{e}");
+        }
+        // Names that only start like one are channels of their own.
+        let s = Settings::new(vec!["y".into()], vec!["y_drive".into(), "y_d".into()], 2);
+        assert!(s.validate().is_ok());
+    }
+
+    #[test]
+    fn a_named_term_over_a_state_the_fixed_orders_lack_is_refused() {
+        let mut s = Settings::new(vec!["y1".into(), "y2".into()], vec!["u".into()], 2);
+        s.terms = vec!["sign(y1_d2)".into()];
+        s.orders = super::Orders::Fixed(vec![1, 3]);
+        let e = s.validate().unwrap_err().to_string();
+        assert!(e.contains("y1_d2") && e.contains("fixed orders"), "{e}");
+        s.orders = super::Orders::Fixed(vec![3, 1]);
+        assert!(s.validate().is_ok());
+        // A search uses the term at the orders that have the state.
+        s.orders = super::Orders::Search(vec![1, 2, 3]);
         assert!(s.validate().is_ok());
     }
 }

@@ -45,8 +45,9 @@ enum Fun {
     Sat,
     Relu,
     // Derivatives only (not in the grammar): the slope of the smoothed sign, the unit step
-    // (relu'), and the indicator of |x| < 1 (sat').
+    // (relu'), the indicator of |x| < 1 (sat') and sqrt' (finite at 0, see `sqrt_slope`).
     SignSlope,
+    SqrtSlope,
     Step,
     Inside,
 }
@@ -274,10 +275,24 @@ fn eval(n: &Node, z: &[f64], eps: Option<&[f64]>) -> f64 {
                 Fun::Exp => x.exp(),
                 Fun::Sat => x.clamp(-1.0, 1.0),
                 Fun::Relu => x.max(0.0),
+                Fun::SqrtSlope => sqrt_slope(x),
                 Fun::Step => (x > 0.0) as u8 as f64,
                 Fun::Inside => (x.abs() < 1.0) as u8 as f64,
             }
         }
+    }
+}
+
+/// `d sqrt(x) / dx = 0.5 / sqrt(x)`, finite at x = 0: there `0.5 / sqrt(0)` is infinite, and
+/// the chain rule's product with an inner slope of zero (`sqrt(abs(v))` at v = 0, where the slope
+/// of `abs` is `sign(0) = 0`) was NaN, so a Jacobian at rest (a linearisation, the integrator's
+/// first step from a state at exactly zero) failed, though `sqrt(abs(v)) * v` has slope 0
+/// there. The largest finite slope keeps such products at zero and others finite.
+fn sqrt_slope(x: f64) -> f64 {
+    if x == 0.0 {
+        0.5 / f64::MIN_POSITIVE.sqrt()
+    } else {
+        0.5 / x.sqrt()
     }
 }
 
@@ -372,7 +387,7 @@ fn diff(n: &Node, v: usize) -> Node {
             let outer = match f {
                 Fun::Sign => fun(Fun::SignSlope, a, *var),
                 Fun::Abs => fun(Fun::Sign, a, None),
-                Fun::Sqrt => div(Node::Num(0.5), fun(Fun::Sqrt, a, *var)),
+                Fun::Sqrt => fun(Fun::SqrtSlope, a, *var),
                 Fun::Tanh => sub(
                     Node::Num(1.0),
                     Node::Pow(Box::new(fun(Fun::Tanh, a, *var)), 2.0),
@@ -384,7 +399,7 @@ fn diff(n: &Node, v: usize) -> Node {
                 Fun::Relu => fun(Fun::Step, a, *var),
                 // Piecewise constant away from their jumps; the slope's own slope is not needed
                 // (Jacobians are first derivatives).
-                Fun::SignSlope | Fun::Step | Fun::Inside => Node::Num(0.0),
+                Fun::SignSlope | Fun::SqrtSlope | Fun::Step | Fun::Inside => Node::Num(0.0),
             };
             mul(outer, da)
         }
@@ -648,6 +663,26 @@ mod tests {
         assert_eq!(
             Expr::parse("sign(y_d1)*y", &v).unwrap().sign_variables(),
             vec![1]
+        );
+    }
+
+    #[test]
+    fn the_slope_of_a_square_root_at_zero_is_finite() {
+        let v: Vec<String> = ["y", "y_d1"].iter().map(|s| s.to_string()).collect();
+        // sqrt(|v|) v has slope 1.5 sqrt(|v|): 0 at rest, where the chain rule gave inf * 0.
+        let e = Expr::parse("sqrt(abs(y_d1))*y_d1", &v).unwrap();
+        assert_eq!(e.derivative(1).eval(&[0.0, 0.0]), 0.0);
+        let at = e.derivative(1).eval(&[0.0, 0.25]);
+        assert!((at - 1.5 * 0.5).abs() < 1e-12, "{at}");
+        // An outflow through an orifice at an empty tank: steep, but a number.
+        let e = Expr::parse("sqrt(abs(y))*sign(y)", &v).unwrap();
+        assert!(e.derivative(0).eval(&[0.0, 0.0]).is_finite());
+        assert!(
+            Expr::parse("sqrt(y)", &v)
+                .unwrap()
+                .derivative(0)
+                .eval(&[0.0, 0.0])
+                > 1e150
         );
     }
 

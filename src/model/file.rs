@@ -701,7 +701,8 @@ impl Model {
     /// that is negative or not finite, an `interval` that is not a finite [low, high], a term with
     /// both exponents and an expression, an expression that does not parse, an exponent above
     /// [`MAX_EXPONENT`], an unknown variable, a term above the model's degree, and a
-    /// `sign_smoothing` width of an unknown variable or one that is not finite and positive.
+    /// `sign_smoothing` width of an unknown variable or one that is not finite and positive or
+    /// whose square is not a normal number.
     pub fn validate(&self) -> Result<()> {
         self.validate_at("<memory>")
     }
@@ -731,6 +732,13 @@ impl Model {
             if !(w.is_finite() && *w > 0.0) {
                 return Err(err(format!(
                     "sign_smoothing of '{name}' is {w}; give a positive width (or leave the variable out for the exact sign)"
+                )));
+            }
+            // The smoothed sign is x / sqrt(x^2 + w^2): a square that underflows makes it 0/0
+            // at x = 0, one that overflows makes it 0 everywhere.
+            if !(w * w).is_normal() {
+                return Err(err(format!(
+                    "sign_smoothing of '{name}' is {w}; give a width between 1e-150 and 1e150"
                 )));
             }
         }

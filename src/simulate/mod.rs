@@ -1111,7 +1111,9 @@ pub fn initial_state(
         x0.extend(estimate_initial_derivatives(t, y, order, &opts.run, &what)?);
     }
     let first = initial_window(model.orders().iter().copied().max().unwrap_or(1));
-    let window = window.max(first);
+    // A window beyond the run is the whole run (each doubling would repeat the same fit; a
+    // window near usize::MAX wrapped the doubling below to zero and never ended).
+    let window = window.min(t.len()).max(first);
     // By continuation: over a short horizon the outputs are nearly linear in the initial state
     // whatever the model, so the fit finds the right basin there, and each doubling of the
     // window starts from the last one's state. Fitted on all 200 samples at once from the
@@ -1125,7 +1127,7 @@ pub fn initial_state(
         if w >= window {
             return Ok(x);
         }
-        w = (2 * w).min(window);
+        w = w.saturating_mul(2).min(window);
     }
 }
 
