@@ -213,16 +213,36 @@ pub fn near_misses(fit: &Fit) -> Vec<(String, f64)> {
 }
 
 /// The model term of a candidate's name: a monomial where the name is one, else the expression.
+/// A monomial over channels whose names expressions cannot hold (`Level (m)*u^2`) is read factor
+/// by factor; the completion tried nothing for them before.
 fn term_of(name: &str, vars: &[String], coefficient: f64) -> Option<Term> {
-    let e = Expr::parse(name, vars).ok()?;
-    let t = match e.monomial() {
-        Some(mono) => {
-            let ex: Vec<(&str, u32)> = mono.iter().map(|&(v, p)| (vars[v].as_str(), p)).collect();
-            Term::new(&ex, coefficient)
-        }
-        None => Term::expression(name, coefficient),
+    let t = match Expr::parse(name, vars) {
+        Ok(e) => match e.monomial() {
+            Some(mono) => {
+                let ex: Vec<(&str, u32)> =
+                    mono.iter().map(|&(v, p)| (vars[v].as_str(), p)).collect();
+                Term::new(&ex, coefficient)
+            }
+            None => Term::expression(name, coefficient),
+        },
+        Err(_) => Term::new(&factors_of(name, vars)?, coefficient),
     };
     Some(t.with_origin(Origin::Identified))
+}
+
+/// The factors `(variable, power)` of a monomial's name `a*b^2*...` over `vars`, where every
+/// factor is a variable, alone or with a power.
+fn factors_of<'a>(name: &str, vars: &'a [String]) -> Option<Vec<(&'a str, u32)>> {
+    let var = |f: &str| vars.iter().find(|v| v.as_str() == f).map(String::as_str);
+    name.split('*')
+        .map(|f| match var(f) {
+            Some(v) => Some((v, 1)),
+            None => {
+                let (base, p) = f.rsplit_once('^')?;
+                Some((var(base)?, p.parse().ok().filter(|p| *p > 0)?))
+            }
+        })
+        .collect()
 }
 
 /// The free runs of `m` on every gate run (`[run][output][sample]`), `None` if one fails.
@@ -1111,6 +1131,22 @@ mod tests {
         let mut none = Vec::new();
         add_offered_swaps(&m, &vars, &stale, &mut none);
         assert!(none.is_empty());
+    }
+
+    #[test]
+    fn a_monomial_over_channels_expressions_cannot_name_is_read_by_its_factors() {
+        let vars: Vec<String> = ["Level (m)", "Level (m)_d1", "u"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        let t = term_of("Level (m)_d1*u^2", &vars, 0.5).unwrap();
+        assert_eq!(t.exponents.get("Level (m)_d1"), Some(&1));
+        assert_eq!(t.exponents.get("u"), Some(&2));
+        assert!(term_of("Level (m)*w", &vars, 0.5).is_none());
+        assert!(term_of("Level (m)^0", &vars, 0.5).is_none());
+        // Names expressions can hold go through the parser as before.
+        let t = term_of("u*u", &vars, 1.0).unwrap();
+        assert_eq!(t.exponents.get("u"), Some(&2));
     }
 
     #[test]
