@@ -210,8 +210,19 @@ fn emps(data: &str) -> Result<Benchmark> {
         1e-3,
     )?;
     let n = train[0].len();
-    if n < 600 || test[0].len() < 100 {
-        return Err(too_short(&format!("{data}/emps"), 600, n));
+    if n < 600 {
+        return Err(too_short(
+            &format!("{data}/emps/EMPS_train_DATA_EMPS.csv"),
+            600,
+            n,
+        ));
+    }
+    if test[0].len() < 100 {
+        return Err(too_short(
+            &format!("{data}/emps/EMPS_test_DATA_EMPS_PULSES.csv"),
+            100,
+            test[0].len(),
+        ));
     }
     let mut runs = segments(&train, 0, n, 6, "est");
     runs.push(one_run("pulses", &test, 0, test[0].len()));

@@ -4,10 +4,13 @@
 use crate::error::{Error, Result};
 
 /// The first element equal to an earlier one: (index of the earlier, index of the repeat).
-pub(crate) fn first_repeat<T: PartialEq>(v: &[T]) -> Option<(usize, usize)> {
+/// Linear in the length: the run lists it checks can hold a run per row of a large file
+/// (`--run-column t` by mistake), where comparing each with all before it took hours.
+pub(crate) fn first_repeat<T: Eq + std::hash::Hash>(v: &[T]) -> Option<(usize, usize)> {
+    let mut seen = std::collections::HashMap::with_capacity(v.len());
     v.iter()
         .enumerate()
-        .find_map(|(j, x)| v[..j].iter().position(|y| y == x).map(|i| (i, j)))
+        .find_map(|(j, x)| seen.insert(x, j).map(|i| (i, j)))
 }
 
 /// A setting that must be a finite number >= 0.

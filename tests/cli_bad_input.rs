@@ -266,6 +266,29 @@ fn usage_errors_are_one_line() {
         &["identify", &data, identify, "--orders 2,2 --tau 0.01"],
         &["listed twice"],
     );
+    // Refused before ten million orders are spelled out.
+    fails(
+        &[
+            "identify",
+            &data,
+            identify,
+            "--orders 1..9999999 --tau 0.01",
+        ],
+        &["'orders'", "1..=6"],
+    );
+    // A header with a space before a name is that name (the loader trims it): no second column.
+    let spaced = file(
+        "spaced.csv",
+        &good_csv().replacen("run,t,u,y", "run, t, u, u_d1", 1),
+    );
+    fails(
+        &[
+            "derive",
+            &spaced,
+            "--column u --order 1 --run-column run --time-column t",
+        ],
+        &["already has a column 'u_d1'"],
+    );
     // A trailing comma is an empty name, not a second output ('1 orders for 2 outputs').
     fails(
         &["identify", &data, "--output y, --degree 2 --order 1"],

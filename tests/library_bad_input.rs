@@ -133,6 +133,15 @@ fn record_sets_refuse_names_twice_and_huge_values() {
         vec![run("0", vec![sine(50, 0.0), sine(50, 1.0)])],
     );
     assert!(e.unwrap_err().to_string().contains("named twice"));
+    let e = RecordSet::new(
+        0.01,
+        vec!["y".into()],
+        vec![run("a", vec![sine(50, 0.0)]), run("a", vec![sine(50, 1.0)])],
+    );
+    assert!(e
+        .unwrap_err()
+        .to_string()
+        .contains("run id 'a' is used twice"));
     let mut v = sine(50, 0.0);
     v[7] = 1e160;
     assert!(RecordSet::new(0.01, vec!["y".into()], vec![run("0", vec![v])]).is_err());

@@ -125,6 +125,8 @@ def test_discover_runs_and_returns_a_model_that_simulates(throttle, fitted):
         (lambda d: d.assign(y=d.y.where(d.index != 5, np.nan)), "not a finite number"),
         (lambda d: d.drop(columns=["u"]), "column 'u' not found"),
         (lambda d: d.assign(u=0.5), "constant"),
+        # A lost run id is refused, not grouped into a run of its own.
+        (lambda d: d.assign(run=d.run.where(d.index != 7, np.nan)), "row 7: no run id"),
     ],
 )
 def test_bad_data_raise_the_cli_one_line_messages(fitted, make, needle):
@@ -144,6 +146,8 @@ def test_wrong_shapes_and_settings_raise_clear_errors(fitted):
         ctsid.derive(np.zeros((10, 2)), 0.01, 1)
     with pytest.raises(ctsid.CtsidError, match="engine"):
         ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", engine="tpu")
+    with pytest.raises(ctsid.CtsidError, match="used twice"):
+        ctsid.identify({1: data[data.run == 0], "1": data[data.run == 1]}, outputs=["y"], inputs=["u"], tau=TAU)
     with pytest.raises(ctsid.CtsidError, match="99"):
         ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", test="99")
     with pytest.raises(ctsid.CtsidError):

@@ -67,7 +67,11 @@ pub fn write_with_columns(
         .iter()
         .map(String::from)
         .collect();
-    if let Some(n) = names.iter().find(|n| header.contains(n)) {
+    // Headers as the loader reads them (trimmed): ` y_d1` is the column `y_d1`.
+    if let Some(n) = names
+        .iter()
+        .find(|n| header.iter().any(|h| h.trim() == n.as_str()))
+    {
         return Err(Error::InvalidData(format!(
             "{p}: already has a column '{n}'; rename it or write elsewhere"
         )));

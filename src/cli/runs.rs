@@ -63,13 +63,17 @@ pub struct Given {
 impl Given {
     /// The runs of `0..n` that no given list names (where omitted lists take their runs from).
     pub fn unnamed(&self, n: usize) -> Vec<usize> {
-        let named = |r: &usize| {
-            [&self.train, &self.validation, &self.test]
-                .into_iter()
-                .flatten()
-                .any(|l| l.contains(r))
-        };
-        (0..n).filter(|r| !named(r)).collect()
+        let mut named = vec![false; n];
+        for &r in [&self.train, &self.validation, &self.test]
+            .into_iter()
+            .flatten()
+            .flatten()
+        {
+            if r < n {
+                named[r] = true;
+            }
+        }
+        (0..n).filter(|&r| !named[r]).collect()
     }
 }
 

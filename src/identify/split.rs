@@ -73,10 +73,15 @@ pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<Str
 /// [`crate::records::RecordSet::segmented`]) names all its pieces. Refuses a name that is neither a
 /// run id (exactly or as a number) nor a run cut into pieces.
 pub fn resolve(names: &[String], ids: &[String], what: &str) -> Result<Vec<usize>> {
+    // Exact ids through a table: a list can name a run per row of a large file.
+    let mut exact = std::collections::HashMap::with_capacity(ids.len());
+    for (i, id) in ids.iter().enumerate().rev() {
+        exact.insert(id.as_str(), i);
+    }
     let mut out = Vec::new();
     for n in names {
         // An exact id first; only then a numeric match ("1" for a run written "01").
-        let one = ids.iter().position(|id| id == n).or_else(|| {
+        let one = exact.get(n.as_str()).copied().or_else(|| {
             ids.iter().position(|id| {
                 id.parse::<f64>()
                     .ok()
@@ -178,6 +183,7 @@ impl Split {
         let groups = split.lists();
         for (a, (na, la)) in groups.iter().enumerate() {
             for (nb, lb) in groups.iter().skip(a + 1) {
+                let lb: std::collections::HashSet<&usize> = lb.iter().collect();
                 if let Some(r) = la.iter().find(|r| lb.contains(r)) {
                     return Err(Error::param(
                         "split",

@@ -207,7 +207,7 @@ pub const MAX_DATASET_SAMPLES: usize = 1 << 30;
 /// Generates `n_runs` runs of `n_samples` samples at `tau` from rest, with noise level `noise`
 /// (the paper's eta, e.g. 0.03 for 3 %), deterministically from `seed`. Refuses a tau that
 /// [`crate::records::check_tau`] refuses, an excitation that [`ExcitationConfig::check`] refuses,
-/// more than [`MAX_DATASET_SAMPLES`] samples in all, fewer than 2 samples per run and a `noise`
+/// no runs, more than [`MAX_DATASET_SAMPLES`] samples in all, fewer than 2 samples per run and a `noise`
 /// that is negative or not finite; errs when a run's simulation fails.
 pub fn dataset(
     plant: &Plant,
@@ -219,6 +219,9 @@ pub fn dataset(
 ) -> Result<Vec<Run>> {
     crate::records::check_tau(tau)?;
     plant.excitation.check()?;
+    if n_runs == 0 {
+        return Err(Error::param("runs", "must be at least 1"));
+    }
     // Each run holds its states and outputs: refuse sizes that cannot be allocated.
     if n_runs.saturating_mul(n_samples) > MAX_DATASET_SAMPLES {
         return Err(Error::TooLarge {
@@ -293,7 +296,9 @@ pub fn write_csv(plant: &Plant, runs: &[Run], path: &str, truth: bool) -> Result
         path: path.into(),
         message: e.to_string(),
     };
-    let mut w = csv::Writer::from_path(path).map_err(|e| io(&e))?;
+    // Whole or not at all: a full disk or a kill half way leaves the file as it was.
+    let file = crate::util::AtomicFile::create(std::path::Path::new(path))?;
+    let mut w = csv::Writer::from_writer(file);
     let outs = plant.output_names();
     let mut header = vec!["run".to_string(), "t".to_string()];
     header.extend(plant.input_names());
@@ -320,5 +325,7 @@ pub fn write_csv(plant: &Plant, runs: &[Run], path: &str, truth: bool) -> Result
             w.write_record(&row).map_err(|e| io(&e))?;
         }
     }
-    w.flush().map_err(|e| io(&e))
+    w.into_inner()
+        .map_err(|e| io(&e.error().to_string()))?
+        .commit()
 }

@@ -169,7 +169,7 @@ pub struct CsvSpec {
 
 impl RecordSet {
     /// Builds a record set from in-memory runs (validated like a file). Refuses a tau that
-    /// [`check_tau`] refuses, a channel name given twice, a run with another number of channels
+    /// [`check_tau`] refuses, a channel name given twice, a run id used twice, a run with another number of channels
     /// than names or with channels of different lengths, a NaN, infinite or too large sample
     /// ([`first_unusable`]), a channel whose largest magnitude is below [`MIN_MAGNITUDE`] (all
     /// zeros aside) and a sample [`MAX_OUTLIER`] times further from its channel's median than
@@ -180,6 +180,17 @@ impl RecordSet {
             return Err(Error::InvalidData(format!(
                 "channel '{}' is named twice (channel {})",
                 channel_names[j],
+                j + 1
+            )));
+        }
+        // Runs are named in split lists and reports: a repeated id would be silently left out
+        // of a list (its name binds the first) or trained on beside its twin in the test list.
+        let ids: Vec<&str> = runs.iter().map(|r| r.id.as_str()).collect();
+        if let Some((i, j)) = crate::util::first_repeat(&ids) {
+            return Err(Error::InvalidData(format!(
+                "run id '{}' is used twice (runs {} and {})",
+                ids[j],
+                i + 1,
                 j + 1
             )));
         }
@@ -658,9 +669,14 @@ fn tau_from_times(
         let tol = (TAU_RTOL * median).max(4.0 * big * f64::EPSILON);
         for w in 1..r.times.len() {
             let step = r.times[w] - r.times[w - 1];
-            // Compare absolute times with the grid, so slow drift is caught too.
+            // Compare absolute times with the grid, so that stamps rounded in print pass. A
+            // step half a step off is a lost or an extra sample whatever the grid says (the
+            // grid's allowance grows with the sample's index, and from sample 1e6 on it let a
+            // lost sample through).
             let expect = r.times[0] + w as f64 * median;
-            if (step - median).abs() > tol && (r.times[w] - expect).abs() > tol * w as f64 {
+            let gross = (step - median).abs() > 0.5 * median;
+            if gross || (step - median).abs() > tol && (r.times[w] - expect).abs() > tol * w as f64
+            {
                 return Err(Error::TimeNonUniform {
                     path: label.into(),
                     row: r.rows[w],
@@ -830,6 +846,18 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("row 4") && e.contains("non-uniform"), "{e}");
+        // One sample lost after a million: the grid's allowance had grown past a step.
+        let mut text = String::from("t,y\n");
+        for k in (0..=1_000_001u64).chain(1_000_003..1_000_010) {
+            text.push_str(&format!("{k},1\n"));
+        }
+        let e = load(&text, spec(&["y"], None, Some("t"), None))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("row 1000004") && e.contains("non-uniform"),
+            "{e}"
+        );
         let e = load(
             "t,y\n0,1\n0.1,2\n",
             spec(&["y"], None, Some("t"), Some(0.2)),

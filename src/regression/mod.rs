@@ -224,7 +224,10 @@ impl RegressionBuilder {
         let path = PathOptions {
             method: self.method,
             max_terms: self.max_terms,
-            max_steps: self.max_steps.unwrap_or(8 * self.max_terms + 20),
+            // Saturating: `--max-terms 18446744073709551615` ("no limit") wrapped to 12 steps.
+            max_steps: self
+                .max_steps
+                .unwrap_or(self.max_terms.saturating_mul(8).saturating_add(20)),
             alpha_min: self.alpha_min,
             epsilon: self.epsilon,
             collinearity_tol: self.collinearity_tol,
