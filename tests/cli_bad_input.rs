@@ -274,7 +274,7 @@ fn usage_errors_are_one_line() {
             identify,
             "--orders 1..9999999 --tau 0.01",
         ],
-        &["'orders'", "1..=6"],
+        &["'orders'", "names more orders", "1..=6"],
     );
     // A header with a space before a name is that name (the loader trims it): no second column.
     let spaced = file(

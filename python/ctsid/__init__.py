@@ -65,7 +65,7 @@ def _frames(data: Any, run_column: Optional[str], columns: Optional[Sequence[str
         return [("0", table)]
     if run_column not in table:
         raise CtsidError(f"run column '{run_column}' not found (columns: {', '.join(table)})")
-    ids = [_run_id(v, run_column, i) for i, v in enumerate(np.asarray(table[run_column]).tolist())]
+    ids = [_cell_run_id(v, run_column, i) for i, v in enumerate(np.asarray(table[run_column]).tolist())]
     rows: Dict[str, List[int]] = {}
     for i, key in enumerate(ids):
         rows.setdefault(key, []).append(i)
@@ -75,12 +75,18 @@ def _frames(data: Any, run_column: Optional[str], columns: Optional[Sequence[str
     ]
 
 
-def _run_id(v: Any, column: str, row: int) -> str:
-    # A missing id is a lost cell, not a run: grouping the rows of NaN or <NA> would join
-    # pieces of different experiments into one run (the command line refuses it too).
-    missing = v is None or (isinstance(v, (float, np.floating)) and np.isnan(v))
-    if missing or str(v) in ("", "<NA>", "nan", "NaT"):
+def _cell_run_id(v: Any, column: str, row: int) -> str:
+    # A missing id is a lost cell, not a run: grouping the rows of NaN, None, pandas' NA or NaT
+    # would join pieces of different experiments into one run (the command line refuses an
+    # empty id too). A string id "nan" is a name like any other.
+    missing = v is None or type(v).__name__ in ("NAType", "NaTType")
+    missing = missing or (isinstance(v, (float, np.floating)) and np.isnan(v))
+    if missing or (isinstance(v, str) and not v.strip()):
         raise CtsidError(f"run column '{column}' row {row}: no run id (a lost cell, not a run)")
+    return _run_id(v)
+
+
+def _run_id(v: Any) -> str:
     if isinstance(v, (float, np.floating)) and float(v).is_integer():
         return str(int(v))
     return str(v)

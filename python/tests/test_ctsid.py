@@ -146,6 +146,10 @@ def test_wrong_shapes_and_settings_raise_clear_errors(fitted):
         ctsid.derive(np.zeros((10, 2)), 0.01, 1)
     with pytest.raises(ctsid.CtsidError, match="engine"):
         ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", engine="tpu")
+    # Run lists as lists of ids give the model the strings give.
+    lists = dict(SETTINGS, train=list(range(8)), validation=[8.0, 9], test=["10", 11])
+    listed = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", **lists)
+    assert listed.to_json() == model.to_json()
     with pytest.raises(ctsid.CtsidError, match="used twice"):
         ctsid.identify({1: data[data.run == 0], "1": data[data.run == 1]}, outputs=["y"], inputs=["u"], tau=TAU)
     with pytest.raises(ctsid.CtsidError, match="99"):

@@ -35,10 +35,10 @@
 //! change no f32 rounding, so results are those of the unscaled sweep wherever it had no
 //! subnormals.
 //!
-//! Memory: Z twice (f64 and f32 copies, O(n_s x n_z)), and per sweep task (two per thread) one f64
-//! accumulator of length n_candidates and about 100 KiB of scratch, kept from one sweep to the
-//! next (for f32 sweeps and for the f64 statistics separately: 32 MB in all at 497,420
-//! candidates on two threads).
+//! Memory: Z twice (f64 and f32 copies, O(n_s x n_z)), and per sweep task (eight per thread
+//! where the tasks' workspaces stay within 16 MiB, else two) one f64 accumulator of length
+//! n_candidates and about 100 KiB of scratch, kept from one sweep to the next (for f32 sweeps and
+//! for the f64 statistics separately: 32 MB in all at 497,420 candidates on two threads).
 //!
 //! # Materialised mode
 //! When `n_samples x n_candidates x 8 bytes` is at most [`CpuOptions::materialize_limit_bytes`]
@@ -302,12 +302,15 @@ impl CpuEngine {
     ) -> &'w [f64] {
         let n_blocks = self.n_samples.div_ceil(bsz);
         let threads = rayon::current_num_threads().max(1);
-        // Eight tasks per thread where their accumulators stay small (16 MiB in all): on a
+        // Eight tasks per thread where their workspaces stay small (16 MiB per pool): on a
         // shared host a core slowed for a moment holds up the sweep's end, and finer tasks let
         // the other core take its share (25,000 x 12,376 on 2 cores: 5-6 % faster sweeps in
         // LARS paths, docs/method/regression.md); two per thread at 497,420 candidates, where
         // sixteen accumulators would be 64 MiB to zero and sum.
-        let by_memory = (16 << 20) / (8 * self.basis.len()).max(1);
+        let nv = self.basis.n_vars();
+        let scratch = (nv * (nv + 1) / 2 + nv + self.plan.degree() + 3) * bsz;
+        let task_bytes = 8 * (self.basis.len() + scratch);
+        let by_memory = (16 << 20) / task_bytes.max(1);
         let tasks = (threads * 8).min(by_memory).max(threads * 2);
         let per_task = n_blocks.div_ceil(tasks).max(1);
         let n_tasks = n_blocks.div_ceil(per_task);

@@ -135,11 +135,13 @@ pub fn prune(
             Some(r) => overall(&free_run_nrmse(r, gate)?),
             None => f64::INFINITY,
         };
-        // A removal is judged only where both free runs exist: from a model that already
+        // A removal is judged only where both free runs exist: against a model that already
         // diverges on a gate run (start_gate infinite) every removal would pass, down to one
         // term per equation; a failed refit leaves the term in.
-        let kept =
-            refit.is_some() && gate_after.is_finite() && gate_after <= opts.gate_rise * start_gate;
+        let kept = refit.is_some()
+            && start_gate.is_finite()
+            && gate_after.is_finite()
+            && gate_after <= opts.gate_rise * start_gate;
         removals.push(Removal {
             equation: derivative_name(&m.outputs[i].name, m.outputs[i].order),
             term,

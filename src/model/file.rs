@@ -702,7 +702,7 @@ impl Model {
     /// both exponents and an expression, an expression that does not parse, an exponent above
     /// [`MAX_EXPONENT`], an unknown variable, a term above the model's degree, and a
     /// `sign_smoothing` width of an unknown variable or one that is not finite and positive or
-    /// whose square is not a normal number.
+    /// whose cube is not a normal number.
     pub fn validate(&self) -> Result<()> {
         self.validate_at("<memory>")
     }
@@ -734,11 +734,12 @@ impl Model {
                     "sign_smoothing of '{name}' is {w}; give a positive width (or leave the variable out for the exact sign)"
                 )));
             }
-            // The smoothed sign is x / sqrt(x^2 + w^2): a square that underflows makes it 0/0
-            // at x = 0, one that overflows makes it 0 everywhere.
-            if !(w * w).is_normal() {
+            // The smoothed sign is x / sqrt(x^2 + w^2) and its slope w^2 / (x^2 + w^2)^1.5: a
+            // cube that underflows makes the slope infinite at x = 0 (a square that does, the
+            // sign 0/0), one that overflows makes them 0 everywhere.
+            if !(w * w * w).is_normal() {
                 return Err(err(format!(
-                    "sign_smoothing of '{name}' is {w}; give a width between 1e-150 and 1e150"
+                    "sign_smoothing of '{name}' is {w}; give a width between 1e-100 and 1e100"
                 )));
             }
         }
