@@ -271,11 +271,14 @@ fn identify(
 }
 
 /// Self-tuning derivatives of one uniformly sampled signal: (values, sigmas), each a list of
-/// `order + 1` lists (k = 0 is the smoothed signal).
+/// `order + 1` lists (k = 0 is the smoothed signal). The signal is checked as `ctsid derive`
+/// checks a column (a magnitude that underflows, a sample far beyond the rest), not only for
+/// non-finite values: a signal of 1e-160 was smoothed at an arbitrary level without a word.
 #[pyfunction]
 fn derive(py: Python<'_>, y: Vec<f64>, tau: f64, order: usize) -> PyResult<(Rows, Rows)> {
+    let rs = record_set(tau, vec!["y".into()], vec![("0".into(), vec![y])]).map_err(err)?;
     let d = py
-        .detach(|| ctsid::derivatives::differentiate(&y, tau, order))
+        .detach(|| ctsid::derivatives::differentiate(&rs.runs[0].channels[0], tau, order))
         .map_err(err)?;
     Ok((d.values, d.sigma))
 }

@@ -144,6 +144,12 @@ def test_wrong_shapes_and_settings_raise_clear_errors(fitted):
         model.simulate(np.zeros((100, 3)), columns=["y", "u"])
     with pytest.raises(ValueError, match="1-D"):
         ctsid.derive(np.zeros((10, 2)), 0.01, 1)
+    # Checked as the command line checks a column: a signal too small to compute with, a spike.
+    wave = np.sin(np.arange(600) * 0.01)
+    with pytest.raises(ctsid.CtsidError, match="too small"):
+        ctsid.derive(1e-160 * wave, 0.01, 2)
+    with pytest.raises(ctsid.CtsidError, match="row 7"):
+        ctsid.derive(np.where(np.arange(600) == 7, 1e149, wave), 0.01, 2)
     with pytest.raises(ctsid.CtsidError, match="engine"):
         ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", engine="tpu")
     # Run lists as lists of ids give the model the strings give.

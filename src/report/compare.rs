@@ -223,6 +223,9 @@ pub fn write_comparisons(dir: &Path, comparisons: &[Comparison], limit: usize) -
         "plots",
     ]);
     let mut drawn = std::collections::HashMap::<&str, usize>::new();
+    // File stems in use: runs `a b` and `a_b` (or `Lauf ä` and `Lauf ö`) have one safe name, and
+    // the second's plots overwrote the first's; a repeat takes `_2`, `_3`, ...
+    let mut stems = std::collections::HashSet::<String>::new();
     let mut left_out = 0;
     for c in comparisons {
         let Some((_, sim)) = c.simulated.last() else {
@@ -232,7 +235,13 @@ pub fn write_comparisons(dir: &Path, comparisons: &[Comparison], limit: usize) -
         let (r, resid_svg) = residual_figure(c);
         let plots = if *count < limit {
             *count += 1;
-            let stem = format!("{}_{}", c.run, c.output);
+            let base = super::safe_name(&format!("{}_{}", c.run, c.output));
+            let mut stem = base.clone();
+            let mut k = 1;
+            while !stems.insert(stem.clone()) {
+                k += 1;
+                stem = format!("{base}_{k}");
+            }
             write_file(dir, &format!("sim_{stem}.svg"), &comparison_figure(c))?;
             write_file(dir, &format!("resid_{stem}.svg"), &resid_svg)?;
             format!("sim_{stem}.svg, resid_{stem}.svg")
@@ -385,6 +394,25 @@ mod tests {
         );
         let resid = std::fs::read_to_string(dir.join("resid_a_angle__rad_.svg")).unwrap();
         assert!(resid.contains("cross-correlation with u (V)") && resid.contains("99 % band"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn runs_of_one_safe_name_get_plots_of_their_own() {
+        let (t, u, y, s) = signals(400);
+        let cs: Vec<Comparison> = ["a b", "a_b"]
+            .iter()
+            .map(|r| Comparison {
+                run: r,
+                ..comparison(&t, &u, &y, &s)
+            })
+            .collect();
+        let dir = std::env::temp_dir().join(format!("ctsid-compare-safe-{}", std::process::id()));
+        let md = write_comparisons(&dir, &cs, 5).unwrap();
+        assert!(dir.join("sim_a_b_angle__rad_.svg").is_file());
+        assert!(dir.join("sim_a_b_angle__rad__2.svg").is_file());
+        // The table names the files as they are on disk.
+        assert!(md.contains("sim_a_b_angle__rad__2.svg"), "{md}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -15,8 +15,14 @@ use std::path::Path;
 pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir.display().to_string(), e))?;
     // Names carry run ids and channel names from the data: keep them inside `dir`.
-    let safe: String = name
-        .chars()
+    let p = dir.join(safe_name(name));
+    crate::util::write_atomic(&p, text.as_bytes())
+}
+
+/// `name` as [`write_file`] names its file: characters other than ASCII letters, digits and
+/// `._-` become `_`.
+pub fn safe_name(name: &str) -> String {
+    name.chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || "._-".contains(c) {
                 c
@@ -24,9 +30,7 @@ pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
                 '_'
             }
         })
-        .collect();
-    let p = dir.join(safe);
-    crate::util::write_atomic(&p, text.as_bytes())
+        .collect()
 }
 
 /// A table rendered as Markdown and as CSV from the same rows.
