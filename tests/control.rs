@@ -53,6 +53,27 @@ fn gains_match_the_hand_derived_placement() {
 }
 
 #[test]
+fn the_chain_observer_reports_its_own_poles() {
+    let mut o = DesignOptions::new(1.0, 0.01);
+    o.bandwidth = Some(3.0);
+    let d = control::design(&oscillator(), &o).unwrap();
+    let c = control::with_chain_observer(d.clone()).unwrap();
+    // Gains of a pure chain with both poles at -9: (18, 81); on the oscillator the error poles
+    // are those of s^2 + (l1 + 0.4) s + (4 + 0.4 l1 + l2) = s^2 + 18.4 s + 92.2.
+    assert_eq!(c.l, vec![18.0, 81.0]);
+    let sum: f64 = c.observer.iter().map(|p| p.0).sum();
+    let prod = (c.observer[0].0 * c.observer[1].0 - c.observer[0].1 * c.observer[1].1).abs();
+    assert!(
+        (sum + 18.4).abs() < 1e-9 && (prod - 92.2).abs() < 1e-9,
+        "{:?}",
+        c.observer
+    );
+    // The linearised observer's poles (-9 twice) were printed for the chain observer before.
+    assert!(c.observer != d.observer);
+    assert_eq!((c.k.clone(), c.k_i), (d.k.clone(), d.k_i));
+}
+
+#[test]
 fn the_loop_around_its_own_model_follows_the_designed_response() {
     let model = oscillator();
     let mut o = DesignOptions::new(1.0, 0.01);

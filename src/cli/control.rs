@@ -115,10 +115,7 @@ pub fn run(a: ControlArgs) -> Result<()> {
     let mut o = DesignOptions::new(a.setpoint, tau);
     o.bandwidth = a.bandwidth;
     o.observer_speed = a.observer_speed;
-    let mut d = control::design(&model, &o)?;
-    if a.observer == ObserverArg::Chain {
-        d.l = control::chain_observer_gains(d.order, d.observer_speed * d.bandwidth);
-    }
+    let d = designed(&model, &o, a.observer)?;
     let tracking = tracking_settings(&a, &d)?;
     let plant_model = plant_model(&a, &model)?;
     let (compiled, x0, u0) = control::model_at_rest(&plant_model, a.from, d.u_star)?;
@@ -317,6 +314,20 @@ fn print_design(a: &ControlArgs, d: &control::Design) -> Result<Vec<String>> {
     Ok(names)
 }
 
+/// The design with the observer asked for (the chain observer's poles and sampled loop checked
+/// as the linearised one's are).
+fn designed(
+    model: &Model,
+    o: &DesignOptions,
+    observer: ObserverArg,
+) -> ctsid::Result<control::Design> {
+    let d = control::design(model, o)?;
+    match observer {
+        ObserverArg::Linearised => Ok(d),
+        ObserverArg::Chain => control::with_chain_observer(d),
+    }
+}
+
 /// Why a noise-free loop around its own model strays from the design and does not settle, as
 /// the error to give: a faster sampling that is checked to work, a longer run that settles, or
 /// another bandwidth.
@@ -331,7 +342,7 @@ fn diagnose_stray(
     let works = |t: f64| -> bool {
         let mut o2 = o.clone();
         o2.tau = t;
-        let Ok(d2) = control::design(model, &o2) else {
+        let Ok(d2) = designed(model, &o2, a.observer) else {
             return false;
         };
         // The same noise-free run as the failing one, at the other tau.

@@ -99,6 +99,7 @@ fn check(d: &Design) -> Result<()> {
         && d.a.ncols() == n
         && d.b.len() == n
         && d.model.outputs.len() == 1
+        && d.model.inputs.len() == 1
         && d.model.outputs[0].order == n
         && d.bandwidth.is_finite()
         && d.bandwidth > 0.0

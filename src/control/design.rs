@@ -439,6 +439,31 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
     })
 }
 
+/// `d` with the chain-of-integrators observer ([`super::chain_observer_gains`], all poles of a
+/// pure chain at `-observer_speed x bandwidth`) in place of the linearised one: its gains, its
+/// error poles on the linearisation (`A - L C`) and the sampled loop checked with them, as
+/// [`design`] checks its own. Before, the command line swapped the gains in afterwards and
+/// printed the poles, and checked the loop, of an observer that did not run.
+pub fn with_chain_observer(mut d: super::Design) -> Result<super::Design> {
+    let n = d.order;
+    d.l = super::chain_observer_gains(n, d.observer_speed * d.bandwidth);
+    let w = d.bandwidth;
+    // In the units design() checks in (time scaled by the bandwidth; states unscaled).
+    let a_s = &d.a / w;
+    let b_s = &d.b / w;
+    let l_s: Vec<f64> = d.l.iter().map(|l| l / w).collect();
+    let mut k_aug = d.k.clone();
+    k_aug.push(d.k_i / w);
+    let mut aobs = d.a.clone();
+    for i in 0..n {
+        aobs[(i, 0)] -= d.l[i];
+    }
+    d.observer = eigenvalues(&aobs)?;
+    let gains = SampledGains { k: &k_aug, l: &l_s };
+    check_sampled_loop(&a_s, &b_s, &gains, (w, d.tau), n)?;
+    Ok(d)
+}
+
 /// The model's Jacobians at rest at `setpoint` under `u_star` (`n` states); refuses one that
 /// is not finite.
 fn linearised(

@@ -41,7 +41,7 @@ pub use closed_loop::{
     default_duration, designed_response, metrics, model_at_rest, rest_state, run, step_plot, track,
     Plant, Scenario, StepMetrics, Trace, MAX_SAMPLES,
 };
-pub use design::{design, steady_input, DesignOptions};
+pub use design::{design, steady_input, with_chain_observer, DesignOptions};
 pub use tracking::{
     chain_observer_gains, tracking_metrics, Law, ProfileLaw, Reference, Tracking, TrackingMetrics,
 };

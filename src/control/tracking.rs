@@ -446,7 +446,10 @@ pub fn tracking_metrics(
             ));
         }
     }
-    for (i, &(ts, before, after, end)) in steps.iter().enumerate() {
+    // `i` counts the steps measured: a step whose window is empty (the reference moves on at
+    // once) is skipped, and counting it left every later step's settling and rise unset.
+    let mut i = 0;
+    for &(ts, before, after, end) in &steps {
         let idx: Vec<usize> = (0..n).filter(|&k| t[k] >= ts && t[k] < end).collect();
         let Some(&last) = idx.last() else { continue };
         let step = after - before;
@@ -481,6 +484,7 @@ pub fn tracking_metrics(
                 rise = b - a;
             }
         }
+        i += 1;
     }
     let saturated = match limits {
         Some((lo, hi)) => u[..n].iter().filter(|&&v| v <= lo || v >= hi).count(),
@@ -571,6 +575,33 @@ mod tests {
         );
         // (s + 7)(s + 14)(s + 21) = s^3 + 42 s^2 + 539 s + 2058
         assert_eq!(c, vec![2058.0, 539.0, 42.0]);
+    }
+
+    #[test]
+    fn a_step_straight_into_a_ramp_does_not_hide_the_later_steps_figures() {
+        // Steps at t = 1 (into a ramp at once: an empty window) and at t = 4 (held to 10).
+        let reference = Reference::from_knots(
+            vec![0.0, 1.0, 1.0, 2.0, 4.0, 4.0, 10.0],
+            vec![0.0, 0.0, 1.0, 2.0, 2.0, 3.0, 3.0],
+        )
+        .unwrap();
+        let t: Vec<f64> = (0..1000).map(|k| k as f64 * 0.01).collect();
+        // Follows the reference, and after t = 4 rises as 1 - exp(-5 (t - 4)).
+        let y: Vec<f64> = t
+            .iter()
+            .map(|&tk| {
+                if tk < 4.0 {
+                    reference.at(tk).0
+                } else {
+                    2.0 + 1.0 - (-5.0 * (tk - 4.0)).exp()
+                }
+            })
+            .collect();
+        let u = vec![0.0; t.len()];
+        let m = tracking_metrics(&t, &y, &u, &reference, None);
+        // 2 % band: exp(-5 s) = 0.02 at s = 0.78; 10-90 %: ln 9 / 5 = 0.44.
+        assert!((m.settling_time - 0.79).abs() < 0.02, "{m:?}");
+        assert!((m.rise_time - 0.44).abs() < 0.02, "{m:?}");
     }
 
     #[test]

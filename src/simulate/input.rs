@@ -153,6 +153,11 @@ impl Input for SampledInput {
             u.iter_mut().for_each(|v| *v = 0.0);
             return;
         }
+        // A NaN time passes both end tests below; the interval search then indexed t[-1].
+        if t.is_nan() {
+            u.iter_mut().for_each(|v| *v = f64::NAN);
+            return;
+        }
         if t <= self.t[0] || n == 1 {
             return self.constant(0, u);
         }
@@ -278,6 +283,16 @@ mod tests {
         ] {
             input.eval(s, &mut v);
             assert_eq!(v[0], want, "at {s}");
+        }
+    }
+
+    #[test]
+    fn a_nan_time_gives_nan_inputs_on_any_grid() {
+        let mut v = [0.0];
+        for t in [vec![0.0, 1.0, 3.0], vec![0.0, 1.0, 2.0]] {
+            let input = SampledInput::new(t, vec![vec![0.0, 1.0, 2.0]]).unwrap();
+            input.eval(f64::NAN, &mut v);
+            assert!(v[0].is_nan());
         }
     }
 }
