@@ -372,10 +372,10 @@ mod tests {
         assert!(long.contains("zoom around the largest error"));
     }
 
-    #[test]
-    fn runs_beyond_the_limit_are_scored_but_not_drawn() {
+    /// The report of [`comparison`] for each of `runs` (plots for at most `limit`) in a fresh
+    /// folder named by `tag`: the folder and the summary.
+    fn report_of(runs: &[&str], limit: usize, tag: &str) -> (std::path::PathBuf, String) {
         let (t, u, y, s) = signals(400);
-        let runs = ["a", "b", "c"];
         let cs: Vec<Comparison> = runs
             .iter()
             .map(|r| Comparison {
@@ -383,8 +383,14 @@ mod tests {
                 ..comparison(&t, &u, &y, &s)
             })
             .collect();
-        let dir = std::env::temp_dir().join(format!("ctsid-compare-{}", std::process::id()));
-        let md = write_comparisons(&dir, &cs, 2).unwrap();
+        let dir = std::env::temp_dir().join(format!("ctsid-{tag}-{}", std::process::id()));
+        let md = write_comparisons(&dir, &cs, limit).unwrap();
+        (dir, md)
+    }
+
+    #[test]
+    fn runs_beyond_the_limit_are_scored_but_not_drawn() {
+        let (dir, md) = report_of(&["a", "b", "c"], 2, "compare");
         assert!(dir.join("sim_a_angle__rad_.svg").is_file());
         assert!(dir.join("resid_b_angle__rad_.svg").is_file());
         assert!(!dir.join("sim_c_angle__rad_.svg").exists());
@@ -399,16 +405,7 @@ mod tests {
 
     #[test]
     fn runs_of_one_safe_name_get_plots_of_their_own() {
-        let (t, u, y, s) = signals(400);
-        let cs: Vec<Comparison> = ["a b", "a_b"]
-            .iter()
-            .map(|r| Comparison {
-                run: r,
-                ..comparison(&t, &u, &y, &s)
-            })
-            .collect();
-        let dir = std::env::temp_dir().join(format!("ctsid-compare-safe-{}", std::process::id()));
-        let md = write_comparisons(&dir, &cs, 5).unwrap();
+        let (dir, md) = report_of(&["a b", "a_b"], 5, "compare-safe");
         assert!(dir.join("sim_a_b_angle__rad_.svg").is_file());
         assert!(dir.join("sim_a_b_angle__rad__2.svg").is_file());
         // The table names the files as they are on disk.
