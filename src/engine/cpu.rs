@@ -307,9 +307,8 @@ impl CpuEngine {
         // the other core take its share (25,000 x 12,376 on 2 cores: 5-6 % faster sweeps in
         // LARS paths, docs/method/regression.md); two per thread at 497,420 candidates, where
         // sixteen accumulators would be 64 MiB to zero and sum.
-        let nv = self.basis.n_vars();
-        let scratch = (nv * (nv + 1) / 2 + nv + self.plan.degree() + 3) * bsz;
-        let task_bytes = 8 * (self.basis.len() + scratch);
+        let scratch = kernel::Scratch::<T>::elements(self.plan.degree(), self.basis.n_vars(), bsz);
+        let task_bytes = 8 * self.basis.len() + std::mem::size_of::<T>() * scratch;
         let by_memory = (16 << 20) / task_bytes.max(1);
         let tasks = (threads * 8).min(by_memory).max(threads * 2);
         let per_task = n_blocks.div_ceil(tasks).max(1);

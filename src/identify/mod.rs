@@ -275,36 +275,28 @@ impl Settings {
         // A channel named like an output's derivative (`y_d1` beside output `y`) would be taken
         // for that state (the fits' name tables refuse it only after the search has started).
         for c in &all {
-            for o in &self.outputs {
-                let k = c
-                    .strip_prefix(o.as_str())
-                    .and_then(|r| r.strip_prefix("_d"));
-                if k.is_some_and(|k| !k.is_empty() && k.bytes().all(|b| b.is_ascii_digit())) {
-                    return Err(Error::param(
-                        "channels",
-                        format!("'{c}' is named like a derivative of output '{o}'; rename it"),
-                    ));
-                }
+            let like = crate::model::derivative_of(c).map(|(base, _)| base);
+            if let Some(o) = like.filter(|b| self.outputs.iter().any(|o| o == b)) {
+                return Err(Error::param(
+                    "channels",
+                    format!("'{c}' is named like a derivative of output '{o}'; rename it"),
+                ));
             }
         }
-        // Fixed orders: a named term over a derivative at or above its output's order would be
-        // left out of every equation without a word.
-        if let Orders::Fixed(c) = &self.orders {
-            let names = self.names_at(c);
-            for t in &self.terms {
-                crate::model::Expr::parse(t, &names).map_err(|e| {
-                    Error::param(
-                        "term",
-                        format!("{e} (at the fixed orders {c:?} the states are y .. y_d(n-1))"),
-                    )
-                })?;
-            }
-        }
-        // Every named term must make sense at the highest order searched.
-        let names = self.names_at(&vec![self.max_order(); self.outputs.len()]);
+        // Every named term must make sense at the highest order searched, and at fixed orders
+        // at those (a term over a derivative at or above its output's order would be left out
+        // of every equation without a word).
+        let (ord, at) = match &self.orders {
+            Orders::Fixed(c) => (
+                c.clone(),
+                format!(" (at the fixed orders {c:?} the states are y .. y_d(n-1))"),
+            ),
+            Orders::Search(_) => (vec![self.max_order(); self.outputs.len()], String::new()),
+        };
+        let names = self.names_at(&ord);
         for t in &self.terms {
             crate::model::Expr::parse(t, &names)
-                .map_err(|e| Error::param("term", e.to_string()))?;
+                .map_err(|e| Error::param("term", format!("{e}{at}")))?;
         }
         // Compared as the model file compares expressions: without spaces.
         let bare: Vec<String> = self

@@ -318,6 +318,16 @@ pub fn derivative_name(output: &str, k: usize) -> String {
     }
 }
 
+/// The inverse of [`derivative_name`] for derivatives 1 and up: `("y", 2)` for `y_d2` (and
+/// `y_d0`); `None` for a name without a `_d` and digits at its end.
+pub fn derivative_of(name: &str) -> Option<(&str, usize)> {
+    let (base, k) = name.rsplit_once("_d")?;
+    if k.is_empty() || !k.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    Some((base, k.parse().ok()?))
+}
+
 /// Where a variable lives: in the state vector or the input vector.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Var {
@@ -859,11 +869,8 @@ impl Model {
     }
 
     fn explain_unknown(&self, name: &str) -> String {
-        if let Some((base, k)) = name.rsplit_once("_d") {
-            if let (Some(o), Ok(k)) = (
-                self.outputs.iter().find(|o| o.name == base),
-                k.parse::<usize>(),
-            ) {
+        if let Some((base, k)) = derivative_of(name) {
+            if let Some(o) = self.outputs.iter().find(|o| o.name == base) {
                 return format!(
                     "'{name}' is derivative {k} of output '{base}' of order {}; right-hand sides may use {base}..{}",
                     o.order,

@@ -46,6 +46,6 @@ mod file;
 pub use compiled::CompiledModel;
 pub use expr::Expr;
 pub use file::{
-    derivative_name, Interpolation, Model, Origin, OutputEquation, Term, Var, FORMAT, FORMAT_V1,
-    MAX_EXPONENT, MAX_ORDER, SECTIONS,
+    derivative_name, derivative_of, Interpolation, Model, Origin, OutputEquation, Term, Var,
+    FORMAT, FORMAT_V1, MAX_EXPONENT, MAX_ORDER, SECTIONS,
 };

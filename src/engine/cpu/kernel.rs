@@ -202,16 +202,26 @@ impl<T: Elem> Scratch<T> {
         // degree d-2, in slots d-2, d-1 and d).
         let mut vals = vec![T::ZERO; (degree.max(1) + 2) * bsz];
         vals[..bsz].fill(T::ONE);
-        let pairs = if degree >= 3 {
-            n_vars * (n_vars + 1) / 2
-        } else {
-            0
-        };
+        let pairs = Self::pairs(degree, n_vars);
         Scratch {
             vals,
             vb: vec![T::ZERO; bsz],
             vz: vec![T::ZERO; n_vars * bsz],
             w: vec![T::ZERO; pairs * bsz],
+        }
+    }
+
+    /// Elements [`Scratch::new`] allocates: the levels' slots, v, v z_k and the pair table.
+    pub fn elements(degree: usize, n_vars: usize, bsz: usize) -> usize {
+        (degree.max(1) + 2 + 1 + n_vars + Self::pairs(degree, n_vars)) * bsz
+    }
+
+    /// Vectors of the pair table `v z_a z_b` (only the two-level loop of degree 3 and up has one).
+    fn pairs(degree: usize, n_vars: usize) -> usize {
+        if degree >= 3 {
+            n_vars * (n_vars + 1) / 2
+        } else {
+            0
         }
     }
 
