@@ -405,3 +405,47 @@ fn io_errors_keep_their_source() {
         "{e}"
     );
 }
+
+#[test]
+fn discover_on_data_near_the_magnitude_limit_is_an_answer_or_a_clear_error() {
+    // Records near `MAX_MAGNITUDE` (1e150), on a fast clock so that the derivatives go beyond
+    // it: the dictionary's scales (standard deviations, whose squares overflow) wrote
+    // `tanh(y_d1/inf)` into a formula that did not parse; cubes of the level overflow too.
+    // What comes back is a verdict whose formulas are all finite, or one clear line.
+    let case = cases::generate("duffing", 0, 0.03).unwrap();
+    for (scale, clock) in [(1e120, 1.0), (1e149, 1.0), (1e149, 1e-4)] {
+        let mut rs = case.records.clone();
+        rs.tau *= clock;
+        for r in &mut rs.runs {
+            for c in &mut r.channels {
+                c.iter_mut().for_each(|x| *x *= scale);
+            }
+        }
+        let (train, val, test) = cases::split();
+        let o = Options::new(train, val, test);
+        match discover(&rs, &case.nominal, &o) {
+            Ok(d) => {
+                let formulas: Vec<String> = d
+                    .effects
+                    .iter()
+                    .map(|e| e.formula.clone())
+                    .chain(d.closest.clone())
+                    .chain(d.dropped.clone())
+                    .collect();
+                for f in &formulas {
+                    assert!(!f.contains("inf") && !f.contains("NaN"), "{scale:e}: {f}");
+                }
+                println!("{scale:e} x{clock}: {} {formulas:?}", d.verdict);
+            }
+            Err(e) => {
+                let m = e.to_string();
+                println!("{scale:e} x{clock}: error: {m}");
+                // The dictionary's own formulas must parse: an error may only be about the data.
+                assert!(
+                    !m.contains('\n') && !m.contains("unknown variable"),
+                    "{scale:e}: {m}"
+                );
+            }
+        }
+    }
+}

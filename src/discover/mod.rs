@@ -465,15 +465,40 @@ fn training_scales(zhat: &[Vec<Vec<f64>>], train: &[usize]) -> Scales {
             .iter()
             .flat_map(|&r| zhat[r][v].iter().copied())
             .collect();
-        let mean = all.iter().sum::<f64>() / all.len().max(1) as f64;
-        sd[v] = (all.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / all.len().max(1) as f64)
-            .sqrt()
-            .max(1e-12);
+        sd[v] = spread(&all).max(1e-12);
         median[v] = percentile(&all, 50.0);
         let abs: Vec<f64> = all.iter().map(|x| x.abs()).collect();
         p99[v] = percentile(&abs, 99.0).max(1e-12);
     }
     Scales { sd, median, p99 }
+}
+
+/// The standard deviation of `x`; where its squares overflow or underflow, computed on `x`
+/// scaled by its largest deviation from the mean (derivatives of records near the 1e150 magnitude limit:
+/// an infinite scale wrote `tanh(y_d1/inf)` into the dictionary, which then did not parse).
+/// Sums of many samples near f64's limit are taken as means of scaled values for the same
+/// reason. 0 for fewer than one sample or a constant; not finite only when `x` is not.
+fn spread(x: &[f64]) -> f64 {
+    let n = x.len().max(1) as f64;
+    // The plain formula where it holds (the same bits as before for every ordinary record).
+    let mean = x.iter().sum::<f64>() / n;
+    let plain = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt();
+    if plain.is_finite() && plain > 1e-150 {
+        return plain;
+    }
+    let big = x.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+    if !big.is_finite() {
+        return f64::NAN;
+    }
+    if big == 0.0 {
+        return 0.0;
+    }
+    let mean = x.iter().map(|v| v / big).sum::<f64>() / n * big;
+    let dev = x.iter().fold(0.0f64, |a, v| a.max((v - mean).abs()));
+    if dev == 0.0 {
+        return 0.0;
+    }
+    dev * (x.iter().map(|v| ((v - mean) / dev).powi(2)).sum::<f64>() / n).sqrt()
 }
 
 /// One run's weak-form rows: the label less the nominal's terms at their coefficients, and the
@@ -533,8 +558,10 @@ fn weak_rows(
 /// that crosses zero only in noise: an offset but for a few samples), unless it is the offset
 /// itself; and a column equal to an earlier candidate's (`abs(y)*y` and `y^2` of a positive
 /// level). Keeping them would only split the bootstrap's votes between two names for one column.
-/// A user's effect (named in `user`) is not dropped quietly: any of these, or a column that is
-/// not finite on the training data, is an error naming it.
+/// A built-in effect whose column is not finite on the training data (the cube of a level near
+/// 1e150) cannot be fitted and is dropped too. A user's effect (named in `user`) is not dropped
+/// quietly: any of these, or a column that is not finite on the training data, is an error
+/// naming it.
 fn distinct_on_data(
     effects: Vec<Effect>,
     user: &[(String, String)],
@@ -568,7 +595,6 @@ fn distinct_on_data(
                     "is not finite on the training data; reformulate it".into(),
                 );
             }
-            kept.push((e, col));
             continue;
         }
         let scale = col.iter().fold(0.0f64, |a, v| a.max(v.abs())).max(1e-300);
@@ -624,19 +650,41 @@ fn distinct_on_data(
 
 const BLOCK: usize = 8;
 
-/// The bootstrap blocks of a run of `len` windows: BLOCK consecutive windows each.
-fn block_ranges(len: usize) -> impl Iterator<Item = std::ops::Range<usize>> {
-    (0..len)
-        .step_by(BLOCK)
-        .map(move |a| a..(a + BLOCK).min(len))
+/// Memory the training runs' block Gram matrices may take together. Each block keeps a Gram of
+/// `ncol^2` f64, so at [`BLOCK`] windows a block their total grows as `N ncol^2 / m` (some GB
+/// for 10^6 samples and a few hundred columns); past this budget blocks get longer (a whole
+/// multiple of [`BLOCK`] windows), which a block bootstrap allows: longer blocks keep more of
+/// the residual's serial correlation, and the bootstrap still draws from at least
+/// [`MIN_BLOCKS`] of them.
+const BLOCK_BUDGET_BYTES: usize = 256 << 20;
+
+/// The least number of blocks the memory budget may leave (at most [`BLOCK_BUDGET_BYTES`] is
+/// then exceeded for very wide problems, by design: fewer blocks than this would make the
+/// bootstrap's spread meaningless).
+const MIN_BLOCKS: usize = 256;
+
+/// Windows per bootstrap block for `windows` training windows in all and `ncol` columns:
+/// [`BLOCK`], or a multiple of it where the blocks' Gram matrices would exceed
+/// [`BLOCK_BUDGET_BYTES`].
+fn block_len(windows: usize, ncol: usize) -> usize {
+    let per_gram = 8 * (ncol * ncol + ncol) + 64;
+    let max_blocks = (BLOCK_BUDGET_BYTES / per_gram.max(1)).max(MIN_BLOCKS);
+    let wanted = windows.div_ceil(BLOCK);
+    BLOCK * wanted.div_ceil(max_blocks).max(1)
 }
 
-fn block_grams(p: &Prepared, runs: &[usize]) -> Vec<Gram> {
+/// The bootstrap blocks of a run of `len` windows: `blen` consecutive windows each.
+fn block_ranges(len: usize, blen: usize) -> impl Iterator<Item = std::ops::Range<usize>> {
+    (0..len).step_by(blen).map(move |a| a..(a + blen).min(len))
+}
+
+/// One Gram matrix per block of `blen` windows of every run in `runs`, in run order.
+fn block_grams(p: &Prepared, runs: &[usize], blen: usize) -> Vec<Gram> {
     let ncol = p.free.len() + p.effects.len();
     let mut out = Vec::new();
     for &r in runs {
         let (lab, cols) = &p.rows[r];
-        for range in block_ranges(lab.len()) {
+        for range in block_ranges(lab.len(), blen) {
             let mut g = Gram::zeros(ncol);
             g.add_rows(cols, lab, range);
             out.push(g);
@@ -645,12 +693,27 @@ fn block_grams(p: &Prepared, runs: &[usize]) -> Vec<Gram> {
     out
 }
 
+/// The sum of [`block_grams`] without keeping the blocks (the same additions in the same order).
+fn summed_block_grams(p: &Prepared, runs: &[usize]) -> Gram {
+    let ncol = p.free.len() + p.effects.len();
+    let mut total = Gram::zeros(ncol);
+    for &r in runs {
+        let (lab, cols) = &p.rows[r];
+        for range in block_ranges(lab.len(), BLOCK) {
+            let mut g = Gram::zeros(ncol);
+            g.add_rows(cols, lab, range);
+            total.add(&g);
+        }
+    }
+    total
+}
+
 /// For each block of [`block_grams`] (same order): whether it lies in the second half of its run.
-fn block_is_late(p: &Prepared, runs: &[usize]) -> Vec<bool> {
+fn block_is_late(p: &Prepared, runs: &[usize], blen: usize) -> Vec<bool> {
     let mut out = Vec::new();
     for &r in runs {
         let len = p.rows[r].0.len();
-        out.extend(block_ranges(len).map(|b| b.start + b.end >= len));
+        out.extend(block_ranges(len, blen).map(|b| b.start + b.end >= len));
     }
     out
 }
@@ -937,10 +1000,12 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let n_eff = p.effects.len();
     let ncol = n_nom + n_eff;
     let pb = problem(&p, o);
-    let blocks = block_grams(&p, &o.train);
-    let late = block_is_late(&p, &o.train);
+    let windows: usize = o.train.iter().map(|&r| p.rows[r].0.len()).sum();
+    let blen = block_len(windows, ncol);
+    let blocks = block_grams(&p, &o.train, blen);
+    let late = block_is_late(&p, &o.train, blen);
     let train = sum_grams(&blocks, ncol);
-    let val = sum_grams(&block_grams(&p, &o.validation), ncol);
+    let val = summed_block_grams(&p, &o.validation);
 
     // (a) compare and (b) localise.
     let nominal_model = p.model(&[], &[]);
@@ -1567,7 +1632,51 @@ impl Discovery {
 
 #[cfg(test)]
 mod tests {
-    use super::{contradicts, drifts};
+    use super::{block_len, contradicts, drifts, spread, BLOCK, BLOCK_BUDGET_BYTES, MIN_BLOCKS};
+
+    #[test]
+    fn spread_does_not_overflow_near_the_magnitude_limit() {
+        let x: Vec<f64> = (0..1000).map(|i| (i as f64 * 0.37).sin()).collect();
+        let plain = spread(&x);
+        let mean = x.iter().sum::<f64>() / 1000.0;
+        let direct = (x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / 1000.0).sqrt();
+        assert!((plain - direct).abs() < 1e-12 * direct);
+        for scale in [1e160, 1e300, 1e-300] {
+            let big: Vec<f64> = x.iter().map(|v| v * scale).collect();
+            let s = spread(&big);
+            assert!(
+                s.is_finite() && (s / scale - plain).abs() < 1e-9 * plain,
+                "{scale:e}: {s:e}"
+            );
+        }
+        assert_eq!(spread(&[3.0; 10]), 0.0);
+        assert_eq!(spread(&[]), 0.0);
+        assert!(spread(&[1.0, f64::INFINITY]).is_nan());
+    }
+
+    #[test]
+    fn bootstrap_blocks_stay_within_their_memory_budget() {
+        // The benchmarks' sizes keep blocks of BLOCK windows (Silverbox: 65,000 samples at most
+        // one window each, some 40 columns).
+        assert_eq!(block_len(65_000, 40), BLOCK);
+        assert_eq!(block_len(0, 40), BLOCK);
+        // 10^6 samples at a stride of 5 and 300 columns: 25,000 blocks of 721 KB (18 GB) before.
+        let (windows, ncol) = (200_000, 300);
+        let blen = block_len(windows, ncol);
+        assert_eq!(blen % BLOCK, 0);
+        let blocks = windows.div_ceil(blen);
+        assert!(
+            blocks * 8 * (ncol * ncol + ncol) <= BLOCK_BUDGET_BYTES,
+            "{blocks} blocks"
+        );
+        assert!(blocks >= BLOCK_BUDGET_BYTES / (8 * (ncol * ncol + ncol) + 64) / 2);
+        // So wide that the budget holds fewer than MIN_BLOCKS: MIN_BLOCKS of them.
+        let blen = block_len(1_000_000, 3000);
+        assert_eq!(
+            1_000_000usize.div_ceil(blen),
+            MIN_BLOCKS.min(1_000_000 / BLOCK)
+        );
+    }
 
     #[test]
     fn drift_needs_a_large_and_significant_change() {

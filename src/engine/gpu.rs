@@ -310,6 +310,14 @@ impl ErrorSink {
                 .map(|u| u.is_empty())
                 .unwrap_or(false)
     }
+
+    /// Records that the device can no longer be trusted (a wait that timed out: the device may
+    /// be hung), as a loss: this engine's later calls fail at once instead of each waiting its
+    /// timeout, and [`shared_device`] stops handing the device to new engines.
+    fn give_up(&self, why: String) {
+        let mut lost = self.lost.lock().unwrap_or_else(|p| p.into_inner());
+        lost.get_or_insert(why);
+    }
 }
 
 /// One [`Window`] per span of candidates: its parameters and the bind groups of its sweep
@@ -1157,10 +1165,9 @@ impl GpuEngine {
         }
         if let Err(e) = polled {
             self.check()?;
-            return Err(Error::Gpu(format!(
-                "waiting for the sweep failed after {:?}: {e}",
-                self.timeout
-            )));
+            let msg = format!("waiting for the sweep failed after {:?}: {e}", self.timeout);
+            self.sink.give_up(msg.clone());
+            return Err(Error::Gpu(msg));
         }
         // Engines share the device: another thread's poll may be the one that runs this
         // mapping's callback, just after our wait returned; so wait for it, boundedly.
@@ -1172,9 +1179,12 @@ impl GpuEngine {
             }
             Err(_) => {
                 self.check()?;
-                return Err(Error::Gpu(
-                    "the results were not ready after the device finished".into(),
-                ));
+                let msg = format!(
+                    "the results were not ready {:?} after the device finished",
+                    self.timeout
+                );
+                self.sink.give_up(msg.clone());
+                return Err(Error::Gpu(msg));
             }
         }
         {
@@ -1412,6 +1422,64 @@ mod tests {
         let r = eng.sweep(&[1.0; 200], &mut out);
         assert!(matches!(r, Err(Error::Gpu(_))), "{r:?}");
         println!("after destroy: {}", r.unwrap_err());
+    }
+
+    #[test]
+    fn a_timed_out_wait_retires_the_device() {
+        let Some(mut eng) = tiny_engine() else { return };
+        let mut out = vec![f64::NAN; eng.n_candidates()];
+        eng.sweep(&[1.0; 200], &mut out).unwrap();
+        assert!(eng.sink.healthy() && !eng.is_lost());
+        // What the timeouts of `run` record: later calls fail at once, and the shared pool
+        // (which keeps only healthy devices) would open a new one for the next engine.
+        eng.sink
+            .give_up("waiting for the sweep failed after 300s: timeout".into());
+        assert!(!eng.sink.healthy() && eng.is_lost());
+        let t = std::time::Instant::now();
+        let e = eng.sweep(&[1.0; 200], &mut out).unwrap_err();
+        assert!(t.elapsed() < std::time::Duration::from_secs(5));
+        assert!(e.to_string().contains("timeout"), "{e}");
+        // A loss recorded first is the one reported.
+        eng.sink.give_up("another reason".into());
+        assert!(eng.check().unwrap_err().to_string().contains("timeout"));
+    }
+
+    #[test]
+    fn a_zero_timeout_fails_cleanly_and_retires_the_device() {
+        // With no time to wait, a sweep either finds its work already done (a fast adapter) or
+        // times out; a timeout must leave the engine lost, not waiting again on every call.
+        let cols = (0..4)
+            .map(|k| {
+                (0..20_000)
+                    .map(|i| ((i * 7 + k * 3) % 11) as f64 / 5.0 - 1.0)
+                    .collect()
+            })
+            .collect();
+        let f = Features::new(vec!["a".into(), "b".into(), "c".into(), "d".into()], cols).unwrap();
+        let b = Basis::new(&f.names, 6, Default::default()).unwrap();
+        let options = GpuOptions {
+            private_device: true,
+            timeout: Duration::ZERO,
+            ..GpuOptions::default()
+        };
+        let mut eng = match GpuEngine::new(&f, &b, options) {
+            Ok(e) => e,
+            Err(Error::NoGpu(m)) if !require_gpu() => {
+                return println!("skipping: no GPU adapter ({m})")
+            }
+            Err(e) => panic!("{e}"),
+        };
+        let mut out = vec![0.0; eng.n_candidates()];
+        match eng.sweep(&vec![1.0; 20_000], &mut out) {
+            Ok(()) => {
+                println!("notice: the sweep finished within a zero timeout; no timeout to check")
+            }
+            Err(e) => {
+                assert!(matches!(e, Error::Gpu(_)), "{e}");
+                assert!(eng.is_lost(), "{e}");
+                assert!(eng.sweep(&vec![1.0; 20_000], &mut out).is_err());
+            }
+        }
     }
 
     #[test]
