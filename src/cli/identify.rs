@@ -1,7 +1,7 @@
 //! `ctsid identify`: the main job on measured data.
 
 use clap::Args;
-use ctsid::identify::split::parse_list_at_most;
+use ctsid::identify::split::{count_names, parse_list};
 use ctsid::identify::{identify, Identification, Orders, OutputReport, Settings, Split};
 use ctsid::model::Interpolation;
 use ctsid::regression::EngineChoice;
@@ -76,20 +76,18 @@ fn parse_interpolation(text: &str) -> std::result::Result<Interpolation, String>
 
 fn parse_orders(text: &str) -> Result<Vec<usize>> {
     let t = text.replace("..", "-");
-    // At most 64 orders (the search takes 1..=6): `1..9999999` expanded ten million strings.
-    parse_list_at_most(&t, "orders", 64)
-        .map_err(|e| match e {
-            Error::InvalidParameter { reason, .. } if reason.contains("names more than") => {
-                Error::param(
-                    "orders",
-                    format!(
-                        "'{text}' names more orders than a search takes (1..={})",
-                        ctsid::identify::MAX_ORDER
-                    ),
-                )
-            }
-            e => e,
-        })?
+    // Counted before any range is spelled out (`1..9999999` expanded ten million strings); a
+    // shorter list goes on to the settings' check, which names a repeated or too high order.
+    if count_names(&t, "orders")? > 64 {
+        return Err(Error::param(
+            "orders",
+            format!(
+                "'{text}' names more orders than a search takes (1..={})",
+                ctsid::identify::MAX_ORDER
+            ),
+        ));
+    }
+    parse_list(&t, "orders")?
         .iter()
         .map(|s| {
             s.parse::<usize>().map_err(|_| {

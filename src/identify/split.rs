@@ -15,20 +15,29 @@ pub fn parse_list(text: &str, what: &str) -> Result<Vec<String>> {
     parse_list_at_most(text, what, 10_000_000)
 }
 
-/// [`parse_list`] of at most `most` names, counted before any range is expanded: a list of
-/// run ids need not name more runs than the record has, and `0-10000000` eight times over
-/// would otherwise take gigabytes before the first unknown id is found. Refuses a range that runs
-/// backwards, more than `most` names, and a list that names nothing.
-pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<String>> {
-    // (prefix, part, range) per item; ranges are checked and counted first.
-    let mut items = Vec::new();
-    let mut count: u64 = 0;
-    for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+/// One item of a list: `RUN#` prefix or none, the rest, and its range when it is one.
+struct Item<'t> {
+    whole: &'t str,
+    prefix: String,
+    part: &'t str,
+    range: Option<(i64, i64)>,
+}
+
+impl Item<'_> {
+    /// Names the item stands for (a range counts each of its numbers).
+    fn count(&self) -> u64 {
+        self.range.map_or(1, |(a, b)| (b - a) as u64 + 1)
+    }
+}
+
+/// The items of a list, unexpanded; refuses a range that runs backwards.
+fn items<'t>(text: &'t str, what: &str) -> Result<Vec<Item<'t>>> {
+    let mut out = Vec::new();
+    for whole in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         // Pieces of a cut run (`RUN#0-4`, see `RecordSet::segmented`) take ranges too.
-        let whole = part;
-        let (prefix, part) = match part.rsplit_once('#') {
+        let (prefix, part) = match whole.rsplit_once('#') {
             Some((run, rest)) => (format!("{run}#"), rest),
-            None => (String::new(), part),
+            None => (String::new(), whole),
         };
         let range = part.split_once('-').and_then(|(a, b)| {
             Some((a.trim().parse::<i64>().ok()?, b.trim().parse::<i64>().ok()?))
@@ -40,12 +49,36 @@ pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<Str
                     format!("range '{whole}' runs backwards; write {prefix}{b}-{a}"),
                 ));
             }
-            count = count.saturating_add((b - a) as u64 + 1);
-        } else {
-            count += 1;
         }
+        out.push(Item {
+            whole,
+            prefix,
+            part,
+            range,
+        });
+    }
+    Ok(out)
+}
+
+/// How many names a list stands for, counted without expanding its ranges (`1-9999999` is
+/// 9,999,999); refuses what [`parse_list`] refuses of a list's form (a backwards range).
+pub fn count_names(text: &str, what: &str) -> Result<u64> {
+    Ok(items(text, what)?
+        .iter()
+        .fold(0u64, |n, it| n.saturating_add(it.count())))
+}
+
+/// [`parse_list`] of at most `most` names, counted before any range is expanded: a list of
+/// run ids need not name more runs than the record has, and `0-10000000` eight times over
+/// would otherwise take gigabytes before the first unknown id is found. Refuses a range that runs
+/// backwards, more than `most` names, and a list that names nothing.
+pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<String>> {
+    let items = items(text, what)?;
+    let mut count: u64 = 0;
+    for it in &items {
+        count = count.saturating_add(it.count());
         if count > most as u64 {
-            let shown: String = whole.chars().take(40).collect();
+            let shown: String = it.whole.chars().take(40).collect();
             return Err(Error::param(
                 what,
                 format!(
@@ -53,13 +86,12 @@ pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<Str
                 ),
             ));
         }
-        items.push((prefix, part, range));
     }
     let mut out = Vec::with_capacity(count as usize);
-    for (prefix, part, range) in items {
-        match range {
-            Some((a, b)) => out.extend((a..=b).map(|i| format!("{prefix}{i}"))),
-            None => out.push(format!("{prefix}{part}")),
+    for it in items {
+        match it.range {
+            Some((a, b)) => out.extend((a..=b).map(|i| format!("{}{i}", it.prefix))),
+            None => out.push(format!("{}{}", it.prefix, it.part)),
         }
     }
     if out.is_empty() {
