@@ -253,7 +253,7 @@ struct Prepared {
     free: Vec<usize>,
     effects: Vec<Effect>,
     /// Per run: label residual r and columns [free nominal..., effects...].
-    rows: Vec<(Vec<f64>, Vec<Vec<f64>>)>,
+    rows: Vec<Rows>,
     /// Per run of the record set, in its order (simulation runs on time since the start).
     simruns: Vec<RunData>,
     zhat: Vec<Vec<Vec<f64>>>,
@@ -663,14 +663,31 @@ const BLOCK_BUDGET_BYTES: usize = 256 << 20;
 /// bootstrap's spread meaningless).
 const MIN_BLOCKS: usize = 256;
 
-/// Windows per bootstrap block for `windows` training windows in all and `ncol` columns:
-/// [`BLOCK`], or a multiple of it where the blocks' Gram matrices would exceed
-/// [`BLOCK_BUDGET_BYTES`].
-fn block_len(windows: usize, ncol: usize) -> usize {
+/// One run's weak-form rows: the labels and the columns (free nominal terms, then effects).
+type Rows = (Vec<f64>, Vec<Vec<f64>>);
+
+/// How the training runs' windows are cut into bootstrap blocks: `blen` consecutive windows of
+/// a run, and `group` such blocks of consecutive runs summed into one where even blocks of
+/// `blen` would be too many (many short runs: each run ends a block).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Blocking {
+    blen: usize,
+    group: usize,
+}
+
+/// The [`Blocking`] of runs of `lens` windows with `ncol` columns: blocks of [`BLOCK`] windows,
+/// or of a multiple of it, then groups of them, where the blocks' Gram matrices would exceed
+/// [`BLOCK_BUDGET_BYTES`] (never fewer than [`MIN_BLOCKS`] blocks).
+fn blocking(lens: &[usize], ncol: usize) -> Blocking {
     let per_gram = 8 * (ncol * ncol + ncol) + 64;
     let max_blocks = (BLOCK_BUDGET_BYTES / per_gram.max(1)).max(MIN_BLOCKS);
-    let wanted = windows.div_ceil(BLOCK);
-    BLOCK * wanted.div_ceil(max_blocks).max(1)
+    let windows: usize = lens.iter().sum();
+    let blen = BLOCK * windows.div_ceil(BLOCK).div_ceil(max_blocks).max(1);
+    let count: usize = lens.iter().map(|l| l.div_ceil(blen)).sum();
+    Blocking {
+        blen,
+        group: count.div_ceil(max_blocks).max(1),
+    }
 }
 
 /// The bootstrap blocks of a run of `len` windows: `blen` consecutive windows each.
@@ -678,22 +695,37 @@ fn block_ranges(len: usize, blen: usize) -> impl Iterator<Item = std::ops::Range
     (0..len).step_by(blen).map(move |a| a..(a + blen).min(len))
 }
 
-/// One Gram matrix per block of `blen` windows of every run in `runs`, in run order.
-fn block_grams(p: &Prepared, runs: &[usize], blen: usize) -> Vec<Gram> {
-    let ncol = p.free.len() + p.effects.len();
-    let mut out = Vec::new();
+/// The Gram matrix of each bootstrap block of `runs` (in run order) and whether it lies in the
+/// second half of its run. With `group` > 1, up to `group` consecutive blocks of the same half
+/// are summed into one (a group may span runs: its rows are still consecutive windows of one
+/// half each), so the halves' comparison keeps its meaning.
+fn block_grams(rows: &[Rows], ncol: usize, runs: &[usize], b: Blocking) -> (Vec<Gram>, Vec<bool>) {
+    let (mut out, mut late) = (Vec::new(), Vec::new());
+    let mut in_group = 0;
     for &r in runs {
-        let (lab, cols) = &p.rows[r];
-        for range in block_ranges(lab.len(), blen) {
+        let (lab, cols) = &rows[r];
+        for range in block_ranges(lab.len(), b.blen) {
+            let is_late = range.start + range.end >= lab.len();
             let mut g = Gram::zeros(ncol);
             g.add_rows(cols, lab, range);
-            out.push(g);
+            match out.last_mut() {
+                Some(last) if in_group < b.group && late.last() == Some(&is_late) => {
+                    Gram::add(last, &g);
+                    in_group += 1;
+                }
+                _ => {
+                    out.push(g);
+                    late.push(is_late);
+                    in_group = 1;
+                }
+            }
         }
     }
-    out
+    (out, late)
 }
 
-/// The sum of [`block_grams`] without keeping the blocks (the same additions in the same order).
+/// The sum of the validation runs' block Grams at [`BLOCK`] windows a block, without keeping
+/// the blocks (the same additions in the same order as when they were kept).
 fn summed_block_grams(p: &Prepared, runs: &[usize]) -> Gram {
     let ncol = p.free.len() + p.effects.len();
     let mut total = Gram::zeros(ncol);
@@ -706,16 +738,6 @@ fn summed_block_grams(p: &Prepared, runs: &[usize]) -> Gram {
         }
     }
     total
-}
-
-/// For each block of [`block_grams`] (same order): whether it lies in the second half of its run.
-fn block_is_late(p: &Prepared, runs: &[usize], blen: usize) -> Vec<bool> {
-    let mut out = Vec::new();
-    for &r in runs {
-        let len = p.rows[r].0.len();
-        out.extend(block_ranges(len, blen).map(|b| b.start + b.end >= len));
-    }
-    out
 }
 
 fn sum_grams<'a>(gs: impl IntoIterator<Item = &'a Gram>, ncol: usize) -> Gram {
@@ -1000,10 +1022,8 @@ pub fn discover(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<Discover
     let n_eff = p.effects.len();
     let ncol = n_nom + n_eff;
     let pb = problem(&p, o);
-    let windows: usize = o.train.iter().map(|&r| p.rows[r].0.len()).sum();
-    let blen = block_len(windows, ncol);
-    let blocks = block_grams(&p, &o.train, blen);
-    let late = block_is_late(&p, &o.train, blen);
+    let lens: Vec<usize> = o.train.iter().map(|&r| p.rows[r].0.len()).collect();
+    let (blocks, late) = block_grams(&p.rows, ncol, &o.train, blocking(&lens, ncol));
     let train = sum_grams(&blocks, ncol);
     let val = summed_block_grams(&p, &o.validation);
 
@@ -1632,7 +1652,57 @@ impl Discovery {
 
 #[cfg(test)]
 mod tests {
-    use super::{block_len, contradicts, drifts, spread, BLOCK, BLOCK_BUDGET_BYTES, MIN_BLOCKS};
+    use super::{
+        block_grams, blocking, contradicts, drifts, spread, Blocking, Rows, BLOCK,
+        BLOCK_BUDGET_BYTES, MIN_BLOCKS,
+    };
+
+    #[test]
+    fn grouped_blocks_sum_to_the_same_gram_and_keep_their_halves() {
+        // Runs of 3 to 40 windows, two columns.
+        let rows: Vec<Rows> = (0..12)
+            .map(|r| {
+                let n = 3 + (r * 7) % 38;
+                let col = |k: usize| (0..n).map(|i| ((i * 5 + r + k) % 9) as f64 - 4.0).collect();
+                (col(2), vec![col(0), col(1)])
+            })
+            .collect();
+        let runs: Vec<usize> = (0..12).collect();
+        let plain = Blocking {
+            blen: BLOCK,
+            group: 1,
+        };
+        let (g1, l1) = block_grams(&rows, 2, &runs, plain);
+        for group in [2, 3, 50] {
+            let (g, l) = block_grams(&rows, 2, &runs, Blocking { blen: BLOCK, group });
+            assert_eq!(g.len(), l.len());
+            assert!(
+                g.len() < g1.len() && g.len() * group >= g1.len(),
+                "{group}: {}",
+                g.len()
+            );
+            let total = |gs: &[super::Gram]| {
+                gs.iter().fold(super::Gram::zeros(2), |mut a, b| {
+                    a.add(b);
+                    a
+                })
+            };
+            let (a, b) = (total(&g1), total(&g));
+            assert_eq!(a.rows, b.rows);
+            assert!((a.g.clone() - b.g.clone()).abs().max() < 1e-9 && (a.rr - b.rr).abs() < 1e-9);
+            // Each half's rows stay in blocks of that half.
+            let half_rows = |gs: &[super::Gram], ls: &[bool], h: bool| -> usize {
+                gs.iter()
+                    .zip(ls)
+                    .filter(|(_, &x)| x == h)
+                    .map(|(g, _)| g.rows)
+                    .sum()
+            };
+            for h in [false, true] {
+                assert_eq!(half_rows(&g1, &l1, h), half_rows(&g, &l, h), "{group} {h}");
+            }
+        }
+    }
 
     #[test]
     fn spread_does_not_overflow_near_the_magnitude_limit() {
@@ -1656,26 +1726,33 @@ mod tests {
 
     #[test]
     fn bootstrap_blocks_stay_within_their_memory_budget() {
+        let bytes = |b: Blocking, lens: &[usize], ncol: usize| {
+            // Blocks per run at blen, then groups (at most one more per run for its halves).
+            let blocks: usize = lens.iter().map(|l| l.div_ceil(b.blen)).sum();
+            blocks.div_ceil(b.group) * 8 * (ncol * ncol + ncol)
+        };
         // The benchmarks' sizes keep blocks of BLOCK windows (Silverbox: 65,000 samples at most
         // one window each, some 40 columns).
-        assert_eq!(block_len(65_000, 40), BLOCK);
-        assert_eq!(block_len(0, 40), BLOCK);
+        let one = Blocking {
+            blen: BLOCK,
+            group: 1,
+        };
+        assert_eq!(blocking(&[65_000], 40), one);
+        assert_eq!(blocking(&[16_000; 4], 40), one);
+        assert_eq!(blocking(&[], 40), one);
         // 10^6 samples at a stride of 5 and 300 columns: 25,000 blocks of 721 KB (18 GB) before.
-        let (windows, ncol) = (200_000, 300);
-        let blen = block_len(windows, ncol);
-        assert_eq!(blen % BLOCK, 0);
-        let blocks = windows.div_ceil(blen);
-        assert!(
-            blocks * 8 * (ncol * ncol + ncol) <= BLOCK_BUDGET_BYTES,
-            "{blocks} blocks"
-        );
-        assert!(blocks >= BLOCK_BUDGET_BYTES / (8 * (ncol * ncol + ncol) + 64) / 2);
+        let lens = [200_000];
+        let b = blocking(&lens, 300);
+        assert!(b.blen.is_multiple_of(BLOCK) && b.group == 1, "{b:?}");
+        assert!(bytes(b, &lens, 300) <= BLOCK_BUDGET_BYTES, "{b:?}");
+        // Ten thousand short runs: each run ends a block, so blocks are grouped across runs.
+        let lens = vec![30; 10_000];
+        let b = blocking(&lens, 300);
+        assert!(b.group > 1, "{b:?}");
+        assert!(bytes(b, &lens, 300) <= BLOCK_BUDGET_BYTES, "{b:?}");
         // So wide that the budget holds fewer than MIN_BLOCKS: MIN_BLOCKS of them.
-        let blen = block_len(1_000_000, 3000);
-        assert_eq!(
-            1_000_000usize.div_ceil(blen),
-            MIN_BLOCKS.min(1_000_000 / BLOCK)
-        );
+        let b = blocking(&[1_000_000], 3000);
+        assert_eq!(1_000_000usize.div_ceil(b.blen), MIN_BLOCKS);
     }
 
     #[test]
