@@ -39,13 +39,7 @@ pub fn run(a: ShowArgs) -> Result<()> {
                 t.monomial()
             };
             let (se, rel) = match t.std_error {
-                Some(s) => (
-                    format_coefficient(s),
-                    format!(
-                        "{:.1} %",
-                        100.0 * s / t.coefficient.abs().max(f64::MIN_POSITIVE)
-                    ),
-                ),
+                Some(s) => (format_coefficient(s), relative_error(s, t.coefficient)),
                 None => {
                     unknown = true;
                     ("-".into(), "-".into())
@@ -70,4 +64,31 @@ pub fn run(a: ShowArgs) -> Result<()> {
         outln!("\n'-': no standard error was estimated for that term (identify writes one for every term it fits; discover for the effects it adds; a hand-written or older file may have none).")?;
     }
     Ok(())
+}
+
+/// A standard error relative to its coefficient in percent (one decimal; scientific notation from
+/// 1e6 %, not hundreds of digits); `-` where the ratio means nothing (a zero coefficient) or is
+/// not finite.
+fn relative_error(se: f64, coefficient: f64) -> String {
+    let r = 100.0 * se / coefficient.abs();
+    if coefficient == 0.0 || !r.is_finite() {
+        "-".into()
+    } else if r < 1e6 {
+        format!("{r:.1} %")
+    } else {
+        format!("{} %", ctsid::util::num4(r))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::relative_error;
+
+    #[test]
+    fn relative_errors_are_short_and_finite() {
+        assert_eq!(relative_error(0.5, 0.0), "-");
+        assert_eq!(relative_error(1e300, -2.0), "5.0000e301 %");
+        assert_eq!(relative_error(0.1, 2.0), "5.0 %");
+        assert_eq!(relative_error(f64::INFINITY, 2.0), "-");
+    }
 }

@@ -437,6 +437,13 @@ fn lex(text: &str) -> Result<Vec<Tok>> {
             let v: f64 = t.parse().map_err(|_| {
                 Error::param("expression", format!("'{text}': '{t}' is not a number"))
             })?;
+            // `1e400` parses as infinity: refused here rather than blamed on the dynamics.
+            if !v.is_finite() {
+                return Err(Error::param(
+                    "expression",
+                    format!("'{text}': '{t}' is beyond the range of f64 numbers"),
+                ));
+            }
             out.push(Tok::Num(v));
         } else if ch.is_alphabetic() || ch == '_' {
             let s = i;
@@ -612,6 +619,16 @@ impl Parser<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_literal_beyond_f64_is_refused_not_read_as_infinity() {
+        let vars = vec!["u".to_string()];
+        for text in ["u*1e400", "0*1e400", "u + -1e309"] {
+            let e = Expr::parse(text, &vars).unwrap_err().to_string();
+            assert!(e.contains("beyond the range"), "{text}: {e}");
+        }
+        assert!(Expr::parse("u*1e300", &vars).is_ok());
+    }
 
     #[test]
     fn deep_nesting_is_an_error_not_a_stack_overflow() {

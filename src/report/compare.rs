@@ -22,6 +22,17 @@ use crate::records::RecordSet;
 use crate::util::num4;
 use std::path::Path;
 
+/// A fit in percent to one decimal, or `-` where it has no meaning (a constant measured output:
+/// the NRMSE's scale is zero and the fit would read `-inf %`).
+fn fit_text(sim: &[f64], meas: &[f64]) -> String {
+    let f = fit_percent(sim, meas);
+    if f.is_finite() {
+        format!("{f:.1} %")
+    } else {
+        "-".into()
+    }
+}
+
 /// Records longer than this many samples get a zoomed window.
 pub const ZOOM_ABOVE: usize = 2000;
 
@@ -62,7 +73,7 @@ impl Comparison<'_> {
         let fits: Vec<String> = self
             .simulated
             .iter()
-            .map(|(label, s)| format!("{label} fit {:.1} %", fit_percent(s, self.measured)))
+            .map(|(label, s)| format!("{label} fit {}", fit_text(s, self.measured)))
             .collect();
         format!("{}, run {}: {}", self.output, self.run, fits.join(", "))
     }
@@ -271,7 +282,7 @@ fn summary_row(c: &Comparison, sim: &[f64], r: &Resid, plots: String) -> Vec<Str
         c.run.to_string(),
         c.output.to_string(),
         num4(rms),
-        format!("{:.1}", fit_percent(sim, c.measured)),
+        fit_text(sim, c.measured).trim_end_matches(" %").to_string(),
         num4(r.mean),
         format!("{}/{}", r.auto.outside(), r.auto.tested()),
         if cross.is_empty() {
@@ -332,6 +343,12 @@ pub fn write_record_report(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_constant_measured_output_has_no_fit_figure() {
+        assert_eq!(fit_text(&[0.5, 0.6, 0.4], &[1.0; 3]), "-");
+        assert_eq!(fit_text(&[1.0, 2.0, 3.0], &[1.0, 2.0, 3.0]), "100.0 %");
+    }
 
     fn signals(n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
         let t: Vec<f64> = (0..n).map(|k| k as f64 * 0.01).collect();
