@@ -449,3 +449,27 @@ fn discover_on_data_near_the_magnitude_limit_is_an_answer_or_a_clear_error() {
         }
     }
 }
+
+#[test]
+fn a_long_product_term_is_refused_before_its_derivatives_take_the_memory() {
+    // 999 factors: each derivative about 500,000 nodes; twenty such terms took 945 MB.
+    let long = vec!["y"; 999].join("*");
+    let terms: Vec<String> = (2..22)
+        .map(|k| format!(r#"{{"expression": "{long}*{k}", "coefficient": 1e-9}}"#))
+        .collect();
+    let text = format!(
+        r#"{{"format": "ctsid-model/2", "inputs": ["u"], "outputs": [{{"name": "y", "order": 1, "terms": [{{"exponents": {{"u": 1}}, "coefficient": 1.0}}, {}]}}]}}"#,
+        terms.join(", ")
+    );
+    let m = ctsid::model::Model::from_json_str(&text, "long.json").unwrap();
+    let e = m.compile().unwrap_err().to_string();
+    assert!(
+        e.contains("too large") && !e.contains('\n') && e.len() < 400,
+        "{e}"
+    );
+    // A product of a few dozen factors is fine.
+    let short = vec!["y"; 30].join("*");
+    let text = text.replace(&long, &short);
+    let m = ctsid::model::Model::from_json_str(&text, "short.json").unwrap();
+    assert!(m.compile().is_ok());
+}

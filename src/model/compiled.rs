@@ -78,6 +78,21 @@ impl CTerm {
     }
 }
 
+/// Nodes the derivative trees of a model's expression terms may have in all (a few hundred MB):
+/// a product of n factors has a derivative of about n^2 / 2 nodes, so a file of a few KB could
+/// otherwise ask for gigabytes. Models written by ctsid stay far below it.
+const MAX_GRADIENT_NODES: u64 = 4_000_000;
+
+/// The first 60 characters of `text`, for an error message.
+fn one_line_prefix(text: &str) -> String {
+    let t: String = text.chars().take(60).collect();
+    if t.len() < text.len() {
+        format!("{t}...")
+    } else {
+        t
+    }
+}
+
 /// Fast evaluator of a model's right-hand sides.
 ///
 /// `z` is the concatenation `[state, inputs]` (see [`Model::variable_names`]); the state holds,
@@ -108,12 +123,27 @@ impl CompiledModel {
         };
         let names = m.variable_names();
         let mut terms = Vec::with_capacity(m.outputs.len());
+        let mut grad_nodes: u64 = 0;
         for o in &m.outputs {
             let mut ts = Vec::with_capacity(o.terms.len());
             for t in &o.terms {
                 let kind = match &t.expression {
                     Some(text) => {
                         let expr = Expr::parse(text, &names)?;
+                        // The gradient's trees, one per variable, within a model-wide budget.
+                        let vars = expr.variables().len() as u64;
+                        grad_nodes =
+                            grad_nodes.saturating_add(expr.derivative_size().saturating_mul(vars));
+                        if grad_nodes > MAX_GRADIENT_NODES {
+                            return Err(Error::Model {
+                                path: "<memory>".into(),
+                                message: format!(
+                                    "the term '{}' of '{}' makes the model's derivatives too large to build (more than {MAX_GRADIENT_NODES} nodes); write long products as monomial exponents",
+                                    one_line_prefix(text),
+                                    o.name
+                                ),
+                            });
+                        }
                         let grad = expr
                             .variables()
                             .into_iter()

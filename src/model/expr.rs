@@ -119,6 +119,14 @@ impl Expr {
         }
     }
 
+    /// An upper bound on the nodes of any first derivative of the expression (before folding).
+    /// A product of n factors has a derivative of about n^2 / 2 nodes, so a long product that
+    /// parses in microseconds can ask for gigabytes of derivative trees ([`diff`] copies each
+    /// factor into every term of the product rule).
+    pub fn derivative_size(&self) -> u64 {
+        diff_size(&self.root).1
+    }
+
     /// Whether the expression is the number 0 (a derivative with respect to a variable it does
     /// not contain).
     pub fn is_zero(&self) -> bool {
@@ -349,6 +357,32 @@ fn div(a: Node, b: Node) -> Node {
 }
 fn fun(f: Fun, a: &Node, var: Option<usize>) -> Node {
     Node::Fun(f, Box::new(a.clone()), var)
+}
+
+/// The nodes of `n` and a bound on the nodes of [`diff`]`(n, v)` for any `v`, saturating.
+fn diff_size(n: &Node) -> (u64, u64) {
+    match n {
+        Node::Num(_) | Node::Var(_) => (1, 1),
+        Node::Neg(a) => {
+            let (s, d) = diff_size(a);
+            (s + 1, d.saturating_add(1))
+        }
+        Node::Pow(a, _) => {
+            let (s, d) = diff_size(a);
+            (s + 1, d.saturating_add(2 * s + 4))
+        }
+        Node::Fun(_, a, _) => {
+            let (s, d) = diff_size(a);
+            (s + 1, d.saturating_add(2 * s + 4))
+        }
+        Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
+            let ((sa, da), (sb, db)) = (diff_size(a), diff_size(b));
+            let size = sa.saturating_add(sb).saturating_add(1);
+            // The product and quotient rules copy both operands beside both derivatives.
+            let d = da.saturating_add(db).saturating_add(2 * size + 4);
+            (size, d)
+        }
+    }
 }
 
 /// `d n / d z_v`, folded.
@@ -628,6 +662,24 @@ mod tests {
             assert!(e.contains("beyond the range"), "{text}: {e}");
         }
         assert!(Expr::parse("u*1e300", &vars).is_ok());
+    }
+
+    #[test]
+    fn a_long_product_has_a_quadratic_derivative_bound() {
+        let vars = vec!["y".to_string()];
+        let size = |n: usize| {
+            Expr::parse(&vec!["y"; n].join("*"), &vars)
+                .unwrap()
+                .derivative_size()
+        };
+        assert!(size(1) >= 1 && size(10) < 1_000);
+        // Quadratic: the bound of 900 factors is about 81 times the bound of 100.
+        let (a, b) = (size(100), size(900));
+        assert!(b > 50 * a && b < 120 * a, "{a} {b}");
+        // The bound holds: the derivative built has no more nodes than it says.
+        let e = Expr::parse(&vec!["y"; 40].join("*"), &vars).unwrap();
+        let d = e.derivative(0);
+        assert!(diff_size(&d.root).0 <= e.derivative_size());
     }
 
     #[test]
