@@ -544,8 +544,11 @@ fn read_exponents(
         .map(|(n, v)| (canonical_var(&n, output_names).to_string(), v))
         .collect();
     let mut exponents = BTreeMap::new();
-    for (i, (name, v)) in pairs.iter().enumerate() {
-        if pairs[..i].iter().any(|(n, _)| n == name) {
+    // Names seen so far (zero exponents included), in a set: a term of tens of thousands of
+    // pairs was checked pair against pair, seconds per megabyte of file.
+    let mut seen = std::collections::HashSet::with_capacity(pairs.len());
+    for (name, v) in &pairs {
+        if !seen.insert(name.as_str()) {
             let note = if output_names.contains(name) {
                 format!(" ({name}_d0 is {name})")
             } else {
@@ -732,8 +735,9 @@ impl Model {
                     .map_err(|m| err(format!("output '{}', term {}: {m}", o.name, k + 1)))?;
             }
         }
+        let known: std::collections::HashSet<&str> = names.iter().map(String::as_str).collect();
         for (name, w) in &self.sign_smoothing {
-            if !names.contains(name) {
+            if !known.contains(name.as_str()) {
                 return Err(err(format!(
                     "sign_smoothing: {}",
                     self.explain_unknown(name)
