@@ -312,8 +312,25 @@ fn show_prints_equations_and_each_terms_standard_error() {
         "{out}"
     );
     assert!(out.contains("| 1 | 0.04 | - | - | - | - |"), "{out}");
+    assert!(
+        out.contains("sign smoothing widths: q_m_d1 2.4e-5"),
+        "{out}"
+    );
     let (ok, _, err) = ctsid(&["show", "/nonexistent/m.json"]);
     assert!(!ok && err.lines().count() == 1, "{err}");
+    // A width given twice was the last one, silently; a width that is not a number.
+    for (smoothing, says) in [
+        (r#"{"q_m_d1": 2.4e-05, "q_m_d1": 7}"#, "twice"),
+        (r#"{"q_m_d1": "wide"}"#, "give a number"),
+    ] {
+        let bad = text.replace(r#"{"q_m_d1": 2.4e-05}"#, smoothing);
+        let path = temp_file("show", "bad.json", &bad);
+        let (ok, _, err) = ctsid(&["show", &path]);
+        assert!(
+            !ok && err.contains(says) && err.lines().count() == 1,
+            "{err}"
+        );
+    }
 }
 
 /// `simulate --report`: per test run a figure with the fit in its title and the error trace, a

@@ -23,6 +23,15 @@ pub fn run(a: ShowArgs) -> Result<()> {
         model.inputs.join(", "),
         model.input_interpolation.name()
     )?;
+    if !model.sign_smoothing.is_empty() {
+        // The widths change every simulation of sign(.) and its kin: shown, not only stored.
+        let widths: Vec<String> = model
+            .sign_smoothing
+            .iter()
+            .map(|(v, w)| format!("{v} {}", ctsid::util::short(*w)))
+            .collect();
+        outln!("sign smoothing widths: {}", widths.join(", "))?;
+    }
     let mut unknown = false;
     for o in &model.outputs {
         outln!(

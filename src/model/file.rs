@@ -346,8 +346,9 @@ struct RawModel {
     tau: Option<f64>,
     degree: Option<usize>,
     inputs: Vec<String>,
+    /// Read as pairs: a name given twice is an error, not the last width silently kept.
     #[serde(default)]
-    sign_smoothing: BTreeMap<String, f64>,
+    sign_smoothing: Pairs,
     #[serde(default)]
     input_interpolation: Interpolation,
     outputs: Vec<RawOutput>,
@@ -572,6 +573,23 @@ fn read_exponents(
     Ok(exponents)
 }
 
+/// The `sign_smoothing` widths by variable; a name given twice or a width that is not a number
+/// is an error (the widths' range is `validate_at`'s).
+fn read_sign_smoothing(pairs: Pairs) -> std::result::Result<BTreeMap<String, f64>, String> {
+    let mut out = BTreeMap::new();
+    for (name, v) in pairs.0 {
+        let w = v
+            .as_f64()
+            .ok_or_else(|| format!("sign_smoothing of '{name}' is {v}; give a number"))?;
+        if out.insert(name.clone(), w).is_some() {
+            return Err(format!(
+                "sign_smoothing names '{name}' twice; give one width"
+            ));
+        }
+    }
+    Ok(out)
+}
+
 impl Model {
     /// A model with the given outputs; `degree` is the largest term degree.
     pub fn new(inputs: &[&str], outputs: Vec<OutputEquation>, tau: Option<f64>) -> Model {
@@ -669,7 +687,7 @@ impl Model {
             tau: raw.tau,
             degree,
             inputs: raw.inputs,
-            sign_smoothing: raw.sign_smoothing,
+            sign_smoothing: read_sign_smoothing(raw.sign_smoothing).map_err(err)?,
             input_interpolation: raw.input_interpolation,
             outputs,
             extra: raw.extra,
