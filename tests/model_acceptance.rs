@@ -338,40 +338,53 @@ fn show_prints_equations_and_each_terms_standard_error() {
 #[test]
 fn simulate_report_shows_fit_error_and_residual_analysis() {
     let (case, f) = files("coulomb", 105, "report");
-    let dir = f.dir.join("report");
-    let (ok, out, err) = ctsid(&[
-        "simulate",
-        &f.nominal,
-        &f.clean,
-        "--run-column run --time-column t",
-        "--report",
-        dir.to_str().unwrap(),
-    ]);
-    assert!(ok, "{err}");
-    let summary = std::fs::read_to_string(dir.join("report.md")).unwrap();
-    for &r in &TEST {
-        let id = &case.records.runs[r].id;
-        let nrmse: f64 = out
-            .lines()
-            .find(|l| l.split_whitespace().next() == Some(id))
-            .and_then(|l| l.split_whitespace().last()?.parse().ok())
-            .unwrap_or_else(|| panic!("no row for run {id}:\n{out}"));
-        let fit = format!("{:.1}", 100.0 - nrmse);
-        let sim = std::fs::read_to_string(dir.join(format!("sim_{id}_y.svg"))).unwrap();
-        assert!(
-            sim.contains(&format!("model fit {fit} %")),
-            "fit {fit} not in title"
+    // Without and with --score-from (which the report ignored: the table scored from sample
+    // 150, the report the whole run).
+    for (extra, name) in [
+        ("--score-from 0", "report"),
+        ("--score-from 150", "report_150"),
+    ] {
+        let dir = f.dir.join(name);
+        let (ok, out, err) = ctsid(&[
+            "simulate",
+            &f.nominal,
+            &f.clean,
+            "--run-column run --time-column t",
+            extra,
+            "--report",
+            dir.to_str().unwrap(),
+        ]);
+        assert!(ok, "{err}");
+        let summary = std::fs::read_to_string(dir.join("report.md")).unwrap();
+        assert_eq!(
+            summary.contains("from its sample 150 on"),
+            extra.ends_with("150")
         );
-        assert!(sim.contains("simulation error (simulated - measured)"));
-        let resid = std::fs::read_to_string(dir.join(format!("resid_{id}_y.svg"))).unwrap();
-        assert!(
-            resid.contains("autocorrelation of the error")
-                && resid.contains("cross-correlation with u")
-        );
-        assert!(
-            summary.contains(&format!("| {id} | y |")) && summary.contains(&format!("| {fit} |")),
-            "{summary}"
-        );
+        for &r in &TEST {
+            let id = &case.records.runs[r].id;
+            let nrmse: f64 = out
+                .lines()
+                .find(|l| l.split_whitespace().next() == Some(id))
+                .and_then(|l| l.split_whitespace().last()?.parse().ok())
+                .unwrap_or_else(|| panic!("no row for run {id}:\n{out}"));
+            let fit = format!("{:.1}", 100.0 - nrmse);
+            let sim = std::fs::read_to_string(dir.join(format!("sim_{id}_y.svg"))).unwrap();
+            assert!(
+                sim.contains(&format!("model fit {fit} %")),
+                "{extra}: fit {fit} not in title"
+            );
+            assert!(sim.contains("simulation error (simulated - measured)"));
+            let resid = std::fs::read_to_string(dir.join(format!("resid_{id}_y.svg"))).unwrap();
+            assert!(
+                resid.contains("autocorrelation of the error")
+                    && resid.contains("cross-correlation with u")
+            );
+            assert!(
+                summary.contains(&format!("| {id} | y |"))
+                    && summary.contains(&format!("| {fit} |")),
+                "{extra}: {summary}"
+            );
+        }
     }
     std::fs::remove_dir_all(&f.dir).ok();
 }

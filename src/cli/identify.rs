@@ -296,7 +296,7 @@ fn write_report(
     let table = if runs.is_empty() {
         "No test run was simulated (none given with --test, or each diverged); for test data in a separate file, `ctsid simulate MODEL DATA --report DIR` writes these figures.\n".to_string()
     } else {
-        write_record_report(dir, rs, &outputs, &inputs, "model", &runs)?
+        write_record_report(dir, rs, &outputs, &inputs, "model", &runs, 0)?
     };
     let text = format!(
         "{text}\n## Free runs on the test runs\n\nFit = 100 (1 - NRMSE); residual tests at 99 % (see `ctsid simulate --report`).\n\n{table}"

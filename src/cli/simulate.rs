@@ -211,9 +211,14 @@ fn write_report(
         .enumerate()
         .map(|(r, s)| (r, &s[..]))
         .collect();
-    let table = write_record_report(dir, rs, &outputs, &inputs, "model", &runs)?;
+    let table = write_record_report(dir, rs, &outputs, &inputs, "model", &runs, args.score_from)?;
+    let scored = if args.score_from > 0 {
+        format!(" Scores, tests and figures cover each run from its sample {} on (`--score-from`), as the printed table.", args.score_from)
+    } else {
+        String::new()
+    };
     let text = format!(
-        "# Free-run simulation of {} on {}\n\nEach run starts from the initial state fitted on its first {} samples. Fit = 100 (1 - NRMSE). Residual tests at 99 %: lags of the simulation error's autocorrelation (whiteness) and of its cross-correlation with each input (independence from past inputs, the test that matters for a simulation model) outside the band.\n\n{table}",
+        "# Free-run simulation of {} on {}\n\nEach run starts from the initial state fitted on its first {} samples.{scored} Fit = 100 (1 - NRMSE). Residual tests at 99 %: lags of the simulation error's autocorrelation (whiteness) and of its cross-correlation with each input (independence from past inputs, the test that matters for a simulation model) outside the band.\n\n{table}",
         args.model, args.data, args.init_window
     );
     write_file(dir, "report.md", &text)

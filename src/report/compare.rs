@@ -296,29 +296,36 @@ fn summary_row(c: &Comparison, sim: &[f64], r: &Resid, plots: String) -> Vec<Str
 
 /// [`write_comparisons`] for free runs of one model on runs of a record set: `runs` holds
 /// (index of the run in `records`, simulated outputs in the order of `outputs`); channels are
-/// found by name. Times are the record's own (`t0 + k tau`). Refuses an output or input that is not
+/// found by name. Times are the record's own (`t0 + k tau`). Every run is shown and scored from its
+/// sample `from` on (`simulate --score-from`: the samples before it set the initial state and are
+/// left out of the printed scores, so of these too; a run no longer than `from` shows nothing).
+/// Refuses an output or input that is not
 /// a channel of `records`, and errs as [`write_comparisons`] does. Panics when an index in `runs`
 /// is not below the number of runs of `records`, a run's simulation has fewer outputs than
 /// `outputs`, or (on a drawn run) a simulated output is shorter than its run.
-pub fn write_record_report(
+pub fn write_record_report<'a>(
     dir: &Path,
-    records: &RecordSet,
+    records: &'a RecordSet,
     outputs: &[&str],
     inputs: &[&str],
-    label: &str,
-    runs: &[(usize, &[Vec<f64>])],
+    label: &'a str,
+    runs: &[(usize, &'a [Vec<f64>])],
+    from: usize,
 ) -> Result<String> {
     let times: Vec<Vec<f64>> = runs
         .iter()
         .map(|&(r, _)| {
             let run = &records.runs[r];
-            (0..run.len())
+            (from.min(run.len())..run.len())
                 .map(|k| run.t0 + k as f64 * records.tau)
                 .collect()
         })
         .collect();
+    let tail = |x: &'a [f64]| &x[from.min(x.len())..];
     let channel = |r: usize, name: &str| -> Result<&[f64]> {
-        Ok(&records.runs[r].channels[records.channel_index(name)?])
+        Ok(tail(
+            &records.runs[r].channels[records.channel_index(name)?],
+        ))
     };
     let mut comparisons = Vec::new();
     // Output by output, so that each output's first runs are the ones drawn.
@@ -329,7 +336,7 @@ pub fn write_record_report(
                 t: &times[k],
                 output,
                 measured: channel(r, output)?,
-                simulated: vec![(label, &sim[o][..])],
+                simulated: vec![(label, tail(&sim[o][..]))],
                 inputs: inputs
                     .iter()
                     .map(|&i| Ok((i, channel(r, i)?)))
