@@ -333,6 +333,45 @@ fn a_huge_bad_field_is_cut_in_the_error_and_a_folder_name_is_no_output_file() {
         ],
         &["ends in a separator"],
     );
+    // Found before the simulation (the table was printed, then the writing failed): a data file
+    // that already has the simulated column, and an -o file that is the report folder (one
+    // output was left without the other).
+    let clash = file(
+        "has-sim.csv",
+        &good_csv()
+            .replacen("run,t,u,y", "run,t,u,y,y_sim", 1)
+            .replace('\n', ",0\n")
+            .replacen("y_sim,0", "y_sim", 1),
+    );
+    let out = fails(
+        &[
+            "simulate",
+            &model,
+            &clash,
+            "--run-column run --tau 0.01 -o",
+            &dir().join("o1.csv").display().to_string(),
+        ],
+        &["already has a column 'y_sim'"],
+    );
+    assert!(
+        out.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    let same = dir().join("same-out").display().to_string();
+    let out = fails(
+        &[
+            "simulate",
+            &model,
+            &good,
+            "--run-column run --tau 0.01 -o",
+            &same,
+            "--report",
+            &same,
+        ],
+        &["report folder"],
+    );
+    assert!(out.stdout.is_empty() && !std::path::Path::new(&same).exists());
 }
 
 #[test]

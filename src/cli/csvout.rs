@@ -13,11 +13,13 @@ use std::path::Path;
 /// Checks, before any work, what [`write_with_columns`] needs: an output (when given) that is
 /// none of the inputs, in a folder that exists; and an input it can read a second time, to copy
 /// its rows (a pipe or a device would give them only once, and the output would lose them).
-/// `what` names the command in the message.
+/// `what` names the command in the message. With the `names` of the columns to append, also
+/// refuses a file that has one of them already (found before the work, not after it).
 pub fn check(
     input: &Path,
     output: Option<&Path>,
     other_inputs: &[&Path],
+    names: &[String],
     what: &str,
 ) -> Result<()> {
     if let Some(o) = output {
@@ -32,7 +34,45 @@ pub fn check(
                 "{what} reads its input twice (to copy its rows): give a regular file, not a pipe or a device"
             ),
         }),
-        _ => Ok(()),
+        // A header that cannot be read is the loader's to report, with its own message.
+        Ok(_) => match read_header(input) {
+            Ok(header) => refuse_clash(input, &header, names),
+            Err(_) => Ok(()),
+        },
+        Err(_) => Ok(()),
+    }
+}
+
+fn read_header(input: &Path) -> Result<Vec<String>> {
+    let p = input.display().to_string();
+    let mut rdr = csv::Reader::from_path(input).map_err(|e| Error::Io {
+        path: p.clone(),
+        message: e.to_string(),
+    })?;
+    Ok(rdr
+        .headers()
+        .map_err(|e| Error::Csv {
+            path: p,
+            row: 1,
+            message: e.to_string(),
+        })?
+        .iter()
+        .map(String::from)
+        .collect())
+}
+
+/// Refuses appending a column named like one of `header` (trimmed, as the loader reads it:
+/// ` y_d1` is the column `y_d1`).
+fn refuse_clash(input: &Path, header: &[String], names: &[String]) -> Result<()> {
+    match names
+        .iter()
+        .find(|n| header.iter().any(|h| h.trim() == n.as_str()))
+    {
+        Some(n) => Err(Error::InvalidData(format!(
+            "{}: already has a column '{n}'; rename it or write elsewhere",
+            input.display()
+        ))),
+        None => Ok(()),
     }
 }
 
@@ -67,15 +107,7 @@ pub fn write_with_columns(
         .iter()
         .map(String::from)
         .collect();
-    // Headers as the loader reads them (trimmed): ` y_d1` is the column `y_d1`.
-    if let Some(n) = names
-        .iter()
-        .find(|n| header.iter().any(|h| h.trim() == n.as_str()))
-    {
-        return Err(Error::InvalidData(format!(
-            "{p}: already has a column '{n}'; rename it or write elsewhere"
-        )));
-    }
+    refuse_clash(input, &header, names)?;
     let out_name = output.map_or("standard output".to_string(), |o| o.display().to_string());
     // A file is written whole or not at all (Ctrl-C on a long write leaves the old one).
     let mut file = output.map(ctsid::util::AtomicFile::create).transpose()?;

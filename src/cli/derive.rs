@@ -43,7 +43,11 @@ pub fn run(a: DeriveArgs) -> Result<()> {
             ),
         ));
     }
-    super::csvout::check(&a.input, a.output.as_deref(), &[], "derive")?;
+    let mut names: Vec<String> = (0..=a.order)
+        .map(|k| format!("{}_d{k}", a.column))
+        .collect();
+    names.extend((0..=a.order).map(|k| format!("{}_sigma{k}", a.column)));
+    super::csvout::check(&a.input, a.output.as_deref(), &[], &names, "derive")?;
     let spec = a
         .sampling
         .spec(vec![a.column.clone()], a.run_column.clone(), None);
@@ -61,10 +65,6 @@ pub fn run(a: DeriveArgs) -> Result<()> {
     } else {
         differentiate_runs(&runs, rs.tau, a.order, &opts)?
     };
-    let mut names: Vec<String> = (0..=a.order)
-        .map(|k| format!("{}_d{k}", a.column))
-        .collect();
-    names.extend((0..=a.order).map(|k| format!("{}_sigma{k}", a.column)));
     let n_orders = a.order + 1;
     super::csvout::write_with_columns(&a.input, a.output.as_deref(), &rs, &names, |r, i, k| {
         if k < n_orders {

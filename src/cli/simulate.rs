@@ -55,20 +55,38 @@ pub struct SimulateArgs {
 }
 
 pub fn run(args: SimulateArgs) -> Result<()> {
-    // The data are read twice only to write them out again with -o.
-    if let Some(o) = &args.output {
-        super::csvout::check(
-            args.data.as_ref(),
-            Some(o.as_ref()),
-            &[args.model.as_ref()],
-            "simulate -o",
-        )?;
-    }
     args.segment.check()?;
     if let Some(d) = &args.report {
         super::check_output_dir(d)?;
     }
     let model = Model::read(&args.model)?;
+    let sim_names: Vec<String> = model
+        .outputs
+        .iter()
+        .map(|o| format!("{}_sim", o.name))
+        .collect();
+    // The data are read twice only to write them out again with -o; everything that would
+    // stop the writing is checked before the simulation.
+    if let Some(o) = &args.output {
+        super::csvout::check(
+            args.data.as_ref(),
+            Some(o.as_ref()),
+            &[args.model.as_ref()],
+            &sim_names,
+            "simulate -o",
+        )?;
+        if let Some(d) = &args.report {
+            if std::path::Path::new(o).starts_with(d) {
+                return Err(Error::param(
+                    "output",
+                    format!(
+                        "{o} is the report folder {} or inside it; write the simulated file elsewhere",
+                        d.display()
+                    ),
+                ));
+            }
+        }
+    }
     let compiled = model.compile()?;
     let mut columns: Vec<String> = model.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(model.inputs.iter().cloned());
@@ -105,11 +123,6 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         }
     }
     let n_out = model.outputs.len();
-    let sim_names: Vec<String> = model
-        .outputs
-        .iter()
-        .map(|o| format!("{}_sim", o.name))
-        .collect();
     let mut simulated: Vec<Vec<Vec<f64>>> = Vec::with_capacity(rs.runs.len());
     let mut pooled_sim: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let mut pooled_meas: Vec<Vec<f64>> = vec![Vec::new(); n_out];
