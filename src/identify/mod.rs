@@ -925,6 +925,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         .collect::<Result<_>>()?;
     for &c in &outputs {
         rs.require_varies(c, &split.train, "output")?;
+        rs.require_varies_within(c, &split.train, "output")?;
     }
     for &c in &inputs {
         rs.require_varies(c, &split.train, "input")?;

@@ -328,6 +328,29 @@ impl RecordSet {
         Ok(())
     }
 
+    /// Refuses a channel that varies over `runs` only from run to run, constant within each of
+    /// them (an output held at a different level in every training run): its derivatives are
+    /// zero in every one of them, so there is no dynamics to identify and no run to tune the
+    /// derivatives on. `role` names the channel's part in the message.
+    pub fn require_varies_within(&self, channel: usize, runs: &[usize], role: &str) -> Result<()> {
+        let varies = |r: usize| {
+            let c = &self.runs[r].channels[channel];
+            let (lo, hi) = c
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                    (a.min(v), b.max(v))
+                });
+            lo.is_finite() && hi - lo > 1e-12 * lo.abs().max(hi.abs())
+        };
+        if runs.is_empty() || runs.iter().any(|&r| varies(r)) {
+            return Ok(());
+        }
+        Err(Error::InvalidData(format!(
+            "{role} '{}' is constant within every training run (its level changes only from run to run): there are no dynamics to identify; give training runs in which it moves",
+            self.channel_names[channel]
+        )))
+    }
+
     /// Refuses any run too short for derivatives up to `order` (named by its id).
     pub fn require_derivable(&self, order: usize) -> Result<()> {
         self.require_min_len(
