@@ -509,3 +509,27 @@ fn an_output_constant_within_every_training_run_is_refused_and_tunes_nothing() {
     let opts = ctsid::derivatives::DerivativeOptions::default();
     assert!(ctsid::derivatives::differentiate_runs(&ys, 0.05, 1, &opts).is_ok());
 }
+
+#[test]
+fn a_test_run_too_short_to_simulate_is_refused_not_scored_nan() {
+    // Twenty samples: enough for derivatives up to order 4 (the search's highest, 18), not for
+    // a free run's initial state at that order (24).
+    let rs = RecordSet::new(
+        0.05,
+        vec!["y".into(), "u".into()],
+        vec![
+            run("0", vec![sine(300, 0.0), sine(300, 1.0)]),
+            run("1", vec![sine(300, 0.5), sine(300, 2.0)]),
+            run("2", vec![sine(20, 0.0), sine(20, 1.0)]),
+        ],
+    )
+    .unwrap();
+    let split = Split {
+        train: vec![0],
+        validation: Some(vec![1]),
+        test: vec![2],
+    };
+    let s = Settings::new(vec!["y".into()], vec!["u".into()], 1);
+    let e = identify(&rs, &split, &s).unwrap_err().to_string();
+    assert!(e.contains("'2'") && e.contains("initial state"), "{e}");
+}

@@ -932,6 +932,13 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     }
     let max_order = settings.max_order();
     rs.require_derivable(max_order)?;
+    // Every run is simulated free from an initial state fitted on its first samples (the gate
+    // and test runs' scores): a run long enough for derivatives but not for that fit gave NaN
+    // scores and a refinement judged `inf -> inf`.
+    rs.require_min_len(
+        simulate::initial_window(max_order),
+        &format!("a free run's initial state (order {max_order})"),
+    )?;
     let say = |msg: String| {
         if let Some(p) = settings.progress {
             p(&msg);
