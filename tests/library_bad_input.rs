@@ -533,3 +533,25 @@ fn a_test_run_too_short_to_simulate_is_refused_not_scored_nan() {
     let e = identify(&rs, &split, &s).unwrap_err().to_string();
     assert!(e.contains("'2'") && e.contains("initial state"), "{e}");
 }
+
+#[test]
+fn derivatives_beyond_the_magnitude_limit_are_an_error_not_a_zero_sigma() {
+    // A signal of 1e120 on a picosecond clock: its eighth derivative is near 1e210, whose
+    // square overflows; the sigmas of orders 4 to 8 came out exactly 0.
+    let y: Vec<f64> = (0..400)
+        .map(|k| {
+            1e120
+                * (2.0 * std::f64::consts::PI * k as f64 / 40.0).sin()
+                * (1.0 + 1e-3 * ((k * 7919) % 13) as f64)
+        })
+        .collect();
+    let opts = ctsid::derivatives::DerivativeOptions {
+        exp_sum: false,
+        ..Default::default()
+    };
+    let e = ctsid::derivatives::differentiate_runs(&[&y], 1e-12, 8, &opts).unwrap_err();
+    assert!(e.to_string().contains("beyond 1e150"), "{e}");
+    // The same shape at ordinary magnitudes is fine.
+    let small: Vec<f64> = y.iter().map(|v| v * 1e-120).collect();
+    assert!(ctsid::derivatives::differentiate_runs(&[&small], 1e-2, 8, &opts).is_ok());
+}

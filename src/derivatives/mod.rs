@@ -343,7 +343,29 @@ pub fn differentiate_runs(
         blend.ends(y, &mut mean, &mut second);
         blend.finish(&mut out[r], y, mean, &second, means[r]);
     }
+    check_range(&out, max_order)?;
     Ok(out)
+}
+
+/// Refuses derivatives beyond [`crate::records::MAX_MAGNITUDE`], the bound every sample obeys:
+/// their squares (the smoother's second moments) overflow, and a sigma came out 0 where its
+/// variance was `inf - inf` (a signal of 1e120 at tau = 1e-12, differentiated eight times).
+fn check_range(out: &[Derivatives], max_order: usize) -> Result<()> {
+    for d in out {
+        for k in 0..=max_order {
+            let big = d.values[k]
+                .iter()
+                .chain(&d.sigma[k])
+                .any(|v| !(v.abs() <= crate::records::MAX_MAGNITUDE));
+            if big {
+                return Err(Error::InvalidData(format!(
+                    "derivative {k} of the signal goes beyond {:e} (or is not finite): rescale the signal or give tau in larger units",
+                    crate::records::MAX_MAGNITUDE
+                )));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// The covariances of `covs` for runs of length `n` (every live run's length is there).
