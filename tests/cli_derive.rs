@@ -144,3 +144,39 @@ fn derive_names_the_runs_an_exponential_sum_took_and_can_refuse_it() {
     assert_eq!(out.lines().next(), out2.lines().next());
     assert_ne!(out, out2);
 }
+
+#[test]
+fn per_run_tuning_reports_each_runs_own_figures() {
+    // Run a constant, run b a noisy sine: the first run's figures (untuned) were printed as
+    // the record's.
+    let mut text = String::from("run,y\n");
+    for i in 0..100 {
+        text += &format!("a,{}\n", 1.0 + 0.0 * i as f64);
+    }
+    for i in 0..300 {
+        let noise = 0.01 * (((i * 7919) % 17) as f64 / 8.0 - 1.0);
+        text += &format!("b,{}\n", (0.3 * i as f64).sin() + noise);
+    }
+    let input = temp("per_run.csv", &text);
+    let args = [
+        "derive",
+        &input,
+        "--column y --order 2 --tau 0.1 --run-column run",
+    ];
+    let (ok, _, err) = ctsid(&[&args[..], &["--per-run-tuning"]].concat());
+    assert!(ok, "{err}");
+    assert!(err.contains("run a: constant, not tuned"), "{err}");
+    let b = err
+        .lines()
+        .find(|l| l.contains("run b:"))
+        .unwrap_or_else(|| panic!("{err}"));
+    // Run b alone is the record's only varying run: the same figures as a joint tuning.
+    let (ok, _, joint) = ctsid(&args);
+    assert!(ok, "{joint}");
+    let bandwidth = |s: &str| {
+        s.split("bandwidth ")
+            .nth(1)
+            .map(|x| x.split(' ').next().unwrap().to_string())
+    };
+    assert_eq!(bandwidth(b), bandwidth(&joint), "{b} / {joint}");
+}

@@ -73,6 +73,17 @@ pub fn run(a: DeriveArgs) -> Result<()> {
             format!("{:.6e}", ders[r].sigma[k - n_orders][i])
         }
     })?;
+    if a.per_run_tuning {
+        eprintln!(
+            "derived '{}' up to order {} on {} run(s) tuned one by one, tau = {:?} s:",
+            a.column,
+            a.order,
+            ders.len(),
+            rs.tau
+        );
+        print_per_run(&rs, &ders);
+        return Ok(());
+    }
     let d0 = &ders[0];
     let models: Vec<String> = ders
         .iter()
@@ -99,4 +110,22 @@ pub fn run(a: DeriveArgs) -> Result<()> {
         d0.h / rs.tau
     );
     Ok(())
+}
+
+/// With `--per-run-tuning` each run has its own noise level and bandwidth: one line per run
+/// (the first run's figures alone read as the record's, and a constant run keeps the untuned
+/// default).
+fn print_per_run(rs: &ctsid::RecordSet, ders: &[ctsid::derivatives::Derivatives]) {
+    for (d, r) in ders.iter().zip(&rs.runs) {
+        let figures = if d.values[0].iter().all(|v| *v == d.values[0][0]) {
+            "constant, not tuned".to_string()
+        } else {
+            format!(
+                "noise sd {:.4e}, smoothing bandwidth {:.3} rad/s",
+                d.noise_sd,
+                d.h / rs.tau
+            )
+        };
+        eprintln!("  run {}: {figures}", r.id);
+    }
 }

@@ -356,7 +356,7 @@ fn check_range(out: &[Derivatives], max_order: usize) -> Result<()> {
             let big = d.values[k]
                 .iter()
                 .chain(&d.sigma[k])
-                .any(|v| !(v.abs() <= crate::records::MAX_MAGNITUDE));
+                .any(|v| v.is_nan() || v.abs() > crate::records::MAX_MAGNITUDE);
             if big {
                 return Err(Error::InvalidData(format!(
                     "derivative {k} of the signal goes beyond {:e} (or is not finite): rescale the signal or give tau in larger units",
