@@ -435,3 +435,50 @@ fn mimo_identify_with_a_sign_term_scores_each_order_without_a_panic() {
         .unwrap_or_else(|| panic!("no sign term\n{found}"));
     assert!((sign.coefficient + 0.3).abs() < 0.03, "{found}");
 }
+
+/// One training run and no validation runs: the MIMO gate's "held-out" runs are the training
+/// run itself. Its residuals were shown as the validation profile; now there is none, and the
+/// refinement names its gate a proxy.
+#[test]
+fn a_mimo_search_on_one_training_run_shows_no_validation_profile() {
+    let (tau, n) = (0.05, 400);
+    let (mut y1, mut y2) = (0.0f64, 0.0f64);
+    let (mut c0, mut c1, mut c2) = (vec![], vec![], vec![]);
+    for k in 0..n {
+        let u = (0.3 * k as f64 * tau).sin() + (0.05 * k as f64).cos().signum() * 0.5;
+        c0.push(y1);
+        c1.push(y2);
+        c2.push(u);
+        // Euler at a tenth of tau: y1' = -y1 + u, y2' = -2 y2 + y1.
+        for _ in 0..10 {
+            let (d1, d2) = (-y1 + u, -2.0 * y2 + y1);
+            y1 += 0.1 * tau * d1;
+            y2 += 0.1 * tau * d2;
+        }
+    }
+    let run = ctsid::records::Run {
+        id: "0".into(),
+        channels: vec![c0, c1, c2],
+        t0: 0.0,
+        rows: (2..n + 2).collect(),
+    };
+    let rs =
+        ctsid::RecordSet::new(tau, vec!["y1".into(), "y2".into(), "u".into()], vec![run]).unwrap();
+    let split = Split::new(vec![0], None, vec![], &["0".to_string()]).unwrap();
+    let mut s = Settings::new(vec!["y1".into(), "y2".into()], vec!["u".into()], 1);
+    s.orders = Orders::Search(vec![1, 2]);
+    s.engine = EngineChoice::Cpu;
+    let id = identify(&rs, &split, &s).unwrap();
+    for o in &id.outputs {
+        for c in &o.candidates {
+            assert!(c.validation.p50().is_nan(), "{} order {}", o.name, c.order);
+            assert!(c.simulation.is_some());
+        }
+    }
+    let gate = id
+        .refinement
+        .as_ref()
+        .map(|r| r.gate.clone())
+        .unwrap_or_default();
+    assert!(gate.contains("proxy"), "{gate}");
+}

@@ -221,7 +221,18 @@ fn output_section(id: &Identification, rep: &OutputReport) -> String {
         );
     }
     if rep.candidates.iter().any(|c| c.simulation.is_some()) {
-        text += &format!("The eta-rule chose on the free-run profiles (simulation on held-out runs; errors below {} count as equal, and the lowest order wins); the derivative-domain validation profiles are shown beside them.\n\n", ctsid::identify::FREE_RUN_RESOLUTION);
+        // Held-out runs where there were any; with one training run and no validation runs the
+        // free runs were of the training run itself, and the text says so.
+        let proxy = id
+            .refinement
+            .as_ref()
+            .is_some_and(|r| r.gate.contains("proxy"));
+        let on = if proxy {
+            "simulation of the training run itself, as no run was held out"
+        } else {
+            "simulation on held-out runs"
+        };
+        text += &format!("The eta-rule chose on the free-run profiles ({on}; errors below {} count as equal, and the lowest order wins); the derivative-domain validation profiles are shown beside them.\n\n", ctsid::identify::FREE_RUN_RESOLUTION);
     }
     if rep
         .candidates

@@ -1681,9 +1681,16 @@ fn mimo_candidate(
         let (e, l) = prep.residuals(&m, i, ord, runs)?;
         Ok(Profile::new(&e, &l))
     };
+    // With one training run and no validation runs the gate is the training run itself: no
+    // validation profile then (as for a single output), not training residuals under its name.
+    let validation = if held == fit {
+        Profile([f64::NAN; 7])
+    } else {
+        profile(&held)?
+    };
     let mut c = Candidate {
         order: ord[i],
-        validation: profile(&held)?,
+        validation,
         train: profile(&fit)?,
         equation: m.equation(),
         n_terms: m.terms.len(),
