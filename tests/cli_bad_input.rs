@@ -369,7 +369,7 @@ fn a_huge_bad_field_is_cut_in_the_error_and_a_folder_name_is_no_output_file() {
             "--report",
             &same,
         ],
-        &["report folder"],
+        &["also the report folder"],
     );
     assert!(out.stdout.is_empty() && !std::path::Path::new(&same).exists());
 }

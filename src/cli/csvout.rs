@@ -44,12 +44,17 @@ pub fn check(
 }
 
 fn read_header(input: &Path) -> Result<Vec<String>> {
+    open_with_header(input).map(|(_, h)| h)
+}
+
+/// A reader of `input` past its header, and the header.
+fn open_with_header(input: &Path) -> Result<(csv::Reader<std::fs::File>, Vec<String>)> {
     let p = input.display().to_string();
     let mut rdr = csv::Reader::from_path(input).map_err(|e| Error::Io {
         path: p.clone(),
         message: e.to_string(),
     })?;
-    Ok(rdr
+    let header = rdr
         .headers()
         .map_err(|e| Error::Csv {
             path: p,
@@ -58,7 +63,8 @@ fn read_header(input: &Path) -> Result<Vec<String>> {
         })?
         .iter()
         .map(String::from)
-        .collect())
+        .collect();
+    Ok((rdr, header))
 }
 
 /// Refuses appending a column named like one of `header` (trimmed, as the loader reads it:
@@ -93,20 +99,7 @@ pub fn write_with_columns(
         }
     }
     let p = input.display().to_string();
-    let mut rdr = csv::Reader::from_path(input).map_err(|e| Error::Io {
-        path: p.clone(),
-        message: e.to_string(),
-    })?;
-    let mut header: Vec<String> = rdr
-        .headers()
-        .map_err(|e| Error::Csv {
-            path: p.clone(),
-            row: 1,
-            message: e.to_string(),
-        })?
-        .iter()
-        .map(String::from)
-        .collect();
+    let (mut rdr, mut header) = open_with_header(input)?;
     refuse_clash(input, &header, names)?;
     let out_name = output.map_or("standard output".to_string(), |o| o.display().to_string());
     // A file is written whole or not at all (Ctrl-C on a long write leaves the old one).

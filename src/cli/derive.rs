@@ -121,9 +121,12 @@ fn print_per_run(rs: &ctsid::RecordSet, ders: &[ctsid::derivatives::Derivatives]
             "constant, not tuned".to_string()
         } else {
             format!(
-                "noise sd {:.4e}, smoothing bandwidth {:.3} rad/s",
+                "noise sd {:.4e}, smoothing bandwidth {:.3} rad/s{}",
                 d.noise_sd,
-                d.h / rs.tau
+                d.h / rs.tau,
+                d.exp_terms.map_or(String::new(), |t| format!(
+                    ", exponential-sum model ({t} terms)"
+                ))
             )
         };
         eprintln!("  run {}: {figures}", r.id);

@@ -226,7 +226,7 @@ fn output_section(id: &Identification, rep: &OutputReport) -> String {
         let proxy = id
             .refinement
             .as_ref()
-            .is_some_and(|r| r.gate.contains("proxy"));
+            .is_some_and(|r| r.gate == ctsid::identify::PROXY_GATE);
         let on = if proxy {
             "simulation of the training run itself, as no run was held out"
         } else {

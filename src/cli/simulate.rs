@@ -75,16 +75,12 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             &sim_names,
             "simulate -o",
         )?;
-        if let Some(d) = &args.report {
-            if std::path::Path::new(o).starts_with(d) {
-                return Err(Error::param(
-                    "output",
-                    format!(
-                        "{o} is the report folder {} or inside it; write the simulated file elsewhere",
-                        d.display()
-                    ),
-                ));
-            }
+        // The same path for both: the file was written, then the report's folder failed.
+        if args.report.as_deref() == Some(std::path::Path::new(o)) {
+            return Err(Error::param(
+                "output",
+                format!("{o} is also the report folder; write the simulated file elsewhere"),
+            ));
         }
     }
     let compiled = model.compile()?;

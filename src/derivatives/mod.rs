@@ -305,21 +305,17 @@ pub fn differentiate_runs(
         .filter(|&r| centred[r].iter().any(|v| *v != 0.0))
         .collect();
     let live_y: Vec<&[f64]> = live.iter().map(|&r| centred[r].as_slice()).collect();
-    // The runs that tune: the chosen ones among the live. When every chosen run is constant,
-    // the others (validation, test) may not tune instead: they must never steer a fit.
+    // The runs that tune: the chosen ones among the live, or all live runs if none is. (When
+    // every chosen run is constant, their estimates are exact whatever the tuning, so the other
+    // runs' level cannot reach a fit made on the chosen ones.)
     let tune_y: Vec<&[f64]> = match &opts.tune_runs {
-        Some(t) => live
+        Some(t) if live.iter().any(|r| t.contains(r)) => live
             .iter()
             .filter(|r| t.contains(r))
             .map(|&r| centred[r].as_slice())
             .collect(),
-        None => live_y.clone(),
+        _ => live_y.clone(),
     };
-    if tune_y.is_empty() && !live.is_empty() {
-        return Err(Error::InvalidData(
-            "the signal is constant in every run chosen to tune the derivatives (the training runs) and varies only in the others, which may not tune them; give tuning runs in which it varies".into(),
-        ));
-    }
 
     let mut out = constant_estimates(runs, &means, tau, max_order, m);
     if live.is_empty() {

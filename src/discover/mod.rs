@@ -658,36 +658,56 @@ const BLOCK: usize = 8;
 /// [`MIN_BLOCKS`] of them.
 const BLOCK_BUDGET_BYTES: usize = 256 << 20;
 
-/// The least number of blocks the memory budget may leave (at most [`BLOCK_BUDGET_BYTES`] is
-/// then exceeded for very wide problems, by design: fewer blocks than this would make the
-/// bootstrap's spread meaningless).
+/// The least number of blocks the memory budget may leave (the budget is then exceeded for
+/// very wide problems, by design: fewer blocks than this would make the bootstrap's spread
+/// meaningless).
 const MIN_BLOCKS: usize = 256;
 
 /// One run's weak-form rows: the labels and the columns (free nominal terms, then effects).
 type Rows = (Vec<f64>, Vec<Vec<f64>>);
 
-/// How the training runs' windows are cut into bootstrap blocks: `blen` consecutive windows of
-/// a run, and `group` such blocks of consecutive runs summed into one where even blocks of
-/// `blen` would be too many (many short runs: each run ends a block).
+/// How the training runs' windows are cut into bootstrap blocks: at most `blen` consecutive
+/// windows of a run (and at most half of it, so that every run of two blocks or more has blocks
+/// in both halves), and `group` such blocks of one half summed into one where even those blocks
+/// would be too many (many short runs: each run ends a block).
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Blocking {
     blen: usize,
     group: usize,
 }
 
-/// The [`Blocking`] of runs of `lens` windows with `ncol` columns: blocks of [`BLOCK`] windows,
-/// or of a multiple of it, then groups of them, where the blocks' Gram matrices would exceed
-/// [`BLOCK_BUDGET_BYTES`] (never fewer than [`MIN_BLOCKS`] blocks).
+impl Blocking {
+    /// Windows per block of a run of `len` windows: `blen`, or fewer for a short run, so that
+    /// its first half and its second half are not one block (a multiple of [`BLOCK`]).
+    fn run_blen(&self, len: usize) -> usize {
+        self.blen
+            .min(BLOCK * len.div_ceil(2).div_ceil(BLOCK))
+            .max(BLOCK)
+    }
+}
+
+/// The [`Blocking`] of runs of `lens` windows with `ncol` columns within [`BLOCK_BUDGET_BYTES`].
 fn blocking(lens: &[usize], ncol: usize) -> Blocking {
-    let per_gram = 8 * (ncol * ncol + ncol) + 64;
-    let max_blocks = (BLOCK_BUDGET_BYTES / per_gram.max(1)).max(MIN_BLOCKS);
+    blocking_within(lens, ncol, BLOCK_BUDGET_BYTES)
+}
+
+/// Blocks of [`BLOCK`] windows, or of a multiple of it, then groups of them, where the blocks'
+/// Gram matrices would exceed `budget` bytes (never fewer than [`MIN_BLOCKS`] blocks).
+fn blocking_within(lens: &[usize], ncol: usize, budget: usize) -> Blocking {
+    let max_blocks = (budget / gram_bytes(ncol)).max(MIN_BLOCKS);
     let windows: usize = lens.iter().sum();
     let blen = BLOCK * windows.div_ceil(BLOCK).div_ceil(max_blocks).max(1);
-    let count: usize = lens.iter().map(|l| l.div_ceil(blen)).sum();
+    let b = Blocking { blen, group: 1 };
+    let count: usize = lens.iter().map(|&l| l.div_ceil(b.run_blen(l))).sum();
     Blocking {
         blen,
         group: count.div_ceil(max_blocks).max(1),
     }
+}
+
+/// Bytes of one block's Gram matrix over `ncol` columns (with its vector and bookkeeping).
+fn gram_bytes(ncol: usize) -> usize {
+    8 * (ncol * ncol + ncol) + 64
 }
 
 /// The bootstrap blocks of a run of `len` windows: `blen` consecutive windows each.
@@ -695,28 +715,30 @@ fn block_ranges(len: usize, blen: usize) -> impl Iterator<Item = std::ops::Range
     (0..len).step_by(blen).map(move |a| a..(a + blen).min(len))
 }
 
-/// The Gram matrix of each bootstrap block of `runs` (in run order) and whether it lies in the
-/// second half of its run. With `group` > 1, up to `group` consecutive blocks of the same half
-/// are summed into one (a group may span runs: its rows are still consecutive windows of one
-/// half each), so the halves' comparison keeps its meaning.
+/// The Gram matrix of each bootstrap block of `runs` and whether it lies in the second half of
+/// its run. With `group` > 1, up to `group` blocks of the same half (of consecutive runs) are
+/// summed into one, so the halves' comparison keeps its meaning and at most two groups are open
+/// at a time.
 fn block_grams(rows: &[Rows], ncol: usize, runs: &[usize], b: Blocking) -> (Vec<Gram>, Vec<bool>) {
-    let (mut out, mut late) = (Vec::new(), Vec::new());
-    let mut in_group = 0;
+    let (mut out, mut late) = (Vec::<Gram>::new(), Vec::new());
+    // Per half: the open group's index in `out` and how many blocks it holds.
+    let mut open: [Option<(usize, usize)>; 2] = [None, None];
     for &r in runs {
         let (lab, cols) = &rows[r];
-        for range in block_ranges(lab.len(), b.blen) {
+        for range in block_ranges(lab.len(), b.run_blen(lab.len())) {
             let is_late = range.start + range.end >= lab.len();
             let mut g = Gram::zeros(ncol);
             g.add_rows(cols, lab, range);
-            match out.last_mut() {
-                Some(last) if in_group < b.group && late.last() == Some(&is_late) => {
-                    Gram::add(last, &g);
-                    in_group += 1;
+            let h = is_late as usize;
+            match open[h] {
+                Some((at, n)) if n < b.group => {
+                    out[at].add(&g);
+                    open[h] = Some((at, n + 1));
                 }
                 _ => {
                     out.push(g);
                     late.push(is_late);
-                    in_group = 1;
+                    open[h] = Some((out.len() - 1, 1));
                 }
             }
         }
@@ -1653,8 +1675,8 @@ impl Discovery {
 #[cfg(test)]
 mod tests {
     use super::{
-        block_grams, blocking, contradicts, drifts, spread, Blocking, Rows, BLOCK,
-        BLOCK_BUDGET_BYTES, MIN_BLOCKS,
+        block_grams, blocking, blocking_within, contradicts, drifts, gram_bytes, spread, Blocking,
+        Rows, BLOCK, MIN_BLOCKS,
     };
 
     #[test]
@@ -1726,11 +1748,6 @@ mod tests {
 
     #[test]
     fn bootstrap_blocks_stay_within_their_memory_budget() {
-        let bytes = |b: Blocking, lens: &[usize], ncol: usize| {
-            // Blocks per run at blen, then groups (at most one more per run for its halves).
-            let blocks: usize = lens.iter().map(|l| l.div_ceil(b.blen)).sum();
-            blocks.div_ceil(b.group) * 8 * (ncol * ncol + ncol)
-        };
         // The benchmarks' sizes keep blocks of BLOCK windows (Silverbox: 65,000 samples at most
         // one window each, some 40 columns).
         let one = Blocking {
@@ -1741,18 +1758,57 @@ mod tests {
         assert_eq!(blocking(&[16_000; 4], 40), one);
         assert_eq!(blocking(&[], 40), one);
         // 10^6 samples at a stride of 5 and 300 columns: 25,000 blocks of 721 KB (18 GB) before.
-        let lens = [200_000];
-        let b = blocking(&lens, 300);
-        assert!(b.blen.is_multiple_of(BLOCK) && b.group == 1, "{b:?}");
-        assert!(bytes(b, &lens, 300) <= BLOCK_BUDGET_BYTES, "{b:?}");
-        // Ten thousand short runs: each run ends a block, so blocks are grouped across runs.
-        let lens = vec![30; 10_000];
-        let b = blocking(&lens, 300);
-        assert!(b.group > 1, "{b:?}");
-        assert!(bytes(b, &lens, 300) <= BLOCK_BUDGET_BYTES, "{b:?}");
+        let b = blocking(&[200_000], 300);
+        assert!(
+            b.blen.is_multiple_of(BLOCK) && b.blen > BLOCK && b.group == 1,
+            "{b:?}"
+        );
         // So wide that the budget holds fewer than MIN_BLOCKS: MIN_BLOCKS of them.
         let b = blocking(&[1_000_000], 3000);
         assert_eq!(1_000_000usize.div_ceil(b.blen), MIN_BLOCKS);
+    }
+
+    /// Rows of `lens` windows, two columns.
+    fn rows_of(lens: &[usize]) -> Vec<Rows> {
+        lens.iter()
+            .enumerate()
+            .map(|(r, &n)| {
+                let col = |k: usize| (0..n).map(|i| ((i * 5 + r + k) % 9) as f64 - 4.0).collect();
+                (col(2), vec![col(0), col(1)])
+            })
+            .collect()
+    }
+
+    #[test]
+    fn blocks_counted_as_built_stay_within_a_budget_and_keep_both_halves() {
+        // A budget of MIN_BLOCKS Grams of two columns, over shapes that broke the first design:
+        // many short runs (each ends a block), runs of exactly two blocks (early, late, early,
+        // late: nothing consecutive to merge), and one long run.
+        let budget = MIN_BLOCKS * gram_bytes(2);
+        for lens in [
+            vec![12; 5_000],
+            vec![16; 3_000],
+            vec![200; 300],
+            vec![40_000],
+            vec![9; 2_000],
+        ] {
+            let b = blocking_within(&lens, 2, budget);
+            let runs: Vec<usize> = (0..lens.len()).collect();
+            let (g, late) = block_grams(&rows_of(&lens), 2, &runs, b);
+            assert!(
+                g.len() <= MIN_BLOCKS + 2,
+                "{} runs of {}: {} Grams, {b:?}",
+                lens.len(),
+                lens[0],
+                g.len()
+            );
+            assert!(
+                late.iter().any(|&l| l) && late.iter().any(|&l| !l),
+                "{lens:?}: one half only"
+            );
+            let rows: usize = g.iter().map(|x| x.rows).sum();
+            assert_eq!(rows, lens.iter().sum::<usize>());
+        }
     }
 
     #[test]

@@ -935,10 +935,20 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     // Every run is simulated free from an initial state fitted on its first samples (the gate
     // and test runs' scores): a run long enough for derivatives but not for that fit gave NaN
     // scores and a refinement judged `inf -> inf`.
-    rs.require_min_len(
-        simulate::initial_window(max_order),
-        &format!("a free run's initial state (order {max_order})"),
-    )?;
+    let min = simulate::initial_window(max_order);
+    let named = split
+        .train
+        .iter()
+        .chain(split.validation.iter().flatten())
+        .chain(&split.test);
+    if let Some(&r) = named.into_iter().find(|&&r| rs.runs[r].len() < min) {
+        return Err(Error::RunTooShort {
+            run: rs.runs[r].id.clone(),
+            len: rs.runs[r].len(),
+            min,
+            what: format!("a free run's initial state (order {max_order})"),
+        });
+    }
     let say = |msg: String| {
         if let Some(p) = settings.progress {
             p(&msg);
@@ -1342,16 +1352,16 @@ fn refine_run(model: &ModelFile, prep: &Prepared, outputs: &[usize], r: usize) -
 }
 
 /// The runs a refinement fits, the runs that judge it, and what those are, in words.
+/// The gate's name when no run is held out (one training run, no validation runs): the free
+/// runs that judge are of the training run itself ([`RefinementReport::gate`]).
+pub const PROXY_GATE: &str = "training runs (proxy)";
+
 fn gate_split(prep: &Prepared, split: &Split) -> (Vec<usize>, Vec<usize>, &'static str) {
     match &split.validation {
         Some(v) => (split.train.clone(), v.clone(), "validation runs"),
         None => match split.folds(prep.settings.folds).into_iter().next() {
             Some((fit, held)) if split.train.len() >= 2 => (fit, held, "held-out training fold"),
-            _ => (
-                split.train.clone(),
-                split.train.clone(),
-                "training runs (proxy)",
-            ),
+            _ => (split.train.clone(), split.train.clone(), PROXY_GATE),
         },
     }
 }
@@ -1675,7 +1685,7 @@ fn mimo_candidate(
     ord: &[usize],
     split: &Split,
 ) -> Result<Candidate> {
-    let (fit, held) = mimo_runs(prep, split);
+    let (fit, held, gate) = gate_split(prep, split);
     let m = prep.fit_candidate(i, ord, &fit)?;
     let profile = |runs: &[usize]| -> Result<Profile> {
         let (e, l) = prep.residuals(&m, i, ord, runs)?;
@@ -1683,7 +1693,7 @@ fn mimo_candidate(
     };
     // With one training run and no validation runs the gate is the training run itself: no
     // validation profile then (as for a single output), not training residuals under its name.
-    let validation = if held == fit {
+    let validation = if gate == PROXY_GATE {
         Profile([f64::NAN; 7])
     } else {
         profile(&held)?

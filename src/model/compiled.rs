@@ -83,16 +83,6 @@ impl CTerm {
 /// otherwise ask for gigabytes. Models written by ctsid stay far below it.
 const MAX_GRADIENT_NODES: u64 = 4_000_000;
 
-/// The first 60 characters of `text`, for an error message.
-fn one_line_prefix(text: &str) -> String {
-    let t: String = text.chars().take(60).collect();
-    if t.len() < text.len() {
-        format!("{t}...")
-    } else {
-        t
-    }
-}
-
 /// Fast evaluator of a model's right-hand sides.
 ///
 /// `z` is the concatenation `[state, inputs]` (see [`Model::variable_names`]); the state holds,
@@ -139,7 +129,7 @@ impl CompiledModel {
                                 path: "<memory>".into(),
                                 message: format!(
                                     "the term '{}' of '{}' makes the model's derivatives too large to build (more than {MAX_GRADIENT_NODES} nodes); write long products as monomial exponents",
-                                    one_line_prefix(text),
+                                    crate::util::clip(text, 60),
                                     o.name
                                 ),
                             });

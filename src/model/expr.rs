@@ -475,7 +475,10 @@ fn lex(text: &str) -> Result<Vec<Tok>> {
             if !v.is_finite() {
                 return Err(Error::param(
                     "expression",
-                    format!("'{text}': '{t}' is beyond the range of f64 numbers"),
+                    format!(
+                        "'{}': '{t}' is beyond the range of f64 numbers",
+                        crate::util::clip(text, 60)
+                    ),
                 ));
             }
             out.push(Tok::Num(v));
