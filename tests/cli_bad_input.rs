@@ -3,7 +3,7 @@
 
 mod common;
 
-use common::cli::{bin, fails, overall_nrmse, run, temp_file, words};
+use common::cli::{bin, ctsid, fails, overall_nrmse, run, temp_file, words};
 use std::path::PathBuf;
 
 fn dir() -> PathBuf {
@@ -559,4 +559,90 @@ fn odd_settings_and_line_breaks_in_names() {
         ],
         &["'a' is given twice"],
     );
+}
+
+#[test]
+fn regress_edge_cases_found_by_the_sixth_reading() {
+    let rows = |f: &dyn Fn(usize) -> String, head: &str| {
+        let mut s = format!("{head}\n");
+        for i in 0..60 {
+            s += &f(i);
+            s += "\n";
+        }
+        s
+    };
+    let sin = |a: f64, i: usize| (a * i as f64).sin();
+    // Features near 1e60 at degree 6: a breakpoint the selection does not choose holds x^6,
+    // whose coefficient leaves f64 in the data's units; that refused the whole fit.
+    let big = file(
+        "big60.csv",
+        &rows(
+            &|i| {
+                let (x, z) = (1e60 * sin(0.7, i), (1.3 * i as f64).cos());
+                format!("{x:e},{z},{}", 1e-60 * x + z + 0.05 * sin(5.1, i))
+            },
+            "x,z,y",
+        ),
+    );
+    let (ok, out, err) = ctsid(&[
+        "regress",
+        &big,
+        "--features x,z --label y --degree 6 --engine cpu",
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.contains("*x") && out.contains("*z"), "{out}");
+    // Rows of zero weight are not samples: three weighted rows fitted three terms exactly.
+    let w3 = file(
+        "w3.csv",
+        &rows(
+            &|i| {
+                let (x, z) = (sin(0.7, i), (1.3 * i as f64).cos());
+                format!("{x},{z},{},{}", 2.0 * x + z, (i < 3) as u8)
+            },
+            "x,z,y,w",
+        ),
+    );
+    fails(
+        &[
+            "regress",
+            &w3,
+            "--features x,z --label y --degree 3 --weights w --engine cpu",
+        ],
+        &["3 samples of positive weight are too few"],
+    );
+    // --epsilon: the term that failed the relevance test was kept (the path's last breakpoint).
+    let eps = file(
+        "eps.csv",
+        &rows(
+            &|i| {
+                let (x, z) = (sin(0.7, i), (1.3 * i as f64).cos());
+                format!("{x},{z},{}", 2.0 * x + 0.5 * x * z + 0.01 * sin(5.1, i))
+            },
+            "x,z,y",
+        ),
+    );
+    for method in ["forward-ols", "lars"] {
+        let args = format!("--features x,z --label y --degree 2 --method {method} --epsilon 0.3");
+        let (ok, out, err) = ctsid(&["regress", &eps, &args]);
+        assert!(ok, "{err}");
+        let model = out.lines().find(|l| l.starts_with("y =")).unwrap_or("");
+        // x*z lowers the relative residual by about 0.17 < 0.3: only x is left.
+        assert!(
+            model.contains("*x") && !model.contains("x*z"),
+            "{method}: {out}"
+        );
+    }
+    // A constant label: eBIC was -inf, and the model file held a null that did not read back.
+    let cl = file("cl.csv", &rows(&|i| format!("{},5", sin(0.7, i)), "x,y"));
+    let json = dir().join("cl.json").display().to_string();
+    let (ok, out, err) = ctsid(&[
+        "regress",
+        &cl,
+        "--features x --label y --degree 2 -o",
+        &json,
+    ]);
+    assert!(ok, "{err}");
+    assert!(!out.contains("inf") && !err.contains("inf"), "{out}{err}");
+    let text = std::fs::read_to_string(&json).unwrap();
+    assert!(!text.contains("null"), "{text}");
 }

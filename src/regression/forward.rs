@@ -90,6 +90,11 @@ pub(super) fn forward_path(
             break;
         }
         if let Some(reason) = stop_reason(opts, (step, active.len(), n), (rel, prev_rel, alpha)) {
+            // The relevance stop: the last term lowered the relative residual by less than
+            // epsilon, so the path ends before it.
+            if reason == StopReason::Relevance && path.breakpoints.len() > 1 {
+                path.breakpoints.pop();
+            }
             path.stop = reason;
             break;
         }

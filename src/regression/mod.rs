@@ -636,10 +636,15 @@ impl Regression {
                 ),
             ));
         }
-        let n_rows = engine.n_samples();
+        // Rows of zero weight are not samples: counted, they let three weighted rows pass the
+        // minimum and fit three terms exactly (R^2 1, eBIC at its floor).
+        let n_rows = weights.map_or(engine.n_samples(), |w| {
+            w.iter().filter(|&&x| x > 0.0).count()
+        });
         if n_rows < MIN_SAMPLES {
             return Err(Error::InvalidData(format!(
-                "{n_rows} samples are too few to select terms (at least {MIN_SAMPLES}); give more data"
+                "{n_rows} samples{} are too few to select terms (at least {MIN_SAMPLES}); give more data",
+                if weights.is_some() { " of positive weight" } else { "" }
             )));
         }
         // eBIC's n: the effective number of independent samples, never more than the rows.
@@ -857,14 +862,19 @@ fn unscale(model: &mut Model, basis: &Basis, pows: &[i32]) -> Result<()> {
             t.coefficient = map(t.coefficient, id, &t.name)?;
         }
     }
+    // The path's breakpoints are diagnostics: one the selection did not choose may hold a term
+    // whose coefficient leaves f64 in the data's units (x^6 of features near 1e60), which must
+    // not refuse the fit; such a value is written at the end of the range with its sign.
     for bp in &mut model.path {
-        for ((c, &id), name) in bp
-            .coefficients
-            .iter_mut()
-            .zip(&bp.active_index)
-            .zip(&bp.active)
-        {
-            *c = map(*c, id, name)?;
+        for (c, &id) in bp.coefficients.iter_mut().zip(&bp.active_index) {
+            if id < nb {
+                let v = times_pow2(*c, -shift(id));
+                *c = if v.is_finite() {
+                    v
+                } else {
+                    f64::MAX.copysign(*c)
+                };
+            }
         }
     }
     Ok(())

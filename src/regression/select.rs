@@ -41,7 +41,10 @@ pub fn ln_binom(p: usize, k: usize) -> f64 {
 /// Extended BIC (see the module docs).
 pub fn ebic(n: usize, rss: f64, k: usize, p: usize, gamma: f64, floor: f64) -> f64 {
     let nf = n as f64;
-    nf * (rss.max(floor) / nf).ln() + k as f64 * nf.ln() + 2.0 * gamma * ln_binom(p, k)
+    // A floor of 0 (a constant label: its norm sets the floor) would give ln 0 = -inf, printed
+    // as such and written to the model file as a null that does not read back.
+    let rss = rss.max(floor).max(f64::MIN_POSITIVE);
+    nf * (rss / nf).ln() + k as f64 * nf.ln() + 2.0 * gamma * ln_binom(p, k)
 }
 
 /// eBIC of every breakpoint's support (None where the refit is singular), in path order.
