@@ -14,15 +14,28 @@ use std::path::Path;
 /// when the folder cannot be created or the file cannot be written.
 pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::file(dir.display().to_string(), e))?;
-    // Names carry run ids and channel names from the data: keep them inside `dir`.
-    let p = dir.join(safe_name(name));
+    // Names carry run ids and channel names from the data: keep them inside `dir`, and short
+    // enough for the file system, with their extension.
+    let file = match name.rsplit_once('.') {
+        Some((stem, ext)) if !ext.is_empty() && ext.len() <= 8 => {
+            format!("{}.{}", safe_name(stem), safe_name(ext))
+        }
+        _ => safe_name(name),
+    };
+    let p = dir.join(file);
     crate::util::write_atomic(&p, text.as_bytes())
 }
 
+/// Characters a file name keeps of a name from the data: file systems refuse names over 255
+/// bytes, and a run id of 300 characters failed the report after every figure before it had
+/// been written (the callers make clipped names unique).
+pub const MAX_NAME_CHARS: usize = 120;
+
 /// `name` as [`write_file`] names its file: characters other than ASCII letters, digits and
-/// `._-` become `_`.
+/// `._-` become `_`, and only the first [`MAX_NAME_CHARS`] are kept.
 pub fn safe_name(name: &str) -> String {
     name.chars()
+        .take(MAX_NAME_CHARS)
         .map(|c| {
             if c.is_ascii_alphanumeric() || "._-".contains(c) {
                 c
@@ -52,13 +65,21 @@ impl Table {
     }
 
     pub fn markdown(&self) -> String {
+        // A `|` in a cell (a run id, an error text) would split it into two columns, a line
+        // break would end the row.
+        let cells = |r: &[String]| -> String {
+            r.iter()
+                .map(|c| c.replace('|', "\\|").replace(['\n', '\r'], " "))
+                .collect::<Vec<_>>()
+                .join(" | ")
+        };
         let mut s = format!(
             "| {} |\n|{}|\n",
-            self.header.join(" | "),
+            cells(&self.header),
             vec!["---"; self.header.len()].join("|")
         );
         for r in &self.rows {
-            s += &format!("| {} |\n", r.join(" | "));
+            s += &format!("| {} |\n", cells(r));
         }
         s
     }
@@ -86,6 +107,22 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("ctsid-report-{}", std::process::id()));
         super::write_file(&dir, "test_run_../exp/5.svg", "x").unwrap();
         assert!(dir.join("test_run_.._exp_5.svg").is_file());
+        // A run id of 300 characters: clipped, the extension kept (the OS refused the name).
+        let long = format!("sim_{}_y.svg", "L".repeat(300));
+        super::write_file(&dir, &long, "x").unwrap();
+        let want = format!("sim_{}.svg", "L".repeat(super::MAX_NAME_CHARS - 4));
+        assert!(dir.join(&want).is_file(), "{want}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn markdown_cells_keep_their_columns() {
+        let mut t = super::Table::new(&["run", "note"]);
+        t.row(vec!["a|b".into(), "diverged:\nline two".into()]);
+        let md = t.markdown();
+        let row = md.lines().nth(2).unwrap();
+        assert_eq!(row, "| a\\|b | diverged: line two |");
+        // Three unescaped separators: two columns.
+        assert_eq!(row.replace("\\|", "").matches('|').count(), 3, "{row}");
     }
 }

@@ -493,15 +493,30 @@ fn fmt_tick(v: f64) -> String {
     }
 }
 
+/// Text as XML character data: `& < >` escaped, and control characters (which XML 1.0 does not
+/// allow at all: a run id with `\x01` made the figure unreadable) shown as U+FFFD.
 fn esc(t: &str) -> String {
-    t.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
+    t.chars()
+        .map(|c| match c {
+            '\t' | '\n' | '\r' => c.to_string(),
+            c if (c as u32) < 0x20 || c == '\u{FFFE}' || c == '\u{FFFF}' => '\u{FFFD}'.to_string(),
+            '&' => "&amp;".into(),
+            '<' => "&lt;".into(),
+            '>' => "&gt;".into(),
+            c => c.to_string(),
+        })
+        .collect()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn text_from_the_data_is_well_formed_xml() {
+        assert_eq!(esc("a\u{1}b & <c>"), "a\u{FFFD}b &amp; &lt;c&gt;");
+        assert_eq!(esc("tab\tok"), "tab\tok");
+    }
 
     fn series<'a>(x: &'a [f64], y: &'a [f64], dashed: bool) -> Series<'a> {
         Series {
