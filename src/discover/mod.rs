@@ -680,9 +680,8 @@ impl Blocking {
     /// Windows per block of a run of `len` windows: `blen`, or fewer for a short run, so that
     /// its first half and its second half are not one block (a multiple of [`BLOCK`]).
     fn run_blen(&self, len: usize) -> usize {
-        self.blen
-            .min(BLOCK * len.div_ceil(2).div_ceil(BLOCK))
-            .max(BLOCK)
+        // Rounded down: a block never reaches past the middle of its run.
+        self.blen.min(BLOCK * (len / 2 / BLOCK)).max(BLOCK)
     }
 }
 
@@ -1609,7 +1608,8 @@ impl Discovery {
         for r in &self.runs {
             s += &format!(
                 "| {} | {} | {} | {} | {} | {} |\n",
-                r.run,
+                // A '|' or line break in a run id would split the row.
+                r.run.replace('|', "\\|").replace(['\n', '\r'], " "),
                 r.role,
                 num4(r.nrmse_nominal),
                 num4(r.above_noise),
@@ -1763,6 +1763,10 @@ mod tests {
             b.blen.is_multiple_of(BLOCK) && b.blen > BLOCK && b.group == 1,
             "{b:?}"
         );
+        // Long blocks stop at the middle of a short run (rounded down to whole BLOCKs).
+        let b = Blocking { blen: 24, group: 1 };
+        assert_eq!((b.run_blen(40), b.run_blen(17), b.run_blen(9)), (16, 8, 8));
+        assert_eq!(b.run_blen(1000), 24);
         // So wide that the budget holds fewer than MIN_BLOCKS: MIN_BLOCKS of them.
         let b = blocking(&[1_000_000], 3000);
         assert_eq!(1_000_000usize.div_ceil(b.blen), MIN_BLOCKS);

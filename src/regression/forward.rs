@@ -85,16 +85,19 @@ pub(super) fn forward_path(
             coefs,
             rel_residual: rel,
         });
+        // The relevance stop first: the last term lowered the relative residual by less than
+        // epsilon (each breakpoint is the exact least-squares fit of its support, so that is
+        // the term's own gain), and the path ends before it, whatever else would stop it here.
+        if opts.epsilon > 0.0 && step > 0 && prev_rel - rel < opts.epsilon {
+            path.breakpoints.pop();
+            path.stop = StopReason::Relevance;
+            break;
+        }
         if monitor(&path, step) {
             path.stop = StopReason::NoImprovement;
             break;
         }
-        if let Some(reason) = stop_reason(opts, (step, active.len(), n), (rel, prev_rel, alpha)) {
-            // The relevance stop: the last term lowered the relative residual by less than
-            // epsilon, so the path ends before it.
-            if reason == StopReason::Relevance && path.breakpoints.len() > 1 {
-                path.breakpoints.pop();
-            }
+        if let Some(reason) = stop_reason(opts, (step, active.len(), n), (rel, alpha)) {
             path.stop = reason;
             break;
         }
@@ -181,7 +184,7 @@ pub(super) fn forward_path(
 fn stop_reason(
     opts: &PathOptions,
     (step, active, n): (usize, usize, usize),
-    (rel, prev_rel, alpha): (f64, f64, f64),
+    (rel, alpha): (f64, f64),
 ) -> Option<StopReason> {
     if step >= opts.max_steps {
         Some(StopReason::MaxSteps)
@@ -193,8 +196,6 @@ fn stop_reason(
         Some(StopReason::ExactFit)
     } else if alpha <= opts.alpha_min {
         Some(StopReason::AlphaMin)
-    } else if opts.epsilon > 0.0 && step > 0 && prev_rel - rel < opts.epsilon {
-        Some(StopReason::Relevance)
     } else {
         None
     }

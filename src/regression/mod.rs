@@ -638,9 +638,11 @@ impl Regression {
         }
         // Rows of zero weight are not samples: counted, they let three weighted rows pass the
         // minimum and fit three terms exactly (R^2 1, eBIC at its floor).
-        let n_rows = weights.map_or(engine.n_samples(), |w| {
-            w.iter().filter(|&&x| x > 0.0).count()
-        });
+        // (Weights of another length or with bad values are left to the path's own checks.)
+        let all = engine.n_samples();
+        let n_rows = weights
+            .filter(|w| w.len() == all && w.iter().all(|x| x.is_finite() && *x >= 0.0))
+            .map_or(all, |w| w.iter().filter(|&&x| x > 0.0).count());
         if n_rows < MIN_SAMPLES {
             return Err(Error::InvalidData(format!(
                 "{n_rows} samples{} are too few to select terms (at least {MIN_SAMPLES}); give more data",

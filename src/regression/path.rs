@@ -853,20 +853,13 @@ impl<'a> Lars<'a> {
     /// gets that alpha too from the exact column (as every entering breakpoint's), unless the
     /// swept value had drifted.
     fn finish(mut self, last_idx: usize) -> Result<Path> {
-        // The relevance stop: the last breakpoint holds the term whose entry lowered the
-        // relative residual by less than epsilon; the path ends before it (the breakpoint
-        // before keeps its alpha, set when that term entered).
-        if self.path.stop == StopReason::Relevance && self.path.breakpoints.len() > 1 {
-            self.path.breakpoints.pop();
-            self.path.sweeps = self.sd.sweeps;
-            return Ok(self.path);
-        }
         if matches!(
             self.path.stop,
             StopReason::MaxSteps
                 | StopReason::MaxTerms
                 | StopReason::SampleLimit
                 | StopReason::ExactFit
+                | StopReason::Relevance
                 | StopReason::NoImprovement
         ) && last_idx != usize::MAX
         {

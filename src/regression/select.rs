@@ -43,7 +43,8 @@ pub fn ebic(n: usize, rss: f64, k: usize, p: usize, gamma: f64, floor: f64) -> f
     let nf = n as f64;
     // A floor of 0 (a constant label: its norm sets the floor) would give ln 0 = -inf, printed
     // as such and written to the model file as a null that does not read back.
-    let rss = rss.max(floor).max(f64::MIN_POSITIVE);
+    let rss = rss.max(floor);
+    let rss = if rss > 0.0 { rss } else { f64::MIN_POSITIVE };
     nf * (rss / nf).ln() + k as f64 * nf.ln() + 2.0 * gamma * ln_binom(p, k)
 }
 

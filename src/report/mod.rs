@@ -18,24 +18,33 @@ pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
     // enough for the file system, with their extension.
     let file = match name.rsplit_once('.') {
         Some((stem, ext)) if !ext.is_empty() && ext.len() <= 8 => {
-            format!("{}.{}", safe_name(stem), safe_name(ext))
+            format!("{}.{}", clean(stem, MAX_FILE_CHARS), clean(ext, 8))
         }
-        _ => safe_name(name),
+        _ => clean(name, MAX_FILE_CHARS),
     };
     let p = dir.join(file);
     crate::util::write_atomic(&p, text.as_bytes())
 }
 
-/// Characters a file name keeps of a name from the data: file systems refuse names over 255
-/// bytes, and a run id of 300 characters failed the report after every figure before it had
-/// been written (the callers make clipped names unique).
+/// Characters of a name from the data that a file name stem keeps ([`safe_name`]): file systems
+/// refuse names over 255 bytes, and a run id of 300 characters failed the report after its first
+/// figures. Callers clip a name once, make it unique, then add their prefix and suffix; those
+/// fit within [`MAX_FILE_CHARS`], the last guard of [`write_file`].
 pub const MAX_NAME_CHARS: usize = 120;
 
-/// `name` as [`write_file`] names its file: characters other than ASCII letters, digits and
-/// `._-` become `_`, and only the first [`MAX_NAME_CHARS`] are kept.
+/// Characters [`write_file`] keeps of a file's stem (well under 255 bytes with any extension).
+const MAX_FILE_CHARS: usize = 200;
+
+/// `name` as a file name stem: characters other than ASCII letters, digits and `._-` become
+/// `_`, and only the first [`MAX_NAME_CHARS`] are kept.
 pub fn safe_name(name: &str) -> String {
+    clean(name, MAX_NAME_CHARS)
+}
+
+/// The first `max` characters of `name`, those other than ASCII letters, digits and `._-` as `_`.
+fn clean(name: &str, max: usize) -> String {
     name.chars()
-        .take(MAX_NAME_CHARS)
+        .take(max)
         .map(|c| {
             if c.is_ascii_alphanumeric() || "._-".contains(c) {
                 c
@@ -107,11 +116,15 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("ctsid-report-{}", std::process::id()));
         super::write_file(&dir, "test_run_../exp/5.svg", "x").unwrap();
         assert!(dir.join("test_run_.._exp_5.svg").is_file());
-        // A run id of 300 characters: clipped, the extension kept (the OS refused the name).
+        // A name of 300 characters: clipped, the extension kept (the OS refused the name). The
+        // callers clip a run id first ([`safe_name`]), so their own prefixes and suffixes stay.
         let long = format!("sim_{}_y.svg", "L".repeat(300));
         super::write_file(&dir, &long, "x").unwrap();
-        let want = format!("sim_{}.svg", "L".repeat(super::MAX_NAME_CHARS - 4));
+        let want = format!("sim_{}.svg", "L".repeat(super::MAX_FILE_CHARS - 4));
         assert!(dir.join(&want).is_file(), "{want}");
+        let stem = format!("{}_2", super::safe_name(&"L".repeat(300)));
+        super::write_file(&dir, &format!("resid_{stem}.svg"), "x").unwrap();
+        assert!(dir.join(format!("resid_{stem}.svg")).is_file());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
