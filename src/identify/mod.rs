@@ -905,12 +905,15 @@ fn prepare<'a>(
     })
 }
 
-/// Runs the whole workflow on a record set with a checked split. Refuses settings that
-/// [`Settings::validate`] refuses, a split that [`Split::check`] refuses, a channel the record set
-/// lacks, an output or input that is constant over the training runs, and a run too short for
-/// derivatives up to the highest order; errors of the derivatives, the regression, the refinement
-/// and the simulations on the way are passed on.
-pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Identification> {
+/// The output and input channels of `settings` in `rs`, after the checks [`identify`] makes
+/// before any work: the settings, the split, channels that exist and vary over the training runs
+/// (an output within at least one of them), and runs long enough for derivatives and for a free
+/// run's initial state at the highest order.
+fn checked_channels(
+    rs: &RecordSet,
+    split: &Split,
+    settings: &Settings,
+) -> Result<(Vec<usize>, Vec<usize>)> {
     settings.validate()?;
     split.check(rs.runs.len())?;
     let outputs: Vec<usize> = settings
@@ -949,6 +952,18 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
             what: format!("a free run's initial state (order {max_order})"),
         });
     }
+    Ok((outputs, inputs))
+}
+
+/// Runs the whole workflow on a record set with a checked split. Refuses settings that
+/// [`Settings::validate`] refuses, a split that [`Split::check`] refuses, a channel the record set
+/// lacks, an output or input that is constant over the training runs (an output also within
+/// every one of them), and a run too short for derivatives up to the highest order or for a free
+/// run's initial state; errors of the derivatives, the regression, the refinement
+/// and the simulations on the way are passed on.
+pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Identification> {
+    let (outputs, inputs) = checked_channels(rs, split, settings)?;
+    let max_order = settings.max_order();
     let say = |msg: String| {
         if let Some(p) = settings.progress {
             p(&msg);
