@@ -1382,7 +1382,12 @@ mod tests {
             private_device: true,
             ..GpuOptions::default()
         };
-        match GpuEngine::new(&f, &b, options) {
+        engine_or_skip(&f, &b, options)
+    }
+
+    /// The engine, or `None` with a notice where there is no adapter and none is required.
+    fn engine_or_skip(f: &Features, b: &Basis, options: GpuOptions) -> Option<GpuEngine> {
+        match GpuEngine::new(f, b, options) {
             Ok(e) => Some(e),
             Err(Error::NoGpu(m)) if !require_gpu() => {
                 println!("skipping: no GPU adapter ({m})");
@@ -1462,12 +1467,8 @@ mod tests {
             timeout: Duration::ZERO,
             ..GpuOptions::default()
         };
-        let mut eng = match GpuEngine::new(&f, &b, options) {
-            Ok(e) => e,
-            Err(Error::NoGpu(m)) if !require_gpu() => {
-                return println!("skipping: no GPU adapter ({m})")
-            }
-            Err(e) => panic!("{e}"),
+        let Some(mut eng) = engine_or_skip(&f, &b, options) else {
+            return;
         };
         let mut out = vec![0.0; eng.n_candidates()];
         match eng.sweep(&vec![1.0; 20_000], &mut out) {
