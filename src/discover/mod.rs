@@ -722,41 +722,53 @@ fn block_grams(rows: &[Rows], ncol: usize, runs: &[usize], b: Blocking) -> (Vec<
     let (mut out, mut late) = (Vec::<Gram>::new(), Vec::new());
     // Per half: the open group's index in `out` and how many blocks it holds.
     let mut open: [Option<(usize, usize)>; 2] = [None, None];
-    for &r in runs {
-        let (lab, cols) = &rows[r];
-        for range in block_ranges(lab.len(), b.run_blen(lab.len())) {
-            let is_late = range.start + range.end >= lab.len();
-            let mut g = Gram::zeros(ncol);
-            g.add_rows(cols, lab, range);
-            let h = is_late as usize;
-            match open[h] {
-                Some((at, n)) if n < b.group => {
-                    out[at].add(&g);
-                    open[h] = Some((at, n + 1));
-                }
-                _ => {
-                    out.push(g);
-                    late.push(is_late);
-                    open[h] = Some((out.len() - 1, 1));
-                }
+    for (g, is_late) in blocks(rows, ncol, runs, b) {
+        let h = is_late as usize;
+        match open[h] {
+            Some((at, n)) if n < b.group => {
+                out[at].add(&g);
+                open[h] = Some((at, n + 1));
+            }
+            _ => {
+                out.push(g);
+                late.push(is_late);
+                open[h] = Some((out.len() - 1, 1));
             }
         }
     }
     (out, late)
 }
 
+/// Each block's Gram matrix of `runs` (in run order, blocks of [`Blocking::run_blen`] windows)
+/// and whether it lies in the second half of its run.
+fn blocks<'a>(
+    rows: &'a [Rows],
+    ncol: usize,
+    runs: &'a [usize],
+    b: Blocking,
+) -> impl Iterator<Item = (Gram, bool)> + 'a {
+    runs.iter().flat_map(move |&r| {
+        let (lab, cols) = &rows[r];
+        block_ranges(lab.len(), b.run_blen(lab.len())).map(move |range| {
+            let is_late = range.start + range.end >= lab.len();
+            let mut g = Gram::zeros(ncol);
+            g.add_rows(cols, lab, range);
+            (g, is_late)
+        })
+    })
+}
+
 /// The sum of the validation runs' block Grams at [`BLOCK`] windows a block, without keeping
 /// the blocks (the same additions in the same order as when they were kept).
 fn summed_block_grams(p: &Prepared, runs: &[usize]) -> Gram {
     let ncol = p.free.len() + p.effects.len();
+    let plain = Blocking {
+        blen: BLOCK,
+        group: 1,
+    };
     let mut total = Gram::zeros(ncol);
-    for &r in runs {
-        let (lab, cols) = &p.rows[r];
-        for range in block_ranges(lab.len(), BLOCK) {
-            let mut g = Gram::zeros(ncol);
-            g.add_rows(cols, lab, range);
-            total.add(&g);
-        }
+    for (g, _) in blocks(&p.rows, ncol, runs, plain) {
+        total.add(&g);
     }
     total
 }

@@ -1367,15 +1367,23 @@ mod tests {
         std::env::var("CTSID_REQUIRE_GPU").as_deref() == Ok("1")
     }
 
-    fn tiny_engine() -> Option<GpuEngine> {
-        let cols = (0..3)
+    /// `n_vars` variables of `n` samples in [-1, 1], a fixed pattern, named a, b, c, ...
+    fn pattern_features(n_vars: usize, n: usize) -> Features {
+        let cols = (0..n_vars)
             .map(|k| {
-                (0..200)
+                (0..n)
                     .map(|i| ((i * 7 + k * 3) % 11) as f64 / 5.0 - 1.0)
                     .collect()
             })
             .collect();
-        let f = Features::new(vec!["a".into(), "b".into(), "c".into()], cols).unwrap();
+        let names = (0..n_vars)
+            .map(|k| ((b'a' + k as u8) as char).to_string())
+            .collect();
+        Features::new(names, cols).unwrap()
+    }
+
+    fn tiny_engine() -> Option<GpuEngine> {
+        let f = pattern_features(3, 200);
         let b = Basis::new(&f.names, 3, Default::default()).unwrap();
         // Private: one test destroys its device.
         let options = GpuOptions {
@@ -1453,14 +1461,7 @@ mod tests {
     fn a_zero_timeout_fails_cleanly_and_retires_the_device() {
         // With no time to wait, a sweep either finds its work already done (a fast adapter) or
         // times out; a timeout must leave the engine lost, not waiting again on every call.
-        let cols = (0..4)
-            .map(|k| {
-                (0..20_000)
-                    .map(|i| ((i * 7 + k * 3) % 11) as f64 / 5.0 - 1.0)
-                    .collect()
-            })
-            .collect();
-        let f = Features::new(vec!["a".into(), "b".into(), "c".into(), "d".into()], cols).unwrap();
+        let f = pattern_features(4, 20_000);
         let b = Basis::new(&f.names, 6, Default::default()).unwrap();
         let options = GpuOptions {
             private_device: true,
