@@ -271,6 +271,32 @@ fn unknown_variable_names_the_term_and_name() {
     );
 }
 
+/// An exponent of 0 drops the name from the term, but a name that is no variable is still a
+/// typo to name (it was dropped without a word); known names with 0 read as before.
+#[test]
+fn a_zero_exponent_on_an_unknown_name_is_refused() {
+    let e = err_of(
+        r#"{"format":"ctsid-model/2","inputs":["u"],"outputs":[{"name":"y","order":2,"terms":[
+        {"exponents":{"y":1},"coefficient":1},{"exponents":{"u":1,"nosuchvar":0},"coefficient":1}]}]}"#,
+    );
+    assert!(
+        e.contains("term 2") && e.contains("'nosuchvar'") && e.contains("exponent 0"),
+        "{e}"
+    );
+    let e = err_of(
+        r#"{"format":"ctsid-model/2","inputs":["u"],"outputs":[{"name":"y","order":2,"terms":[
+        {"exponents":{"y_d2":0, "u":1},"coefficient":1}]}]}"#,
+    );
+    assert!(e.contains("y_d2") && e.contains("y..y_d1"), "{e}");
+    let m = Model::from_json_str(
+        r#"{"format":"ctsid-model/2","inputs":["u"],"outputs":[{"name":"y","order":2,"terms":[
+        {"exponents":{"y_d1":0, "u":1, "y_d0":0},"coefficient":1}]}]}"#,
+        "m.json",
+    )
+    .unwrap();
+    assert_eq!(m.to_string().trim(), "y_d2 = 1*u");
+}
+
 #[test]
 fn derivative_at_or_above_the_order_is_refused() {
     let e = err_of(

@@ -468,6 +468,7 @@ fn read_output(
     o: RawOutput,
     output_names: &[String],
     v1: bool,
+    zeros: &mut Vec<(usize, usize, String)>,
 ) -> std::result::Result<OutputEquation, String> {
     if let Some(k) = o.extra.keys().next() {
         let hint = if o.terms.is_none() {
@@ -483,14 +484,17 @@ fn read_output(
     let Some(raw_terms) = o.terms else {
         return Err(format!("output '{}' has no \"terms\" list", o.name));
     };
+    let index = output_names.iter().position(|n| *n == o.name).unwrap_or(0);
     let terms = raw_terms
         .into_iter()
         .enumerate()
         .map(|(k, t)| {
-            read_term(t, output_names, v1)
-                .map_err(|m| format!("output '{}', term {}: {m}", o.name, k + 1))
+            let (term, zero) = read_term(t, output_names, v1)
+                .map_err(|m| format!("output '{}', term {}: {m}", o.name, k + 1))?;
+            zeros.extend(zero.into_iter().map(|n| (index, k, n)));
+            Ok(term)
         })
-        .collect::<std::result::Result<Vec<_>, _>>()?;
+        .collect::<std::result::Result<Vec<_>, String>>()?;
     Ok(OutputEquation {
         name: o.name,
         order: o.order,
@@ -498,8 +502,13 @@ fn read_output(
     })
 }
 
-/// One term of a file; the message says what is wrong with it (the caller names it).
-fn read_term(t: RawTerm, output_names: &[String], v1: bool) -> std::result::Result<Term, String> {
+/// One term of a file and the names it gives exponent 0; the message says what is wrong with it
+/// (the caller names it).
+fn read_term(
+    t: RawTerm,
+    output_names: &[String],
+    v1: bool,
+) -> std::result::Result<(Term, Vec<String>), String> {
     if let Some(k) = t.extra.keys().next() {
         return Err(format!("unknown key \"{k}\" (known: {TERM_KEYS})"));
     }
@@ -525,26 +534,29 @@ fn read_term(t: RawTerm, output_names: &[String], v1: bool) -> std::result::Resu
         }
         (None, Some(e)) => {
             term.expression = Some(e.trim().to_string());
-            Ok(term)
+            Ok((term, Vec::new()))
         }
         (pairs, None) => {
-            term.exponents = read_exponents(pairs.unwrap_or_default(), output_names)?;
-            Ok(term)
+            let (exponents, zeros) = read_exponents(pairs.unwrap_or_default(), output_names)?;
+            term.exponents = exponents;
+            Ok((term, zeros))
         }
     }
 }
 
-/// A monomial's exponents under their canonical names; duplicates and non-integers are errors.
+/// A monomial's exponents under their canonical names, and the names given exponent 0 (left
+/// out of the term); duplicates and non-integers are errors.
 fn read_exponents(
     pairs: Pairs,
     output_names: &[String],
-) -> std::result::Result<BTreeMap<String, u32>, String> {
+) -> std::result::Result<(BTreeMap<String, u32>, Vec<String>), String> {
     let pairs: Vec<(String, Value)> = pairs
         .0
         .into_iter()
         .map(|(n, v)| (canonical_var(&n, output_names).to_string(), v))
         .collect();
     let mut exponents = BTreeMap::new();
+    let mut zeros = Vec::new();
     // Names seen so far (zero exponents included), in a set: a term of tens of thousands of
     // pairs was checked pair against pair, seconds per megabyte of file.
     let mut seen = std::collections::HashSet::with_capacity(pairs.len());
@@ -568,9 +580,11 @@ fn read_exponents(
             })?;
         if e > 0 {
             exponents.insert(name.clone(), e);
+        } else {
+            zeros.push(name.clone());
         }
     }
-    Ok(exponents)
+    Ok((exponents, zeros))
 }
 
 /// The `sign_smoothing` widths by variable; a name given twice or a width that is not a number
@@ -675,10 +689,11 @@ impl Model {
         }
         // Stored under the canonical name, so that expressions know it.
         let output_names: Vec<String> = raw.outputs.iter().map(|o| o.name.clone()).collect();
+        let mut zeros = Vec::new();
         let outputs = raw
             .outputs
             .into_iter()
-            .map(|o| read_output(o, &output_names, format == FORMAT_V1).map_err(err))
+            .map(|o| read_output(o, &output_names, format == FORMAT_V1, &mut zeros).map_err(err))
             .collect::<Result<Vec<_>>>()?;
         let degree = raw.degree.unwrap_or_else(|| largest_degree(&outputs));
         // Whatever version was read, the model is now of the version this one writes.
@@ -693,7 +708,30 @@ impl Model {
             extra: raw.extra,
         };
         model.validate_at(path)?;
+        model.check_zero_exponents(&zeros).map_err(err)?;
         Ok(model)
+    }
+
+    /// Names read with exponent 0 (`(output, term index, name)`) are dropped from their terms,
+    /// but a name that is no variable of the model is a typo worth naming, as it would be with
+    /// any other exponent.
+    fn check_zero_exponents(
+        &self,
+        zeros: &[(usize, usize, String)],
+    ) -> std::result::Result<(), String> {
+        if zeros.is_empty() {
+            return Ok(());
+        }
+        let table = self.variable_table()?;
+        match zeros.iter().find(|(_, _, n)| !table.contains_key(n)) {
+            Some((o, k, name)) => Err(format!(
+                "output '{}', term {}: {} (with exponent 0)",
+                self.outputs[*o].name,
+                k + 1,
+                self.explain_unknown(name)
+            )),
+            None => Ok(()),
+        }
     }
 
     /// Reads and validates a model file. Refuses a path that is not a regular file of at most 256
