@@ -398,6 +398,36 @@ fn finite_time_blow_up_is_reported_with_time_and_state() {
     assert!(msg.contains("run 7") && msg.contains("diverged"), "{msg}");
 }
 
+/// An oscillation far faster than the output grid fits within the per-interval step limit
+/// but costs hundreds of steps in every interval: the limit on the mean stops it within its
+/// first intervals (`ctsid simulate` ran minutes on such a model), and the same simulation
+/// with a mean limit it stays within finishes.
+#[test]
+fn dynamics_far_faster_than_the_sampling_stop_early() {
+    // y'' = -1e8 y: 16 periods per output interval of 0.01 s.
+    let m = siso(2, vec![Term::new(&[("y", 1)], -1e8)]);
+    let t = grid(21, 0.01);
+    let opts = |mean: usize| SimOptions {
+        max_steps_per_interval: 1_000,
+        max_mean_steps_per_interval: mean,
+        ..Default::default()
+    };
+    let ok = simulate(&m, &ConstantInput(vec![0.0]), &[1.0, 0.0], &t, &opts(1_000));
+    let (steps, done) = match &ok {
+        Ok(tr) => (tr.steps, true),
+        Err(e) => panic!("{e}"),
+    };
+    assert!(done && steps > 20 * 100, "{steps} steps");
+    let err = simulate(&m, &ConstantInput(vec![0.0]), &[1.0, 0.0], &t, &opts(50)).unwrap_err();
+    match &err {
+        Error::Diverged { time, state, .. } => {
+            assert!(*time < 0.1, "stopped at {time}");
+            assert!(state.contains("far faster than the sampling"), "{state}");
+        }
+        e => panic!("wrong error {e}"),
+    }
+}
+
 #[test]
 fn bad_arguments_are_errors() {
     let m = siso(2, vec![Term::new(&[("y", 1)], -1.0)]);

@@ -859,6 +859,7 @@ impl Prepared {
 fn gate_options() -> SimOptions {
     SimOptions {
         max_steps_per_interval: 2000,
+        max_mean_steps_per_interval: 2000,
         ..SimOptions::fitting()
     }
 }
