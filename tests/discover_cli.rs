@@ -71,7 +71,7 @@ fn discover_cli_uses_the_given_split() {
         assert!(resid.is_file(), "residual analysis of the test run missing");
     }
     assert!(rep.join("residual_along_y.svg").is_file());
-    let lib = discover(rs, &case.nominal, &Options::new(train, val, test)).unwrap();
+    let mut lib = discover(rs, &case.nominal, &Options::new(train, val, test)).unwrap();
     assert_eq!(lib.verdict, "added", "{}", lib.text());
     assert!(
         out.lines()
@@ -97,6 +97,18 @@ fn discover_cli_uses_the_given_split() {
             l.coefficient
         );
     }
+    // Run ids with one safe file name (`a b`, `a_b`) get figures of their own: the second's
+    // overwrote the first's.
+    assert!(lib.test_runs.len() >= 2);
+    lib.test_runs[0].id = "a b".into();
+    lib.test_runs[1].id = "a_b".into();
+    let names: Vec<String> = lib.plots().into_iter().map(|(n, _)| n).collect();
+    let unique: std::collections::HashSet<&String> = names.iter().collect();
+    assert_eq!(unique.len(), names.len(), "{names:?}");
+    assert!(
+        names.contains(&"test_run_a_b_2.svg".to_string()),
+        "{names:?}"
+    );
 
     fails(
         &[

@@ -1457,6 +1457,8 @@ impl Discovery {
         use crate::report::compare::{comparison_figure, residual_figure, Comparison};
         use crate::report::svg::{line_plot, Series};
         let mut out = Vec::new();
+        // One figure name per run, also where run ids share their safe name.
+        let mut stems = std::collections::HashSet::new();
         if let (Some(nom), Some(fin)) = (&self.nominal_model, &self.final_model) {
             for r in &self.test_runs {
                 let sim_of = |m: &Model| simulated(m, r, &SimOptions::default());
@@ -1477,8 +1479,9 @@ impl Discovery {
                         .map(|(n, u)| (n.as_str(), &u[..]))
                         .collect(),
                 };
-                out.push((format!("test_run_{}.svg", r.id), comparison_figure(&c)));
-                out.push((format!("resid_{}.svg", r.id), residual_figure(&c).1));
+                let stem = crate::report::unique_stem(crate::report::safe_name(&r.id), &mut stems);
+                out.push((format!("test_run_{stem}.svg"), comparison_figure(&c)));
+                out.push((format!("resid_{stem}.svg"), residual_figure(&c).1));
             }
         }
         for sh in &self.shares {

@@ -234,8 +234,7 @@ pub fn write_comparisons(dir: &Path, comparisons: &[Comparison], limit: usize) -
         "plots",
     ]);
     let mut drawn = std::collections::HashMap::<&str, usize>::new();
-    // File stems in use: runs `a b` and `a_b` (or `Lauf ä` and `Lauf ö`) have one safe name, and
-    // the second's plots overwrote the first's; a repeat takes `_2`, `_3`, ...
+    // File stems in use ([`super::unique_stem`]).
     let mut stems = std::collections::HashSet::<String>::new();
     let mut left_out = 0;
     for c in comparisons {
@@ -247,12 +246,7 @@ pub fn write_comparisons(dir: &Path, comparisons: &[Comparison], limit: usize) -
         let plots = if *count < limit {
             *count += 1;
             let base = super::safe_name(&format!("{}_{}", c.run, c.output));
-            let mut stem = base.clone();
-            let mut k = 1;
-            while !stems.insert(stem.clone()) {
-                k += 1;
-                stem = format!("{base}_{k}");
-            }
+            let stem = super::unique_stem(base, &mut stems);
             write_file(dir, &format!("sim_{stem}.svg"), &comparison_figure(c))?;
             write_file(dir, &format!("resid_{stem}.svg"), &resid_svg)?;
             format!("sim_{stem}.svg, resid_{stem}.svg")

@@ -41,6 +41,19 @@ pub fn safe_name(name: &str) -> String {
     clean(name, MAX_NAME_CHARS)
 }
 
+/// `base` made unique among the stems in `used` (which it joins): a repeat takes `_2`, `_3`, ...
+/// Runs `a b` and `a_b` (or `Lauf ä` and `Lauf ö`, or two ids that share their first
+/// [`MAX_NAME_CHARS`]) have one [`safe_name`], and the second's figures overwrote the first's.
+pub fn unique_stem(base: String, used: &mut std::collections::HashSet<String>) -> String {
+    let mut stem = base.clone();
+    let mut k = 1;
+    while !used.insert(stem.clone()) {
+        k += 1;
+        stem = format!("{base}_{k}");
+    }
+    stem
+}
+
 /// The first `max` characters of `name`, those other than ASCII letters, digits and `._-` as `_`.
 fn clean(name: &str, max: usize) -> String {
     name.chars()
