@@ -121,6 +121,35 @@ fn tanks_model_file_simulates_to_the_printed_rms() {
     assert_simulates_to_the_printed_rms(&out, 1.0);
 }
 
+/// `--out` into a folder whose name is not UTF-8: the model file lands in that folder (it was
+/// written through a lossy string, to a folder named with U+FFFD).
+#[cfg(unix)]
+#[test]
+fn tanks_writes_its_model_into_a_folder_whose_name_is_not_utf8() {
+    use std::os::unix::ffi::OsStrExt;
+    if shared_data("cascaded_tanks/cascaded_tanks_estimation.csv").is_none() {
+        return;
+    }
+    let base = std::path::PathBuf::from(temp_file("bench", "y", ""))
+        .parent()
+        .unwrap()
+        .to_path_buf();
+    let dir = base.join(std::ffi::OsStr::from_bytes(b"out-\xff"));
+    let _ = std::fs::remove_dir_all(&dir);
+    let out = common::cli::bin()
+        .args(["benchmark", "tanks", "--out"])
+        .arg(&dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(dir.join("tanks.model.json").is_file());
+    assert!(dir.join("tanks.csv").is_file());
+}
+
 #[test]
 fn unbalanced_disk_with_gravity_and_friction_beats_its_linear_nominal_and_its_model_file_simulates()
 {
