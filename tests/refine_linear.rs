@@ -265,3 +265,72 @@ fn prune_drops_a_term_the_data_do_not_determine_and_keeps_the_true_ones() {
     assert!(b.removals.iter().all(|r| !r.dropped), "{:?}", b.removals);
     assert_eq!(b.model, fitted);
 }
+
+/// A start that follows the output in free run but blows up from the state guesses at a later
+/// segment's start (a spurious degree-5 term in the derivative, harmless at the run's own
+/// speeds, explosive at a wild derivative estimate) is refined without its highest-degree terms,
+/// keeping the true cubic one: the linear part, the fallback before, dropped it too (`demo mimo
+/// --degrees 6 --noise 0.01 --seed 4`: y3's order-3 candidate lost `y1^2`).
+#[test]
+fn a_start_that_blows_up_from_the_state_guesses_keeps_its_lower_degree_terms() {
+    let truth = [0.5, -4.0, -0.8, 4.0, -0.3];
+    let with_states = |runs: Vec<RunData>| -> Vec<RunData> {
+        runs.into_iter()
+            .map(|mut r| {
+                // The output itself, and a derivative guess far beyond the run's speeds.
+                r.states = Some(vec![r.y[0].clone(), vec![40.0; r.t.len()]]);
+                r
+            })
+            .collect()
+    };
+    let train = with_states(runs_of(&cubic(truth), 0, 4, 0.01));
+    let val = runs_of(&cubic(truth), 100, 3, 0.01);
+    let mut start = cubic([0.6, -3.5, -0.7, 3.6, -0.25]);
+    start.degree = 5;
+    // Two spurious terms: without the degree-5 one the start still blows up (the degree-4 one),
+    // so the fallback goes on to the terms up to degree 3.
+    start.outputs[0].terms.push(Term::new(&[("y_d1", 5)], 1e-5));
+    start.outputs[0].terms.push(Term::new(&[("y_d1", 4)], 1e-4));
+    // It simulates from its fitted initial state.
+    assert!(free_run_nrmse(&start, &train).unwrap()[0] < 0.5);
+    assert!(refine(&start, &train, &RefineOptions::default()).is_err());
+    let mut without_5 = start.clone();
+    without_5.outputs[0].terms.remove(5);
+    assert!(refine(&without_5, &train, &RefineOptions::default()).is_err());
+    let g = refine_gated(&start, &train, &val, &RefineOptions::default()).unwrap();
+    assert!(g.message.contains("up to degree 3"), "{}", g.message);
+    let refined = g.refined.expect("a refinement").model;
+    let names: Vec<String> = refined.outputs[0]
+        .terms
+        .iter()
+        .map(|t| t.monomial())
+        .collect();
+    assert_eq!(names.len(), 5, "{names:?}");
+    assert!(names.iter().any(|n| n == "y^3"), "{names:?}");
+    assert!(g.kept, "{}", g.message);
+}
+
+/// A nonlinear start that does not follow the output in free run (its cubic term of the wrong
+/// sign: the free runs blow up) is refined from its linear part only, as before the lower-degree
+/// starts.
+#[test]
+fn a_start_that_does_not_follow_the_output_is_refined_from_its_linear_part() {
+    let truth = [0.5, -4.0, -0.8, 4.0, -0.3];
+    let train = runs_of(&cubic(truth), 0, 4, 0.01);
+    let val = runs_of(&cubic(truth), 100, 3, 0.01);
+    let start = cubic([0.5, -4.0, -0.8, 4.0, 3.0]);
+    let tb = free_run_nrmse(&start, &train).unwrap()[0];
+    assert!(!(tb <= 1.0), "{tb}");
+    let g = refine_gated(&start, &train, &val, &RefineOptions::default()).unwrap();
+    assert!(
+        g.message.contains("refined its linear terms"),
+        "{}",
+        g.message
+    );
+    assert_eq!(
+        g.refined.expect("a refinement").model.outputs[0]
+            .terms
+            .len(),
+        4
+    );
+}

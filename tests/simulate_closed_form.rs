@@ -412,12 +412,16 @@ fn dynamics_far_faster_than_the_sampling_stop_early() {
         max_mean_steps_per_interval: mean,
         ..Default::default()
     };
-    let ok = simulate(&m, &ConstantInput(vec![0.0]), &[1.0, 0.0], &t, &opts(1_000));
-    let (steps, done) = match &ok {
-        Ok(tr) => (tr.steps, true),
-        Err(e) => panic!("{e}"),
-    };
-    assert!(done && steps > 20 * 100, "{steps} steps");
+    let run = |o: &SimOptions| simulate(&m, &ConstantInput(vec![0.0]), &[1.0, 0.0], &t, o);
+    let steps = run(&opts(1_000)).unwrap_or_else(|e| panic!("{e}")).steps;
+    assert!(steps > 20 * 100, "{steps} steps");
+    // usize::MAX switches either limit off, without an overflow.
+    run(&opts(usize::MAX)).unwrap();
+    run(&SimOptions {
+        max_steps_per_interval: usize::MAX,
+        ..opts(usize::MAX)
+    })
+    .unwrap();
     let err = simulate(&m, &ConstantInput(vec![0.0]), &[1.0, 0.0], &t, &opts(50)).unwrap_err();
     match &err {
         Error::Diverged { time, state, .. } => {

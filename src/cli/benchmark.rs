@@ -139,8 +139,7 @@ fn write_outputs(dir: &std::path::Path, b: &Benchmark, o: &Outcome) -> Result<()
     let model_path = dir.join(format!("{}.model.json", b.name));
     // Written through the path itself: a folder whose name is not UTF-8 went through a lossy
     // string and the model landed elsewhere.
-    let text = o.model.to_json_string()? + "\n";
-    ctsid::util::write_atomic(&model_path, text.as_bytes())?;
+    o.model.write(&model_path)?;
     let mut csv = String::from("benchmark,metric,ours,linear,pnarx,best\n");
     for sc in &o.scores {
         let p = &sc.metric.published;

@@ -105,7 +105,7 @@ pub enum ObserverArg {
 
 pub fn run(a: ControlArgs) -> Result<()> {
     check_args(&a)?;
-    let model = Model::read(&a.model.to_string_lossy())?;
+    let model = Model::read(&a.model)?;
     let tau = a.tau.or(model.tau).ok_or_else(|| {
         Error::param(
             "tau",
@@ -233,7 +233,7 @@ fn check_args(a: &ControlArgs) -> Result<()> {
 fn plant_model(a: &ControlArgs, model: &Model) -> Result<Model> {
     Ok(match &a.plant {
         Some(p) => {
-            let m = Model::read(&p.to_string_lossy())?;
+            let m = Model::read(p)?;
             control::design::siso_order(&m).map_err(|e| match e {
                 Error::InvalidParameter { reason, .. } => Error::param("plant", reason),
                 e => e,

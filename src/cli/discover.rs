@@ -83,7 +83,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     let user_effects = pairs(&a.effect, "effect", "NAME=EXPRESSION")?;
     ctsid::discover::dictionary::check_user_names(&user_effects)?;
     a.segment.check()?;
-    let nominal = Model::read(&a.nominal.to_string_lossy())?;
+    let nominal = Model::read(&a.nominal)?;
     let mut columns: Vec<String> = nominal.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(nominal.inputs.iter().cloned());
     let spec = a.sampling.spec(columns, a.run_column.clone(), None);
@@ -167,7 +167,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     let d = discover(&rs, &nominal, &o).map_err(|e| a.segment.explain(e))?;
     out!("{}", d.text())?;
     if let Some(p) = &a.output_model {
-        d.augmented_model(&nominal)?.write(&p.to_string_lossy())?;
+        d.augmented_model(&nominal)?.write(&p)?;
     }
     if let Some(dir) = &a.report {
         let json = serde_json::to_string_pretty(&d)

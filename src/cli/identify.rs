@@ -149,7 +149,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             "refinement": id.refinement,
             "settings": {"degree": a.degree, "eta": a.eta, "engine": a.engine.to_string(), "method": s.method, "train": split.train.iter().map(|&r| ids[r].clone()).collect::<Vec<_>>()},
         }));
-        model.write(&path.display().to_string())?;
+        model.write(path)?;
         eprintln!("model written to {}", path.display());
     }
     if let Some(dir) = &a.report {

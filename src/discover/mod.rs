@@ -1458,7 +1458,7 @@ impl Discovery {
         use crate::report::svg::{line_plot, Series};
         let mut out = Vec::new();
         // One figure name per run, also where run ids share their safe name.
-        let mut stems = std::collections::HashSet::new();
+        let (mut stems, mut coordinate_stems) = Default::default();
         if let (Some(nom), Some(fin)) = (&self.nominal_model, &self.final_model) {
             for r in &self.test_runs {
                 let sim_of = |m: &Model| simulated(m, r, &SimOptions::default());
@@ -1490,8 +1490,12 @@ impl Discovery {
             }
             let x: Vec<f64> = sh.profile.iter().map(|p| p.0).collect();
             let y: Vec<f64> = sh.profile.iter().map(|p| p.1).collect();
+            let stem = crate::report::unique_stem(
+                crate::report::safe_name(&format!("residual_along_{}", sh.coordinate)),
+                &mut coordinate_stems,
+            );
             out.push((
-                format!("residual_along_{}.svg", sh.coordinate),
+                format!("{stem}.svg"),
                 line_plot(
                     &format!(
                         "conditional mean of the residual along {} ({:.0} % of var(r))",

@@ -736,14 +736,18 @@ impl Model {
 
     /// Reads and validates a model file. Refuses a path that is not a regular file of at most 256
     /// MiB or is not UTF-8 text, and all that [`Model::from_json_str`] refuses.
-    pub fn read(path: &str) -> Result<Model> {
+    pub fn read(path: impl AsRef<std::path::Path>) -> Result<Model> {
         use std::io::Read;
-        let io = |e: std::io::Error| Error::file(path, e);
+        // Opened through the path itself (a name that is not UTF-8 is still the user's file);
+        // the messages show it as text.
+        let path = path.as_ref();
+        let shown = path.display().to_string();
+        let io = |e: std::io::Error| Error::file(&shown, e);
         let mut text = String::new();
-        crate::util::open_regular(std::path::Path::new(path), Some(MAX_FILE_BYTES))?
+        crate::util::open_regular(path, Some(MAX_FILE_BYTES))?
             .read_to_string(&mut text)
             .map_err(io)?;
-        Model::from_json_str(&text, path)
+        Model::from_json_str(&text, &shown)
     }
 
     /// Pretty JSON text (validated first: a model that could not be read back is not written).
@@ -758,9 +762,9 @@ impl Model {
 
     /// Writes the model file. Refuses a model that [`Model::validate`] refuses, and errors as
     /// [`crate::util::write_atomic`] does.
-    pub fn write(&self, path: &str) -> Result<()> {
+    pub fn write(&self, path: impl AsRef<std::path::Path>) -> Result<()> {
         let text = self.to_json_string()?;
-        crate::util::write_atomic(std::path::Path::new(path), (text + "\n").as_bytes())
+        crate::util::write_atomic(path.as_ref(), (text + "\n").as_bytes())
     }
 
     /// Checks names, orders, exponents and coefficients; the error names the term at fault. Refuses

@@ -162,13 +162,15 @@ pub struct SimOptions {
     /// A state beyond this many times the run's scale (the largest magnitude in the initial
     /// state and in the input at the output times, at least 1) means divergence.
     pub bound: f64,
-    /// Most steps between two output times.
+    /// Most steps between two output times (between two of an input's breakpoints where it has
+    /// some inside an interval).
     pub max_steps_per_interval: usize,
     /// Most steps per output interval on average over the intervals so far, beyond a first
-    /// [`SimOptions::max_steps_per_interval`]: a model whose dynamics are far faster than its
-    /// sampling then fails in its first intervals instead of running for minutes within the
-    /// per-interval limit (`y'' = -1e12 y + 1e12 u` at tau = 0.01 took more than 5 minutes on
-    /// 1,000 samples).
+    /// [`SimOptions::max_steps_per_interval`] and the steps that the input's breakpoints and
+    /// `h_max` force: a model whose dynamics are far faster than its sampling then fails in its
+    /// first intervals instead of running for minutes within the per-interval limit (`y'' =
+    /// -1e12 y + 1e12 u` at tau = 0.01 took more than 5 minutes on 1,000 samples). `usize::MAX`
+    /// switches it off.
     pub max_mean_steps_per_interval: usize,
     /// Label of the run in error messages.
     pub run: String,
@@ -1314,11 +1316,13 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
     let mut stats = (0usize, 0usize);
     let mut h = times.get(1).map(|t1| t1 - times[0]).unwrap_or(1.0);
     let mut bps = Vec::new();
+    // Steps allowed so far (see SimOptions::max_mean_steps_per_interval), beside those an input's
+    // breakpoints or h_max force whatever the dynamics.
+    let mut allowed = opts.max_steps_per_interval;
     for (k, w) in times.windows(2).enumerate() {
         let (t0, t1) = (w[0], w[1]);
         let spent = stats.0 + stats.1;
-        if spent > opts.max_steps_per_interval + k.saturating_mul(opts.max_mean_steps_per_interval)
-        {
+        if spent > allowed {
             return Err(Error::Diverged {
                 run: opts.run.clone(),
                 time: t0,
@@ -1329,6 +1333,13 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
         }
         bps.clear();
         input.breakpoints(t0, t1, &mut bps);
+        let forced = bps.len()
+            + opts.h_max.map_or(0, |hm| {
+                ((t1 - t0) / hm).ceil().min(usize::MAX as f64) as usize
+            });
+        allowed = allowed
+            .saturating_add(opts.max_mean_steps_per_interval)
+            .saturating_add(forced);
         let mut a = t0;
         for &bp in bps.iter().chain(std::iter::once(&t1)) {
             // Skip breakpoints that coincide with the segment start (or are out of order).
