@@ -222,7 +222,7 @@ fn the_placement_law_with_a_constant_reference_is_the_step_run() {
 #[test]
 fn bad_tracking_settings_are_one_line_errors() {
     let model = std::env::temp_dir().join(format!("ctsid-tracking-{}.json", std::process::id()));
-    chain(2, vec![]).write(&model.to_string_lossy()).unwrap();
+    chain(2, vec![]).write(&model).unwrap();
     let m = model.to_str().unwrap();
     let gap = temp_file("tracking", "gap.csv", "t,r\n0,0\n1,\n2,1\n");
     let nan = temp_file("tracking", "nan.csv", "t,r\n0,0\n1,nan\n");
