@@ -320,7 +320,8 @@ fn a_start_that_does_not_follow_the_output_is_refined_from_its_linear_part() {
     let val = runs_of(&cubic(truth), 100, 3, 0.01);
     let start = cubic([0.5, -4.0, -0.8, 4.0, 3.0]);
     let tb = free_run_nrmse(&start, &train).unwrap()[0];
-    assert!(!(tb <= 1.0), "{tb}");
+    // Infinite where a free run blows up.
+    assert!(tb > 1.0 || tb.is_nan(), "{tb}");
     let g = refine_gated(&start, &train, &val, &RefineOptions::default()).unwrap();
     assert!(
         g.message.contains("refined its linear terms"),

@@ -167,7 +167,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     let d = discover(&rs, &nominal, &o).map_err(|e| a.segment.explain(e))?;
     out!("{}", d.text())?;
     if let Some(p) = &a.output_model {
-        d.augmented_model(&nominal)?.write(&p)?;
+        d.augmented_model(&nominal)?.write(p)?;
     }
     if let Some(dir) = &a.report {
         let json = serde_json::to_string_pretty(&d)
