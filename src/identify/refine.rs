@@ -737,6 +737,49 @@ pub fn free_run_nrmse(model: &Model, runs: &[RunData]) -> Result<Vec<f64>> {
         .collect())
 }
 
+/// The refinement of `model` from its first lower-degree start that can be simulated over the
+/// shooting segments, and the note that says so: the terms up to each lower degree the model
+/// has, highest first, where it `follows` the output in free run; else its linear part alone.
+/// A derivative fit with spurious nonlinear terms can blow up from the state guesses at some
+/// segment's start though its free run follows the output (a high-degree term amplifying a
+/// noisy derivative estimate): `demo mimo --degrees 6 --noise 0.01 --seed 4`, y3's order-3
+/// candidate lost `y1^2` with its three spurious degree-6 terms when its linear part was the
+/// start (gate NRMSE 0.17 -> 0.58; from its terms up to degree 2, 0.17 -> 0.04).
+fn lower_degree_start(
+    model: &Model,
+    fit: &[RunData],
+    opts: &RefineOptions,
+    follows: bool,
+) -> Option<(Refined, String)> {
+    let mut degrees: Vec<u32> = model
+        .outputs
+        .iter()
+        .flat_map(|eq| eq.terms.iter().map(|t| t.degree()))
+        .collect();
+    degrees.sort_unstable();
+    degrees.dedup();
+    let lower: Vec<u32> = if follows {
+        let below = degrees.len().saturating_sub(1);
+        degrees[..below]
+            .iter()
+            .rev()
+            .copied()
+            .filter(|&k| k >= 1)
+            .collect()
+    } else {
+        vec![1]
+    };
+    lower.into_iter().find_map(|k| {
+        let r = refine(&up_to_degree(model, k)?, fit, opts).ok()?;
+        let note = if k == 1 {
+            " (the full derivative fit could not be simulated or did not follow the output; refined its linear terms)".to_string()
+        } else {
+            format!(" (the full derivative fit could not be simulated; refined its terms up to degree {k})")
+        };
+        Some((r, note))
+    })
+}
+
 /// `model` with only its terms of degree at most `k` (a named expression counts as degree 0);
 /// `None` where that drops nothing or leaves an output without terms.
 fn up_to_degree(model: &Model, k: u32) -> Option<Model> {
@@ -820,26 +863,11 @@ pub fn refine_gated(
         );
         return Ok(Gated::unchanged(model, train_before, gate_before, message));
     }
-    // A derivative fit with spurious nonlinear terms can blow up in free run, and then no
-    // shooting segment can be simulated. Its terms up to a lower degree are the natural fallback
-    // starts, the highest degree first, down to its linear part: the gate below still decides
-    // against the full starting model.
-    let mut degrees: Vec<u32> = model
-        .outputs
-        .iter()
-        .flat_map(|eq| eq.terms.iter().map(|t| t.degree()))
-        .collect();
-    degrees.sort_unstable();
-    degrees.dedup();
     // A start that diverges in free run on the fit runs, or does not follow the output at all
     // (NRMSE above 1: worse than its mean), is not refined in full: its shooting segments blow
     // up too, or dozens of spurious terms must be walked back (with finite-difference Jacobians
     // one 35-term candidate of the noise-free throttle search took 90 s). Its linear part is
-    // the start instead. One that follows the output but cannot be simulated over the segments
-    // from the state guesses (a high-degree term amplifying a noisy derivative estimate) tries
-    // each lower degree: `demo mimo --degrees 6 --noise 0.01 --seed 4`, y3's order-3 candidate
-    // lost `y1^2` (degree 2) with its three spurious degree-6 terms when its linear part was
-    // refined (gate NRMSE 0.17 -> 0.58).
+    // the start instead ([`lower_degree_start`]).
     let follows = tb <= 1.0;
     let first = if follows || up_to_degree(model, 1).is_none() {
         refine(model, fit, opts)
@@ -848,37 +876,12 @@ pub fn refine_gated(
             "the derivative fit does not follow the output in free run (NRMSE {tb:.3})"
         )))
     };
-    let mut first = first.map(|r| (r, String::new()));
-    // The degrees below the highest that the terms have, highest first (each a different start).
-    let lower: Vec<u32> = if follows {
-        let below = degrees.len().saturating_sub(1);
-        degrees[..below]
-            .iter()
-            .rev()
-            .copied()
-            .filter(|&k| k >= 1)
-            .collect()
-    } else {
-        vec![1]
-    };
-    for k in lower {
-        let Err(Error::Numerical(_)) = first else {
-            break;
-        };
-        if let Some(start) = up_to_degree(model, k) {
-            if let Ok(r) = refine(&start, fit, opts) {
-                let note = if k == 1 {
-                    " (the full derivative fit could not be simulated or did not follow the output; refined its linear terms)".to_string()
-                } else {
-                    format!(" (the full derivative fit could not be simulated; refined its terms up to degree {k})")
-                };
-                first = Ok((r, note));
-            }
-        }
-    }
-    let (first, start_note) = match first {
-        Ok((r, note)) => (Ok(r), note),
-        Err(e) => (Err(e), String::new()),
+    let fallback = matches!(first, Err(Error::Numerical(_)))
+        .then(|| lower_degree_start(model, fit, opts, follows))
+        .flatten();
+    let (first, start_note) = match fallback {
+        Some((r, note)) => (Ok(r), note),
+        None => (first, String::new()),
     };
     let refined = match first {
         Ok(r) => r,
