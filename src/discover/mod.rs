@@ -1628,8 +1628,7 @@ impl Discovery {
         for r in &self.runs {
             s += &format!(
                 "| {} | {} | {} | {} | {} | {} |\n",
-                // A '|' or line break in a run id would split the row.
-                r.run.replace('|', "\\|").replace(['\n', '\r'], " "),
+                crate::report::md_cell(&r.run),
                 r.role,
                 num4(r.nrmse_nominal),
                 num4(r.above_noise),

@@ -846,12 +846,17 @@ fn unscale(model: &mut Model, basis: &Basis, pows: &[i32]) -> Result<()> {
             .map(|(&e, &p)| e as i64 * p as i64)
             .sum()
     };
-    let map = |c: f64, id: usize, name: &str| -> Result<f64> {
-        if id >= nb {
-            return Ok(c);
+    // A candidate's coefficient in the data's units (a named column, past the basis, as it is).
+    let scaled = |c: f64, id: usize| -> f64 {
+        if id < nb {
+            times_pow2(c, -shift(id))
+        } else {
+            c
         }
-        let v = times_pow2(c, -shift(id));
-        if c != 0.0 && !(v.is_finite() && v.abs() >= f64::MIN_POSITIVE) {
+    };
+    let map = |c: f64, id: usize, name: &str| -> Result<f64> {
+        let v = scaled(c, id);
+        if id < nb && c != 0.0 && !(v.is_finite() && v.abs() >= f64::MIN_POSITIVE) {
             return Err(Error::InvalidData(format!(
                 "the coefficient of {name} in the data's units ({c:e} x 2^{}) is beyond the range of f64; rescale its variables (e.g. to other units)",
                 -shift(id)
@@ -869,14 +874,12 @@ fn unscale(model: &mut Model, basis: &Basis, pows: &[i32]) -> Result<()> {
     // not refuse the fit; such a value is written at the end of the range with its sign.
     for bp in &mut model.path {
         for (c, &id) in bp.coefficients.iter_mut().zip(&bp.active_index) {
-            if id < nb {
-                let v = times_pow2(*c, -shift(id));
-                *c = if v.is_finite() {
-                    v
-                } else {
-                    f64::MAX.copysign(*c)
-                };
-            }
+            let v = scaled(*c, id);
+            *c = if v.is_finite() {
+                v
+            } else {
+                f64::MAX.copysign(*c)
+            };
         }
     }
     Ok(())

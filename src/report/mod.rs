@@ -54,6 +54,12 @@ pub fn unique_stem(base: String, used: &mut std::collections::HashSet<String>) -
     stem
 }
 
+/// `text` as one cell of a Markdown table: a `|` in it (a run id, an error text) would split it
+/// into two columns and a line break would end the row, so they are escaped and made spaces.
+pub fn md_cell(text: &str) -> String {
+    text.replace('|', "\\|").replace(['\n', '\r'], " ")
+}
+
 /// The first `max` characters of `name`, those other than ASCII letters, digits and `._-` as `_`.
 fn clean(name: &str, max: usize) -> String {
     name.chars()
@@ -87,13 +93,8 @@ impl Table {
     }
 
     pub fn markdown(&self) -> String {
-        // A `|` in a cell (a run id, an error text) would split it into two columns, a line
-        // break would end the row.
         let cells = |r: &[String]| -> String {
-            r.iter()
-                .map(|c| c.replace('|', "\\|").replace(['\n', '\r'], " "))
-                .collect::<Vec<_>>()
-                .join(" | ")
+            r.iter().map(|c| md_cell(c)).collect::<Vec<_>>().join(" | ")
         };
         let mut s = format!(
             "| {} |\n|{}|\n",

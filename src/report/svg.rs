@@ -496,16 +496,18 @@ fn fmt_tick(v: f64) -> String {
 /// Text as XML character data: `& < >` escaped, and control characters (which XML 1.0 does not
 /// allow at all: a run id with `\x01` made the figure unreadable) shown as U+FFFD.
 fn esc(t: &str) -> String {
-    t.chars()
-        .map(|c| match c {
-            '\t' | '\n' | '\r' => c.to_string(),
-            c if (c as u32) < 0x20 || c == '\u{FFFE}' || c == '\u{FFFF}' => '\u{FFFD}'.to_string(),
-            '&' => "&amp;".into(),
-            '<' => "&lt;".into(),
-            '>' => "&gt;".into(),
-            c => c.to_string(),
-        })
-        .collect()
+    let mut out = String::with_capacity(t.len());
+    for c in t.chars() {
+        match c {
+            '\t' | '\n' | '\r' => out.push(c),
+            c if (c as u32) < 0x20 || c == '\u{FFFE}' || c == '\u{FFFF}' => out.push('\u{FFFD}'),
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            c => out.push(c),
+        }
+    }
+    out
 }
 
 #[cfg(test)]
