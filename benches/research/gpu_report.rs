@@ -27,12 +27,14 @@
 
 use std::time::Instant;
 
+#[path = "path_problem.rs"]
+mod problem;
+
 use rayon::prelude::*;
 
 use ctsid::basis::{Basis, BasisLimits, Code};
 use ctsid::engine::gpu::{GpuEngine, GpuOptions, KernelShape};
 use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
-use ctsid::plants::rng::Rng;
 use ctsid::regression::{lars_path, Method, PathOptions};
 
 /// Plain rayon f64 reference: out_j = sum_i prod(z_i[vars of j]) * v_i, parallel over candidates.
@@ -126,18 +128,13 @@ fn main() {
         let names: Vec<String> = (0..n_z).map(|k| format!("z{k}")).collect();
         let basis = Basis::new(&names, d, BasisLimits::default()).expect("basis");
         let n_c = basis.len();
-        let mut rng = Rng::new(0xC7510 + n_z as u64 * 100 + d as u64);
-        let cols: Vec<Vec<f64>> = (0..n_z)
-            .map(|_| (0..n_s).map(|_| rng.uniform_in(-1.0, 1.0)).collect())
-            .collect();
-        let feats = Features::new(names.clone(), cols).unwrap();
+        let problem::Problem { mut rng, feats, v } = problem::Problem::new(n_z, d, n_s);
         let mut rows = vec![0.0; n_s * n_z];
         for k in 0..n_z {
             for i in 0..n_s {
                 rows[i * n_z + k] = feats.column(k)[i];
             }
         }
-        let v: Vec<f64> = (0..n_s).map(|_| rng.uniform_in(-1.0, 1.0)).collect();
         let pairs = (n_s * n_c) as f64;
 
         for shape in &shapes {
@@ -200,7 +197,7 @@ fn main() {
         let med = median_time(reps, || eng.sweep(&v, &mut out).expect("sweep"));
 
         // A label with a sparse polynomial truth plus noise, for the paths.
-        let y = label(&mut rng, &basis, &feats);
+        let y = problem::label(&mut rng, &basis, &feats);
         let path_opts = PathOptions {
             method: Method::LassoLars,
             max_terms: steps,
@@ -392,29 +389,6 @@ fn median_time(reps: usize, mut f: impl FnMut()) -> f64 {
         .collect();
     times.sort_by(|a, b| a.partial_cmp(b).unwrap());
     times[times.len() / 2]
-}
-
-/// Six random monomials of the basis with coefficients of either sign, plus 1 % noise.
-fn label(rng: &mut Rng, basis: &Basis, f: &Features) -> Vec<f64> {
-    let n = f.n_samples;
-    let mut y = vec![0.0; n];
-    for t in 0..6 {
-        let j = 1 + (rng.next_u64() % (basis.len() as u64 - 1)) as usize;
-        let c = if t % 2 == 0 { 1.0 } else { -1.5 };
-        let code = basis.code(j);
-        let mut col = vec![c; n];
-        for k in code.vars() {
-            col.iter_mut().zip(f.column(k)).for_each(|(a, z)| *a *= z);
-        }
-        y.iter_mut().zip(&col).for_each(|(a, b)| *a += b);
-    }
-    let sd = (y.iter().map(|x| x * x).sum::<f64>() / n as f64)
-        .sqrt()
-        .max(1e-12);
-    for yi in &mut y {
-        *yi += 0.01 * sd * rng.uniform_in(-1.0, 1.0);
-    }
-    y
 }
 
 /// Two or three significant digits (ratios span 1e-3 on lavapipe to 1e3 on a real GPU).
