@@ -46,9 +46,12 @@ pub fn short(x: f64) -> String {
 }
 
 /// A file written whole or not at all: the bytes go to a temporary file in the target's folder
-/// (`.NAME.tmp-PID`), renamed over the target by [`AtomicFile::commit`]. Dropped without a
-/// commit (an error on the way), the temporary file is removed and the target is untouched; a
-/// process killed half way leaves the target as it was (and the temporary file beside it).
+/// (`.ctsid-PID-N.tmp`, short whatever the target's name), renamed over the target by
+/// [`AtomicFile::commit`]. Dropped without a commit (an error on the way), the temporary file is
+/// removed and the target is untouched; a process killed half way leaves the target as it was
+/// (and the temporary file beside it). A symbolic link is followed (the file it names is
+/// replaced, the link kept), an existing file's permissions are kept, and a target that is not a
+/// regular file (a device, a pipe, a socket) is refused: renaming over it would replace it.
 pub struct AtomicFile {
     target: std::path::PathBuf,
     tmp: std::path::PathBuf,
@@ -56,22 +59,21 @@ pub struct AtomicFile {
 }
 
 impl AtomicFile {
-    /// Creates the temporary file beside `target`. Refuses a target with no file name (`/`, a path
-    /// ending in `..`) and errors when the temporary file cannot be created (a missing folder, no
-    /// write permission).
+    /// Creates the temporary file beside `target` (see [`output_target`] for what is refused).
+    /// Errors when the temporary file cannot be created (a missing folder, no write permission).
     pub fn create(target: &std::path::Path) -> crate::Result<AtomicFile> {
+        static SEQ: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         let io = |e: std::io::Error| crate::Error::file(target.display().to_string(), e);
-        let name = target.file_name().ok_or_else(|| crate::Error::Io {
-            path: target.display().to_string(),
-            message: "not a file name".into(),
-        })?;
-        let mut tmp_name = std::ffi::OsString::from(".");
-        tmp_name.push(name);
-        tmp_name.push(format!(".tmp-{}", std::process::id()));
-        let tmp = target.with_file_name(tmp_name);
+        let target = output_target(target)?;
+        let seq = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let tmp = target.with_file_name(format!(".ctsid-{}-{seq}.tmp", std::process::id()));
         let file = std::fs::File::create(&tmp).map_err(io)?;
+        // The replaced file's permissions, not the defaults of a new file.
+        if let Ok(meta) = std::fs::metadata(&target) {
+            let _ = std::fs::set_permissions(&tmp, meta.permissions());
+        }
         Ok(AtomicFile {
-            target: target.to_path_buf(),
+            target,
             tmp,
             file: Some(std::io::BufWriter::new(file)),
         })
@@ -103,6 +105,37 @@ impl Drop for AtomicFile {
         if self.file.take().is_some() {
             let _ = std::fs::remove_file(&self.tmp);
         }
+    }
+}
+
+/// The file an output to `path` replaces: `path` itself, or the file a symbolic link names. Refuses
+/// a path with no file name (`/`, one ending in `..`), a name longer than file systems allow, a
+/// link whose file cannot be reached, and an existing target that is not a regular file (a
+/// device, a pipe, a socket, a folder), which [`AtomicFile`] would otherwise replace by a file.
+pub fn output_target(path: &std::path::Path) -> crate::Result<std::path::PathBuf> {
+    let err = |message: &str| crate::Error::Io {
+        path: path.display().to_string(),
+        message: message.into(),
+    };
+    let name = path.file_name().ok_or_else(|| err("not a file name"))?;
+    if name.len() > 255 {
+        return Err(err(
+            "the file name is longer than 255 bytes; give a shorter one",
+        ));
+    }
+    let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
+    let target = if is_link {
+        std::fs::canonicalize(path)
+            .map_err(|_| err("is a symbolic link whose file cannot be reached; give a file name"))?
+    } else {
+        path.to_path_buf()
+    };
+    match std::fs::metadata(&target) {
+        Ok(m) if m.is_dir() => Err(err("is a folder; give a file name")),
+        Ok(m) if !m.is_file() => Err(err(
+            "is not a regular file (a device, a pipe or a socket); give a file name",
+        )),
+        _ => Ok(target),
     }
 }
 
@@ -138,6 +171,49 @@ mod atomic_tests {
         write_atomic(&p, b"new").unwrap();
         assert_eq!(std::fs::read_to_string(&p).unwrap(), "new");
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 1);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A link is followed (its file replaced, the link kept), a file's permissions are kept, a
+    /// pipe and a device are refused (they were replaced by regular files), and a name as long as
+    /// file systems allow is written (the temporary name was the target's and longer).
+    #[cfg(unix)]
+    #[test]
+    fn links_permissions_devices_and_long_names() {
+        use std::os::unix::fs::{symlink, PermissionsExt};
+        let dir = std::env::temp_dir().join(format!("ctsid-atomic-kinds-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("target.csv");
+        std::fs::write(&file, "old").unwrap();
+        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600)).unwrap();
+        let link = dir.join("link.csv");
+        symlink(&file, &link).unwrap();
+        write_atomic(&link, b"new").unwrap();
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "new");
+        let mode = std::fs::metadata(&file).unwrap().permissions().mode();
+        assert_eq!(mode & 0o777, 0o600);
+
+        let dangling = dir.join("dangling.csv");
+        symlink(dir.join("missing/x.csv"), &dangling).unwrap();
+        let e = write_atomic(&dangling, b"x").unwrap_err().to_string();
+        assert!(e.contains("symbolic link"), "{e}");
+
+        let dev = std::path::Path::new("/dev/null");
+        let e = write_atomic(dev, b"x").unwrap_err().to_string();
+        assert!(e.contains("not a regular file"), "{e}");
+        assert!(!std::fs::metadata(dev).unwrap().is_file());
+
+        let long = dir.join("a".repeat(251) + ".csv");
+        write_atomic(&long, b"long").unwrap();
+        assert_eq!(std::fs::read_to_string(&long).unwrap(), "long");
+        let e = write_atomic(&dir.join("a".repeat(256)), b"x")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("longer than 255"), "{e}");
         std::fs::remove_dir_all(&dir).ok();
     }
 }

@@ -299,6 +299,23 @@ fn usage_errors_are_one_line() {
 #[test]
 fn demo_settings_are_checked_before_the_work() {
     fails(&["demo", "mimo", "--degrees", "0"], &["degree", "1..=12"]);
+    // Was found inside the first fit, after the plant's data were simulated.
+    fails(&["demo", "mimo", "--orders", "0"], &["orders", "1..=6"]);
+    // A huge setting is written short (it was printed with 301 digits).
+    let data = file("eps.csv", &good_csv());
+    let out = fails(
+        &[
+            "regress",
+            &data,
+            "--features u --label y --degree 1 --epsilon 1e300",
+        ],
+        &["epsilon", "1e300"],
+    );
+    assert!(
+        out.stderr.len() < 200,
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     fails(&["demo", "etc", "--noise=-1"], &["noise"]);
     fails(&["demo", "etc", "--patm", "nan"], &["patm"]);
     // A setting far outside physics is blamed, not the model identified under it.
@@ -642,4 +659,88 @@ fn regress_edge_cases_found_by_the_sixth_reading() {
     assert!(!out.contains("inf") && !err.contains("inf"), "{out}{err}");
     let text = std::fs::read_to_string(&json).unwrap();
     assert!(!text.contains("null"), "{text}");
+}
+
+/// `-o` to a device or a pipe is refused before the work (the output was renamed over it: as
+/// root, `-o /dev/full` replaced the device by a regular file), a link's file is written with
+/// the link kept, and a name as long as file systems allow is written (its temporary name was
+/// longer, so it failed after the whole table was printed).
+#[cfg(unix)]
+#[test]
+fn outputs_to_devices_links_and_long_names() {
+    let model = lag_model("mo.json", Some(1.0));
+    let good = file("good-for-outputs.csv", &good_csv());
+    let sim = |out: &str| {
+        vec![
+            "simulate".to_string(),
+            model.clone(),
+            good.clone(),
+            "--run-column".into(),
+            "run".into(),
+            "--tau".into(),
+            "0.01".into(),
+            "-o".into(),
+            out.to_string(),
+        ]
+    };
+    let args = sim("/dev/null");
+    let refs: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+    let out = fails(&refs, &["not a regular file"]);
+    assert!(out.stdout.is_empty(), "the work ran before the refusal");
+
+    let target = dir().join("linked-target.csv");
+    std::fs::write(&target, "old").unwrap();
+    let link = dir().join("link-to-target.csv");
+    let _ = std::fs::remove_file(&link);
+    std::os::unix::fs::symlink(&target, &link).unwrap();
+    let args = sim(&link.display().to_string());
+    let refs: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+    let (ok, _, err) = ctsid(&refs);
+    assert!(ok, "{err}");
+    assert!(std::fs::symlink_metadata(&link)
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    assert!(std::fs::read_to_string(&target).unwrap().contains("y_sim"));
+
+    let long = dir().join("l".repeat(251) + ".csv");
+    let args = sim(&long.display().to_string());
+    let refs: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+    let (ok, _, err) = ctsid(&refs);
+    assert!(ok, "{err}");
+    assert!(long.is_file());
+    std::fs::remove_file(&long).ok();
+}
+
+/// Terms that are never finite, or not finite on the data, are refused by name: `identify
+/// --term '0/0'` ran with the term set aside quietly, and a model file with `y/0` was read,
+/// then blamed on the step size by `simulate`.
+#[test]
+fn terms_that_are_not_finite_are_refused_by_name() {
+    let good = file("terms-finite.csv", &good_csv());
+    let id = "--run-column run --time-column t --degree 1 --output y --input u --order 1";
+    fails(
+        &["identify", &good, id, "--term", "0/0"],
+        &["'0/0' is not finite whatever the data are"],
+    );
+    fails(
+        &["identify", &good, id, "--term", "exp(1000)"],
+        &["'exp(1000)'", "not finite"],
+    );
+    fails(
+        &["identify", &good, id, "--term", "1/(y-y)"],
+        &["'1/(y-y)' is not finite on", "reformulate"],
+    );
+    let text = common::cli::lag_model_text(-1.0, Some(1.0));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    for (expr, says) in [("y/0", "divides by zero"), ("sqrt(-1)", "NaN")] {
+        let mut m = v.clone();
+        m["format"] = "ctsid-model/2".into();
+        m["outputs"][0]["terms"]
+            .as_array_mut()
+            .unwrap()
+            .push(serde_json::json!({"expression": expr, "coefficient": 1.0}));
+        let path = file(&format!("bad-expr-{}.json", expr.len()), &m.to_string());
+        fails(&["show", &path], &[expr, says]);
+    }
 }

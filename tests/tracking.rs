@@ -228,6 +228,8 @@ fn bad_tracking_settings_are_one_line_errors() {
     let nan = temp_file("tracking", "nan.csv", "t,r\n0,0\n1,nan\n");
     let cases: Vec<(Vec<&str>, &str)> = vec![
         (vec!["--block", "0"], "block"),
+        // Decided once at the start and held for the whole run (was a run of zeros, exit 0).
+        (vec!["--block", "1000000"], "decided once"),
         (vec!["--law", "profile", "--sigma", "0"], "sigma"),
         (vec!["--law", "profile", "--sigma", "-1"], "sigma"),
         (

@@ -136,6 +136,10 @@ pub fn run(a: ControlArgs) -> Result<()> {
         u0,
     };
 
+    if let Some(tk) = &tracking {
+        // Before the design is printed: a setting that makes the run meaningless is the answer.
+        control::check_block(&d, &scenario, tk)?;
+    }
     let names = print_design(&a, &d)?;
     if let Some(tk) = tracking {
         return run_tracking(&a, &d, &plant, &scenario, &tk, &names);

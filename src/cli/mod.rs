@@ -123,8 +123,9 @@ pub fn write_stdout(text: &str) -> Result<()> {
         .map_err(|e| Error::file("standard output", e))
 }
 
-/// Checks an output file before any work is done: its folder exists, it is not a folder, and
-/// it is none of `inputs` (writing would truncate a file that is still to be read).
+/// Checks an output file before any work is done: its folder exists, it is not a folder, it
+/// is none of `inputs` (writing would truncate a file that is still to be read), and it is a
+/// target [`ctsid::util::output_target`] accepts.
 pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
     let name = out.display().to_string();
     let err = |message: String| Error::Io {
@@ -156,7 +157,8 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
             "is also an input file; writing it would destroy the input, so give another output file".into(),
         ));
     }
-    Ok(())
+    // A device, a pipe, a dangling link or an over-long name: refused now, not after the work.
+    ctsid::util::output_target(out).map(|_| ())
 }
 
 /// Checks a report folder before any work: it is not an existing file and its parent exists.

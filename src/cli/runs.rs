@@ -109,7 +109,10 @@ impl SegmentArgs {
         match self.segment {
             Some(s) if !(s.is_finite() && s > 0.0) => Err(Error::param(
                 "segment",
-                format!("{s} s; give the length of a piece in seconds, > 0"),
+                format!(
+                    "{} s; give the length of a piece in seconds, > 0",
+                    ctsid::util::short(s)
+                ),
             )),
             _ => Ok(()),
         }
@@ -125,8 +128,9 @@ impl SegmentArgs {
             return Err(Error::param(
                 "segment",
                 format!(
-                    "{s} s is less than 2 samples at tau = {} s; give a longer piece",
-                    rs.tau
+                    "{} s is less than 2 samples at tau = {} s; give a longer piece",
+                    ctsid::util::short(s),
+                    ctsid::util::short(rs.tau)
                 ),
             ));
         }
@@ -149,7 +153,8 @@ impl SegmentArgs {
             ) => Error::param(
                 "segment",
                 format!(
-                    "piece '{run}' of {s} s has {len} samples but {what} needs at least {min}; give a longer --segment (a run shorter than one piece needs more samples or a lower order)"
+                    "piece '{run}' of {} s has {len} samples but {what} needs at least {min}; give a longer --segment (a run shorter than one piece needs more samples or a lower order)",
+                    ctsid::util::short(s)
                 ),
             ),
             (_, e) => e,

@@ -437,6 +437,23 @@ impl Controller<'_> {
     }
 }
 
+/// The tracking run's sample count, refusing a block of at least that many samples (the input
+/// would be decided once, at the start, and held: a run of the rest input that looked like an
+/// answer) and the durations [`track`] refuses.
+pub fn check_block(d: &Design, s: &Scenario, tk: &Tracking) -> Result<usize> {
+    let samples = sample_count(d, s)?;
+    if tk.block >= samples {
+        return Err(Error::param(
+            "block",
+            format!(
+                "{} samples, but the run has {samples}: the input would be decided once, at the start, and held; give a block shorter than the run",
+                tk.block
+            ),
+        ));
+    }
+    Ok(samples)
+}
+
 /// Runs a tracking loop around `plant`: the reference `tk.reference` from t = 0, the input
 /// decided by `tk.law` every `tk.block` samples and held in between (clipped to the
 /// scenario's limits), the observer as in [`run`]. The trace carries the reference.
@@ -445,7 +462,7 @@ pub fn track(d: &Design, plant: &Plant, s: &Scenario, tk: &Tracking) -> Result<T
     tk.check()?;
     check_scenario(d, s, &tk.law)?;
     check_plant(plant)?;
-    let samples = sample_count(d, s)?;
+    let samples = check_block(d, s, tk)?;
     let sys = plant.system;
     let n = d.order;
     let model = d.model.compile()?;

@@ -1585,11 +1585,11 @@ impl Discovery {
         }
         if let Some(g) = &self.gates {
             s += &format!(
-                "gates: inclusion {:?}, interval excludes 0 {:?}, validation residual ratio {:.3}, validation free-run ratio {:.3}\n",
+                "gates: inclusion {:?}, interval excludes 0 {:?}, validation residual ratio {}, validation free-run ratio {}\n",
                 g.inclusion.iter().map(|v| (v * 100.0).round() / 100.0).collect::<Vec<_>>(),
                 g.interval_excludes_zero,
-                g.residual_ratio,
-                g.simulation_ratio
+                gate_ratio(g.residual_ratio),
+                gate_ratio(g.simulation_ratio)
             );
         }
         s += "share of var(r) by coordinate:";
@@ -1691,12 +1691,32 @@ impl Discovery {
     }
 }
 
+/// A gate's ratio for the summary: three decimals, "diverged" where the augmented model's free
+/// run (or residual) was infinite, "-" where it could not be formed (was printed `inf`, `NaN`).
+fn gate_ratio(x: f64) -> String {
+    if x.is_finite() {
+        format!("{x:.3}")
+    } else if x == f64::INFINITY {
+        "diverged".into()
+    } else {
+        "-".into()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::{
-        block_grams, blocking, blocking_within, contradicts, drifts, gram_bytes, spread, Blocking,
-        Rows, BLOCK, MIN_BLOCKS,
+        block_grams, blocking, blocking_within, contradicts, drifts, gate_ratio, gram_bytes,
+        spread, Blocking, Rows, BLOCK, MIN_BLOCKS,
     };
+
+    /// An effect singular on the data made the free run diverge: the summary said `ratio inf`.
+    #[test]
+    fn gate_ratios_that_are_not_finite_are_named() {
+        assert_eq!(gate_ratio(0.81234), "0.812");
+        assert_eq!(gate_ratio(f64::INFINITY), "diverged");
+        assert_eq!(gate_ratio(f64::NAN), "-");
+    }
 
     #[test]
     fn grouped_blocks_sum_to_the_same_gram_and_keep_their_halves() {

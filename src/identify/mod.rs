@@ -295,8 +295,14 @@ impl Settings {
         };
         let names = self.names_at(&ord);
         for t in &self.terms {
-            crate::model::Expr::parse(t, &names)
+            let e = crate::model::Expr::parse(t, &names)
                 .map_err(|e| Error::param("term", format!("{e}{at}")))?;
+            if let Some(why) = e.constant_fault() {
+                return Err(Error::param(
+                    "term",
+                    format!("'{t}' is not finite whatever the data are ({why})"),
+                ));
+            }
         }
         // Compared as the model file compares expressions: without spaces.
         let bare: Vec<String> = self

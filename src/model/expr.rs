@@ -133,6 +133,35 @@ impl Expr {
         num_of(&self.root) == Some(0.0)
     }
 
+    /// What makes the expression not finite whatever its variables are: a part without
+    /// variables whose value is not finite (`0/0`, `sqrt(-1)`, `exp(710)`), or a division by a
+    /// part that is zero without variables (`y/0`). `None` when there is none. (Such a term was
+    /// read from a model file and then blamed on the step size, or dropped from a fit quietly.)
+    pub fn constant_fault(&self) -> Option<String> {
+        fn walk(n: &Node) -> Option<String> {
+            let mut vars = Vec::new();
+            collect_vars(n, &mut vars);
+            if vars.is_empty() {
+                let v = eval(n, &[], None);
+                return (!v.is_finite()).then(|| format!("a part of it without variables is {v}"));
+            }
+            match n {
+                Node::Num(_) | Node::Var(_) => None,
+                Node::Neg(a) | Node::Pow(a, _) | Node::Fun(_, a, _) => walk(a),
+                Node::Div(a, b) => {
+                    let mut bv = Vec::new();
+                    collect_vars(b, &mut bv);
+                    if bv.is_empty() && eval(b, &[], None) == 0.0 {
+                        return Some("it divides by zero".into());
+                    }
+                    walk(a).or_else(|| walk(b))
+                }
+                Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) => walk(a).or_else(|| walk(b)),
+            }
+        }
+        walk(&self.root)
+    }
+
     /// The indices (into `z`) of the variables the expression reads, in order of appearance.
     pub fn variables(&self) -> Vec<usize> {
         let mut v = Vec::new();
@@ -656,6 +685,34 @@ impl Parser<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn parts_that_are_not_finite_whatever_the_variables_are_named() {
+        let vars = ["y".to_string(), "u".to_string()];
+        let fault = |t: &str| Expr::parse(t, &vars).unwrap().constant_fault();
+        for bad in [
+            "0/0",
+            "sqrt(-1)",
+            "exp(710)",
+            "y/0",
+            "y*(1/0)",
+            "u + 1/(2-2)",
+            "tanh(y)/(1-1)",
+        ] {
+            assert!(fault(bad).is_some(), "{bad}");
+        }
+        for good in [
+            "y/u",
+            "1/(y-y)",
+            "exp(709)*y",
+            "sqrt(abs(y))",
+            "sign(y)*2",
+            "-1",
+            "y^2/2",
+        ] {
+            assert_eq!(fault(good), None, "{good}");
+        }
+    }
 
     #[test]
     fn a_literal_beyond_f64_is_refused_not_read_as_infinity() {

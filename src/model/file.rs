@@ -882,7 +882,13 @@ impl Model {
                 return Err("both exponents and an expression: a term is one or the other".into());
             }
             // The parser's message names the unknown variable or function.
-            return Expr::parse(e, names).map(|_| ()).map_err(|e| e.to_string());
+            let parsed = Expr::parse(e, names).map_err(|e| e.to_string())?;
+            return match parsed.constant_fault() {
+                Some(why) => Err(format!(
+                    "expression '{e}' is not finite whatever the state is ({why})"
+                )),
+                None => Ok(()),
+            };
         }
         if let Some((name, e)) = t.exponents.iter().find(|(_, &e)| e > MAX_EXPONENT) {
             return Err(format!(

@@ -194,7 +194,7 @@ impl RegressionBuilder {
         if !(0.0..=1.0).contains(&self.ebic_gamma) {
             return Err(Error::param(
                 "ebic_gamma",
-                format!("{} is outside [0, 1]", self.ebic_gamma),
+                format!("{} is outside [0, 1]", crate::util::short(self.ebic_gamma)),
             ));
         }
         if !(self.epsilon < 1.0) {
@@ -202,7 +202,7 @@ impl RegressionBuilder {
                 "epsilon",
                 format!(
                     "{} would stop before the first term (use a value below 1)",
-                    self.epsilon
+                    crate::util::short(self.epsilon)
                 ),
             ));
         }
@@ -476,7 +476,7 @@ impl Regression {
     /// candidates among them), features that fail [`Features::check`], with no samples or with a
     /// value that is not finite, fewer than [`MIN_SAMPLES`] samples, a label of another length or
     /// not finite, weights of another length, negative, not finite or all zero, a named column of
-    /// another length, a GPU asked for where there is none, f32 sweeps asked for (GPU or
+    /// another length or with a value that is not finite, a GPU asked for where there is none, f32 sweeps asked for (GPU or
     /// [`Precision::F32`]) that the label would overflow, and a coefficient beyond f64's range in
     /// the data's units; errs ([`Error::Numerical`]) when the chosen terms are linearly dependent.
     pub fn fit_with_columns(
@@ -496,6 +496,21 @@ impl Regression {
         )?;
         let notes = Vec::new();
         features.check()?;
+        // A named column that is not finite somewhere cannot be fitted; the path set it aside
+        // without a word (`--term '0/0'` ran and the heading still counted it).
+        for c in named {
+            let bad = c.values.iter().filter(|v| !v.is_finite()).count();
+            if bad > 0 {
+                return Err(Error::param(
+                    "term",
+                    format!(
+                        "'{}' is not finite on {bad} of the fit's {} samples; reformulate it",
+                        c.name,
+                        c.values.len()
+                    ),
+                ));
+            }
+        }
         // Each feature is scaled by a power of two to a largest magnitude near 1 (exact: the
         // products and the path are those of the raw data, without their overflow), and the
         // coefficients are mapped back at the end. Raw features of 1e60 at degree 3 gave
