@@ -731,6 +731,11 @@ fn terms_that_are_not_finite_are_refused_by_name() {
         &["identify", &good, id, "--term", "1/(y-y)"],
         &["'1/(y-y)' is not finite on", "reformulate"],
     );
+    // A monomial already among the candidates (was accepted as a second column of y).
+    fails(
+        &["identify", &good, id, "--term", "y"],
+        &["'y' is a monomial of degree 1", "already a candidate"],
+    );
     let text = common::cli::lag_model_text(-1.0, Some(1.0));
     let v: serde_json::Value = serde_json::from_str(&text).unwrap();
     for (expr, says) in [("y/0", "divides by zero"), ("sqrt(-1)", "NaN")] {

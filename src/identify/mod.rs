@@ -303,6 +303,17 @@ impl Settings {
                     format!("'{t}' is not finite whatever the data are ({why})"),
                 ));
             }
+            // A monomial the basis already has would be a second column with the same values,
+            // left to the selection to split its vote between two names.
+            if let Some(m) = e.monomial() {
+                let deg: u32 = m.iter().map(|(_, k)| k).sum();
+                if deg as usize <= self.degree {
+                    return Err(Error::param(
+                        "term",
+                        format!("'{t}' is a monomial of degree {deg}, already a candidate at --degree {}; leave it out", self.degree),
+                    ));
+                }
+            }
         }
         // Compared as the model file compares expressions: without spaces.
         let bare: Vec<String> = self
