@@ -749,3 +749,19 @@ fn terms_that_are_not_finite_are_refused_by_name() {
         fails(&["show", &path], &[expr, says]);
     }
 }
+
+/// Terms near 1e308: the steady-input search summed the terms' magnitudes, which overflowed, and
+/// called the input ineffective ("dP/du = 0"); the error now names what is wrong (the default
+/// bandwidth the model's poles give).
+#[test]
+fn a_model_near_the_end_of_f64_is_not_called_uncontrollable() {
+    let model = file(
+        "huge-coefs.json",
+        &common::cli::lag_model_text(-1e308, Some(1e308)),
+    );
+    let out = fails(
+        &["control", &model, "--setpoint 1 --from 0 --tau 0.01"],
+        &["bandwidth"],
+    );
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("dP/du = 0"));
+}

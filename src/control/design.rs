@@ -93,13 +93,16 @@ fn rest_eval(c: &CompiledModel, n: usize, y: f64, u: f64) -> (f64, f64, f64) {
     let mut g = vec![0.0; n + 1];
     c.grad_output_unchecked(0, &z, &mut g);
     // The size of the sum the root cancels: sum |c_k phi_k(z)| over the terms (for named terms
-    // too, where |c| at |z| says nothing: cos(y) or s*sat(u/s) - u can come out negative).
+    // too, where |c| at |z| says nothing: cos(y) or s*sat(u/s) - u can come out negative),
+    // held at f64's largest: for terms near 1e308 the sum overflowed, and an infinite size
+    // called every root one where the input has no effect.
     let size: f64 = c
         .term_values_unchecked(0, &z)
         .iter()
         .zip(c.coefficients())
         .map(|(v, k)| (k * v).abs())
-        .sum();
+        .sum::<f64>()
+        .min(f64::MAX);
     (c.eval_output_unchecked(0, &z), g[n], size)
 }
 
