@@ -62,21 +62,63 @@ impl AtomicFile {
     /// Creates the temporary file beside `target` (see [`output_target`] for what is refused).
     /// Errors when the temporary file cannot be created (a missing folder, no write permission).
     pub fn create(target: &std::path::Path) -> crate::Result<AtomicFile> {
-        static SEQ: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
         let io = |e: std::io::Error| crate::Error::file(target.display().to_string(), e);
         let target = output_target(target)?;
-        let seq = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        let tmp = target.with_file_name(format!(".ctsid-{}-{seq}.tmp", std::process::id()));
-        let file = std::fs::File::create(&tmp).map_err(io)?;
-        // The replaced file's permissions, not the defaults of a new file.
-        if let Ok(meta) = std::fs::metadata(&target) {
-            let _ = std::fs::set_permissions(&tmp, meta.permissions());
-        }
+        let mode = std::fs::metadata(&target).ok().map(|m| m.permissions());
+        let (tmp, file) = Self::fresh(&target, mode).map_err(io)?;
         Ok(AtomicFile {
             target,
             tmp,
             file: Some(std::io::BufWriter::new(file)),
         })
+    }
+
+    /// A temporary file beside `target` that did not exist before (`create_new`: two writers,
+    /// even two processes of the same id in containers sharing a folder, never share one), with
+    /// the replaced file's permissions where there was one (on unix, set at creation and again
+    /// on the open file, so that no moment has wider ones; special bits left out).
+    fn fresh(
+        target: &std::path::Path,
+        mode: Option<std::fs::Permissions>,
+    ) -> std::io::Result<(std::path::PathBuf, std::fs::File)> {
+        static SEQ: std::sync::atomic::AtomicUsize = std::sync::atomic::AtomicUsize::new(0);
+        let mut opts = std::fs::OpenOptions::new();
+        opts.write(true).create_new(true);
+        #[cfg(unix)]
+        let bits = mode.as_ref().map(|m| {
+            use std::os::unix::fs::PermissionsExt;
+            m.mode() & 0o777
+        });
+        #[cfg(unix)]
+        if let Some(b) = bits {
+            use std::os::unix::fs::OpenOptionsExt;
+            opts.mode(b);
+        }
+        #[cfg(not(unix))]
+        let _ = mode;
+        let mut last = None;
+        for _ in 0..16 {
+            let seq = SEQ.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let nanos = std::time::SystemTime::now()
+                .duration_since(std::time::UNIX_EPOCH)
+                .map_or(0, |d| d.subsec_nanos());
+            let name = format!(".ctsid-{}-{seq}-{nanos:08x}.tmp", std::process::id());
+            let tmp = target.with_file_name(name);
+            match opts.open(&tmp) {
+                Ok(file) => {
+                    #[cfg(unix)]
+                    if let Some(b) = bits {
+                        use std::os::unix::fs::PermissionsExt;
+                        // The creation mode passed through the umask; the file's own is exact.
+                        let _ = file.set_permissions(std::fs::Permissions::from_mode(b));
+                    }
+                    return Ok((tmp, file));
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => last = Some(e),
+                Err(e) => return Err(e),
+            }
+        }
+        Err(last.expect("sixteen tries"))
     }
 
     /// Flushes and renames the temporary file over the target. Errors when the flush, the sync to
@@ -87,7 +129,11 @@ impl AtomicFile {
         let file = file.into_inner().map_err(|e| io(e.into_error()))?;
         file.sync_all().map_err(io)?;
         drop(file);
-        std::fs::rename(&self.tmp, &self.target).map_err(io)
+        std::fs::rename(&self.tmp, &self.target).map_err(|e| {
+            // The file was taken out of `self`, so `Drop` would leave the temporary file.
+            let _ = std::fs::remove_file(&self.tmp);
+            io(e)
+        })
     }
 }
 
@@ -108,35 +154,68 @@ impl Drop for AtomicFile {
     }
 }
 
-/// The file an output to `path` replaces: `path` itself, or the file a symbolic link names. Refuses
-/// a path with no file name (`/`, one ending in `..`), a name longer than file systems allow, a
-/// link whose file cannot be reached, and an existing target that is not a regular file (a
-/// device, a pipe, a socket, a folder), which [`AtomicFile`] would otherwise replace by a file.
+/// The file an output to `path` replaces: `path` itself, or the file a chain of symbolic links
+/// names (which may not exist yet). Refuses a path with no file name (`/`, one ending in `..`)
+/// or with a NUL byte, a name longer than file systems allow, a link into a folder that does not
+/// exist, and a target that is not a regular file (a device, a pipe, a socket, a folder), which
+/// [`AtomicFile`] would otherwise replace by a file.
 pub fn output_target(path: &std::path::Path) -> crate::Result<std::path::PathBuf> {
     let err = |message: &str| crate::Error::Io {
         path: path.display().to_string(),
         message: message.into(),
     };
     let name = path.file_name().ok_or_else(|| err("not a file name"))?;
-    if name.len() > 255 {
+    if path.as_os_str().as_encoded_bytes().contains(&0) {
+        return Err(err("has a NUL byte, which no file name can hold"));
+    }
+    #[cfg(windows)]
+    let units = {
+        use std::os::windows::ffi::OsStrExt;
+        name.encode_wide().count()
+    };
+    #[cfg(not(windows))]
+    let units = name.len();
+    if units > 255 {
         return Err(err(
-            "the file name is longer than 255 bytes; give a shorter one",
+            "the file name is longer than 255 bytes (units on Windows); give a shorter one",
         ));
     }
-    let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
-    let target = if is_link {
-        std::fs::canonicalize(path)
-            .map_err(|_| err("is a symbolic link whose file cannot be reached; give a file name"))?
-    } else {
-        path.to_path_buf()
-    };
-    match std::fs::metadata(&target) {
-        Ok(m) if m.is_dir() => Err(err("is a folder; give a file name")),
-        Ok(m) if !m.is_file() => Err(err(
-            "is not a regular file (a device, a pipe or a socket); give a file name",
-        )),
-        _ => Ok(target),
+    // What the path names, through any links: a pipe behind `/dev/stdout`, a device, a folder.
+    match std::fs::metadata(path) {
+        Ok(m) if m.is_dir() => return Err(err("is a folder; give a file name")),
+        Ok(m) if !m.is_file() => {
+            return Err(err(
+                "is not a regular file (a device, a pipe or a socket); give a file name",
+            ))
+        }
+        _ => {}
     }
+    let mut target = path.to_path_buf();
+    // Links followed by hand (a link may name a file still to be written, which
+    // `canonicalize` refuses), relative ones from their own folder, at most 40 in a chain.
+    for _ in 0..40 {
+        match std::fs::symlink_metadata(&target) {
+            Ok(m) if m.file_type().is_symlink() => {
+                let next = std::fs::read_link(&target)
+                    .map_err(|_| err("is a symbolic link that cannot be read"))?;
+                target = match target.parent() {
+                    Some(dir) if next.is_relative() => dir.join(next),
+                    _ => next,
+                };
+            }
+            _ => {
+                let folder = target.parent().filter(|p| !p.as_os_str().is_empty());
+                if folder.is_some_and(|f| !f.is_dir()) {
+                    return Err(err(&format!(
+                        "is a symbolic link to {}, whose folder does not exist",
+                        target.display()
+                    )));
+                }
+                return Ok(target);
+            }
+        }
+    }
+    Err(err("is a chain of more than 40 symbolic links"))
 }
 
 /// Writes `bytes` to `path` whole or not at all ([`AtomicFile`]). Errors as [`AtomicFile::create`]
@@ -182,12 +261,14 @@ mod atomic_tests {
     fn links_permissions_devices_and_long_names() {
         use std::os::unix::fs::{symlink, PermissionsExt};
         let dir = std::env::temp_dir().join(format!("ctsid-atomic-kinds-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).unwrap();
         let file = dir.join("target.csv");
         std::fs::write(&file, "old").unwrap();
-        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o600)).unwrap();
+        // A mode with an execute bit, which no new file gets from any umask.
+        std::fs::set_permissions(&file, std::fs::Permissions::from_mode(0o751)).unwrap();
         let link = dir.join("link.csv");
-        symlink(&file, &link).unwrap();
+        symlink("target.csv", &link).unwrap();
         write_atomic(&link, b"new").unwrap();
         assert!(std::fs::symlink_metadata(&link)
             .unwrap()
@@ -195,17 +276,32 @@ mod atomic_tests {
             .is_symlink());
         assert_eq!(std::fs::read_to_string(&file).unwrap(), "new");
         let mode = std::fs::metadata(&file).unwrap().permissions().mode();
-        assert_eq!(mode & 0o777, 0o600);
+        assert_eq!(mode & 0o777, 0o751);
 
+        // A link set up before its file exists is followed; one into a missing folder is not.
+        let ahead = dir.join("latest.csv");
+        symlink(dir.join("run1.csv"), &ahead).unwrap();
+        write_atomic(&ahead, b"first").unwrap();
+        assert_eq!(
+            std::fs::read_to_string(dir.join("run1.csv")).unwrap(),
+            "first"
+        );
         let dangling = dir.join("dangling.csv");
         symlink(dir.join("missing/x.csv"), &dangling).unwrap();
         let e = write_atomic(&dangling, b"x").unwrap_err().to_string();
-        assert!(e.contains("symbolic link"), "{e}");
+        assert!(e.contains("symbolic link") && e.contains("folder"), "{e}");
 
-        let dev = std::path::Path::new("/dev/null");
-        let e = write_atomic(dev, b"x").unwrap_err().to_string();
-        assert!(e.contains("not a regular file"), "{e}");
-        assert!(!std::fs::metadata(dev).unwrap().is_file());
+        for special in [std::path::PathBuf::from("/dev/null"), dir.join("fifo")] {
+            if special.starts_with(&dir) {
+                let ok = std::process::Command::new("mkfifo").arg(&special).status();
+                if !ok.is_ok_and(|s| s.success()) {
+                    continue;
+                }
+            }
+            let e = write_atomic(&special, b"x").unwrap_err().to_string();
+            assert!(e.contains("not a regular file"), "{e}");
+            assert!(!std::fs::metadata(&special).unwrap().is_file());
+        }
 
         let long = dir.join("a".repeat(251) + ".csv");
         write_atomic(&long, b"long").unwrap();
@@ -214,6 +310,14 @@ mod atomic_tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("longer than 255"), "{e}");
+        // A NUL byte: refused before anything is written (the whole output was left beside it
+        // under the temporary name when the rename failed).
+        let before = std::fs::read_dir(&dir).unwrap().count();
+        let e = write_atomic(&dir.join("x\0y.json"), b"x")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("NUL"), "{e}");
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), before);
         std::fs::remove_dir_all(&dir).ok();
     }
 }

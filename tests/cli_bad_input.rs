@@ -721,7 +721,7 @@ fn terms_that_are_not_finite_are_refused_by_name() {
     let id = "--run-column run --time-column t --degree 1 --output y --input u --order 1";
     fails(
         &["identify", &good, id, "--term", "0/0"],
-        &["'0/0' is not finite whatever the data are"],
+        &["'0/0' has a part that is not finite whatever the data are"],
     );
     fails(
         &["identify", &good, id, "--term", "exp(1000)"],
@@ -730,6 +730,20 @@ fn terms_that_are_not_finite_are_refused_by_name() {
     fails(
         &["identify", &good, id, "--term", "1/(y-y)"],
         &["'1/(y-y)' is not finite on", "reformulate"],
+    );
+    // A channel named like a number shared the constant candidate's name `1` (another model
+    // than the same data named `u`).
+    let numeric = file(
+        "numeric-name.csv",
+        &good_csv().replacen("run,t,u,y", "run,t,1,y", 1),
+    );
+    fails(
+        &[
+            "identify",
+            &numeric,
+            "--run-column run --time-column t --degree 1 --output y --input 1 --order 1",
+        ],
+        &["'1' reads as a number", "rename"],
     );
     // A monomial already among the candidates (was accepted as a second column of y).
     fails(

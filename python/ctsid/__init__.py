@@ -27,6 +27,9 @@ prints. Long calls release the GIL; progress goes to the ``logging`` logger ``"c
 from __future__ import annotations
 
 import json
+import math
+import numbers
+import os
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -49,8 +52,66 @@ __all__ = [
 RunList = Union[str, Sequence[Any], None]
 
 
+def _int(name: str, v: Any, low: int = 0) -> int:
+    """An integer setting: Python or numpy integers only (``2.7`` was cut to 2 without a word)."""
+    if isinstance(v, bool) or not isinstance(v, numbers.Integral):
+        raise TypeError(f"{name}: give an integer, not {v!r}")
+    if v < low:
+        raise ValueError(f"{name}: {v} is below {low}")
+    return int(v)
+
+
+def _real(name: str, v: Any) -> float:
+    """A real setting: numbers only (a string ``"0.003"`` was read as one)."""
+    if isinstance(v, bool) or not isinstance(v, numbers.Real):
+        raise TypeError(f"{name}: give a number, not {v!r}")
+    return float(v)
+
+
+def _flag(name: str, v: Any) -> bool:
+    """A yes/no setting: ``bool("no")`` is True, so strings are refused."""
+    if not isinstance(v, (bool, np.bool_)):
+        raise TypeError(f"{name}: give True or False, not {v!r}")
+    return bool(v)
+
+
+def _path(name: str, p: Any) -> str:
+    """A file name: ``str`` or a path object (``None`` was written to a file named None)."""
+    if isinstance(p, (str, os.PathLike)):
+        q = os.fspath(p)
+        if isinstance(q, str):
+            return q
+    raise TypeError(f"{name}: give a file name (str or pathlib.Path), not {p!r}")
+
+
+def _names(name: str, v: Any) -> List[str]:
+    """A list of names: one string is refused (it was split into characters)."""
+    if isinstance(v, str):
+        raise TypeError(f"{name}: give a list of names, e.g. [{v!r}]")
+    return [str(x) for x in v]
+
+
+def _unique(names: Sequence[Any], where: str) -> None:
+    seen: Dict[str, int] = {}
+    for c in names:
+        k = str(c)
+        if k in seen:
+            raise CtsidError(f"{where}: column '{k}' is named twice")
+        seen[k] = 1
+
+
+def _finite_or_none(x: float) -> Optional[float]:
+    """A figure the command line prints as ``-`` (a constant measured output) is ``None``."""
+    return x if math.isfinite(x) else None
+
+
 def _frames(data: Any, run_column: Optional[str], columns: Optional[Sequence[str]]):
     """(run id, table) pairs, each table a mapping column name -> 1-D float array."""
+    if isinstance(data, (Mapping, list, tuple)) and not _is_frame(data) and run_column is not None:
+        raise ValueError(
+            "run_column: a list or dict of runs already gives one run per item; "
+            "run_column splits a single DataFrame"
+        )
     if isinstance(data, Mapping) and not _is_frame(data):
         return [(str(k), _table(v, columns)) for k, v in data.items()]
     if isinstance(data, (list, tuple)):
@@ -99,6 +160,9 @@ def _is_frame(d: Any) -> bool:
 def _table(d: Any, columns: Optional[Sequence[str]]) -> Dict[str, np.ndarray]:
     """A DataFrame or 2-D array as column name -> 1-D array."""
     if _is_frame(d):
+        if columns is not None:
+            raise ValueError("columns: names the columns of a numpy array; a DataFrame has its own")
+        _unique(d.columns, "data")
         return {str(c): d[c].to_numpy() for c in d.columns}
     a = np.asarray(d)
     if a.ndim != 2:
@@ -112,6 +176,7 @@ def _table(d: Any, columns: Optional[Sequence[str]]) -> Dict[str, np.ndarray]:
         raise ValueError(
             f"data: {a.shape[1]} columns in the array but {len(columns)} names in columns=[...]"
         )
+    _unique(columns, "columns")
     return {str(c): a[:, k] for k, c in enumerate(columns)}
 
 
@@ -149,7 +214,7 @@ def _run_list(v: RunList) -> Optional[str]:
 
 def _tau(tau: Optional[float], model: Optional["Model"] = None) -> float:
     if tau is not None:
-        return float(tau)
+        return _real("tau", tau)
     if model is not None and model.tau is not None:
         return model.tau
     raise ValueError("tau: give the sampling period in seconds")
@@ -163,6 +228,8 @@ class Model:
     """
 
     def __init__(self, inner: "_ctsid.Model", summary: Optional[dict] = None):
+        if not isinstance(inner, _ctsid.Model):
+            raise TypeError("Model: read a model file with ctsid.load(path), or identify one")
         self._m = inner
         #: What the identification reported (orders, test NRMSE per output, engine,
         #: refinement), for a model from :func:`identify`; else ``None``.
@@ -171,7 +238,7 @@ class Model:
     @staticmethod
     def load(path: str) -> "Model":
         """Reads a model file."""
-        return Model(_ctsid.Model.load(str(path)))
+        return Model(_ctsid.Model.load(_path("path", path)))
 
     @staticmethod
     def from_json(text: str) -> "Model":
@@ -183,7 +250,7 @@ class Model:
 
     def save(self, path: str) -> None:
         """Writes the model file (whole or not at all)."""
-        self._m.save(str(path))
+        self._m.save(_path("path", path))
 
     def equations(self) -> List[str]:
         """One equation per output, ``y_d2 = ...``."""
@@ -243,13 +310,14 @@ class Model:
         columns: Optional[Sequence[str]] = None,
     ) -> List[dict]:
         """Per run and output: RMS, NRMSE (RMS over the measured output's standard deviation)
-        and fit in percent, ``100 (1 - NRMSE)``, as ``ctsid simulate`` prints them."""
+        and fit in percent, ``100 (1 - NRMSE)``, as ``ctsid simulate`` prints them; ``None``
+        where the command line prints ``-`` (the measured output is constant in that run)."""
         rows = []
         for rid, _, rms, nrmse in self._run(data, tau, run_column, columns):
             for o, r, e in zip(self.outputs, rms, nrmse):
-                rows.append(
-                    {"run": rid, "output": o, "rms": r, "nrmse": e, "fit_percent": 100.0 * (1.0 - e)}
-                )
+                e = _finite_or_none(e)
+                fit = None if e is None else 100.0 * (1.0 - e)
+                rows.append({"run": rid, "output": o, "rms": r, "nrmse": e, "fit_percent": fit})
         return rows
 
     def __str__(self) -> str:
@@ -286,25 +354,27 @@ def identify(
     ``"gpu"``. The returned model's ``summary`` holds the orders and test NRMSE.
     """
     tau = _tau(tau)
-    outputs, inputs = list(outputs), list(inputs)
+    outputs, inputs = _names("outputs", outputs), _names("inputs", inputs)
+    if order is not None and orders is not None:
+        raise ValueError("order fixes the orders and orders lists those to search; give one of them")
     names, runs = _records(data, outputs + inputs, run_column, columns)
-    if isinstance(order, int):
+    if isinstance(order, numbers.Integral) and not isinstance(order, bool):
         order = [order] * len(outputs)
     inner, summary = _ctsid.identify(
-        float(tau),
+        tau,
         names,
         runs,
         outputs,
         inputs,
-        int(degree),
+        _int("degree", degree, 1),
         train=_run_list(train),
         validation=_run_list(validation),
         test=_run_list(test),
-        order=None if order is None else [int(o) for o in order],
-        orders=None if orders is None else [int(o) for o in orders],
-        terms=list(terms),
+        order=None if order is None else [_int("order", o, 1) for o in order],
+        orders=None if orders is None else [_int("orders", o, 1) for o in orders],
+        terms=_names("terms", terms),
         engine=str(engine),
-        refine=bool(refine),
+        refine=_flag("refine", refine),
     )
     return Model(inner, json.loads(summary))
 
@@ -323,21 +393,25 @@ def derive(y: Any, tau: float, order: int) -> Tuple[np.ndarray, np.ndarray]:
     """Derivatives y, y', ..., y^(order) of one uniformly sampled signal by the self-tuning
     smoother: ``(values, sigmas)``, each an array (order + 1) x samples; row 0 is the smoothed
     signal, ``sigmas`` the per-sample standard deviations."""
-    a = np.asarray(y, dtype=float)
+    raw = np.asarray(y)
+    if raw.dtype.kind not in "biuf":
+        raise CtsidError(f"y: values are not numbers ({raw.dtype})")
+    a = raw.astype(float)
     if a.ndim != 1:
         raise ValueError(f"y: a {a.ndim}-D array; give one signal as a 1-D array")
-    values, sigmas = _ctsid.derive(a.tolist(), float(tau), int(order))
+    values, sigmas = _ctsid.derive(a.tolist(), _real("tau", tau), _int("order", order))
     return np.asarray(values), np.asarray(sigmas)
 
 
 class Discovery:
     """What :func:`discover` found: ``verdict`` ("added", "nothing", ...), ``text`` (the
     evidence and the before/after table, as the command line prints it), ``model`` (the
-    augmented model), ``nrmse_before`` / ``nrmse_after`` on the test runs."""
+    augmented model), ``nrmse_before`` / ``nrmse_after`` on the test runs (``None`` where the
+    measured output is constant)."""
 
     def __init__(self, verdict: str, text: str, model: Model, before: float, after: float):
         self.verdict, self.text, self.model = verdict, text, model
-        self.nrmse_before, self.nrmse_after = before, after
+        self.nrmse_before, self.nrmse_after = _finite_or_none(before), _finite_or_none(after)
 
     def __str__(self) -> str:
         return self.text
@@ -356,6 +430,8 @@ def discover(
 ) -> Discovery:
     """Compares a nominal model with the data, names the effect it misses (friction, drag,
     stiffness, ...), adds it and refits (``ctsid discover``)."""
+    if not isinstance(nominal, Model):
+        raise TypeError("nominal: a ctsid.Model (ctsid.load(path) reads a model file)")
     names, runs = _records(data, nominal.outputs + nominal.inputs, run_column, columns)
     verdict, text, inner, before, after = _ctsid.discover(
         _tau(tau, nominal),
@@ -365,7 +441,7 @@ def discover(
         train=_run_list(train),
         validation=_run_list(validation),
         test=_run_list(test),
-        seed=int(seed),
+        seed=_int("seed", seed),
     )
     return Discovery(verdict, text, Model(inner), before, after)
 
@@ -381,4 +457,12 @@ def throttle_dataset(
 ) -> None:
     """Writes the source paper's throttle experiment as CSV (``run,t,u,y``; with ``truth``
     also ``y_true`` and its exact derivatives): the data of ``ctsid demo etc``."""
-    _ctsid.throttle_dataset(str(path), runs, samples, tau, noise, seed, truth)
+    _ctsid.throttle_dataset(
+        _path("path", path),
+        _int("runs", runs, 1),
+        _int("samples", samples, 1),
+        _real("tau", tau),
+        _real("noise", noise),
+        _int("seed", seed),
+        _flag("truth", truth),
+    )

@@ -162,3 +162,40 @@ def test_wrong_shapes_and_settings_raise_clear_errors(fitted):
         ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", test="99")
     with pytest.raises(ctsid.CtsidError):
         ctsid.Model.from_json('{"format": "ctsid-model/2", "inputs": [], "outputs": [{"name": "y", "order": 1, "terms": [{"exponent": {"y": 1}, "coefficient": 1}]}]}')
+
+
+def test_settings_of_the_wrong_kind_are_refused_not_coerced(fitted, tmp_path):
+    """A second probe's findings: each of these ran with a silently changed setting or data."""
+    data, model = fitted
+    base = dict(outputs=["y"], inputs=["u"], tau=TAU, run_column="run", train="0-7", test="10-11")
+    with pytest.raises(TypeError, match="degree"):
+        ctsid.identify(data, degree=2.7, order=3, **base)  # was degree 2
+    with pytest.raises(TypeError, match="refine"):
+        ctsid.identify(data, degree=2, order=3, refine="no", **base)  # bool("no") is True
+    with pytest.raises(ValueError, match="one of them"):
+        ctsid.identify(data, degree=2, order=3, orders=[1, 2], **base)  # orders was ignored
+    with pytest.raises(TypeError, match="terms"):
+        ctsid.identify(data, degree=2, order=3, terms="sign(y_d1)", **base)  # split into letters
+    with pytest.raises(TypeError, match="order"):
+        ctsid.derive(data.y[:600].to_numpy(), TAU, 2.9)  # was order 2
+    with pytest.raises(ctsid.CtsidError, match="not numbers"):
+        ctsid.derive(data.y[:600].to_numpy() + 1j, TAU, 2)  # the imaginary part was dropped
+    # Two columns of one name: the later one was used (here the noise column as y).
+    runs = [g[["y", "u"]].to_numpy() for _, g in data.groupby("run")]
+    junk = [np.c_[r[:, 0], np.zeros(len(r)), r[:, 1]] for r in runs]
+    with pytest.raises(ctsid.CtsidError, match="named twice"):
+        ctsid.identify(junk, outputs=["y"], inputs=["u"], tau=TAU, columns=["y", "y", "u"])
+    # run_column on a list of frames: every run was joined into one.
+    with pytest.raises(ValueError, match="run_column"):
+        ctsid.identify([data], outputs=["y"], inputs=["u"], tau=TAU, run_column="run", degree=2, order=3)
+    with pytest.raises(TypeError, match="file name"):
+        model.save(None)  # wrote a file named None
+    with pytest.raises(TypeError, match="ctsid.Model"):
+        ctsid.discover(data, None, tau=TAU, run_column="run")
+    # A constant measured output: the command line prints "-", Python gave inf and -inf.
+    rows = model.score(data[data.run == 0].assign(y=1.0), run_column="run")
+    assert rows[0]["nrmse"] is None and rows[0]["fit_percent"] is None
+    # A numpy integer is an integer.
+    same = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run",
+                          **dict(SETTINGS, degree=np.int64(2), order=np.int64(3)))
+    assert same.to_json() == model.to_json()

@@ -205,6 +205,15 @@ impl Basis {
                 ),
             ));
         }
+        // The constant candidate is named `1`: a variable named like a number would share its
+        // name (and an expression could not tell it from the number), so that a channel named
+        // `1` gave another model than the same data named `u`.
+        if let Some(v) = names.iter().find(|v| v.trim().parse::<f64>().is_ok()) {
+            return Err(Error::param(
+                "features",
+                format!("'{v}' reads as a number, which terms and expressions cannot tell from a constant; rename the channel"),
+            ));
+        }
         let total = count(n, degree).unwrap_or(u64::MAX);
         if total > limits.max_candidates {
             let mib = |c: u64| c as f64 * BYTES_PER_CANDIDATE as f64 / 1048576.0;

@@ -370,7 +370,8 @@ fn sample_count(d: &Design, s: &Scenario) -> Result<usize> {
             ),
         ));
     }
-    if samples < 10.0 {
+    // A NaN duration is refused here too (it gave 0 samples and a misleading error).
+    if samples.is_nan() || samples < 10.0 {
         return Err(Error::param(
             "duration",
             format!(

@@ -83,7 +83,8 @@ impl Identifier {
 
     /// A named term beside the monomials, in the model file's expression language
     /// (`sign(q_m_d1)`, `abs(y_d1)*y_d1`); may be given several times. Checked by
-    /// [`Identifier::fit`]: it must parse, and not be given twice.
+    /// [`Identifier::fit`]: it must parse, not be given twice, have no part that is never
+    /// finite, not be a monomial already among the candidates, and be finite on the data.
     pub fn term(mut self, expression: impl Into<String>) -> Self {
         self.settings.terms.push(expression.into());
         self

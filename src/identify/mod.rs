@@ -218,8 +218,10 @@ impl Settings {
     /// twice among the outputs and inputs, a `label_floor` that is negative or not finite, no
     /// candidate order, an order outside 1..=[`MAX_ORDER`], a searched order listed twice, a number
     /// of fixed orders other than of outputs, an `eta` below 1 or not finite, a degree outside
-    /// 1..=12, and a named term that does not parse over the variables of the highest order or is
-    /// given twice.
+    /// 1..=12, and a named term that does not parse over the variables of the highest order, is
+    /// given twice, has a part that is not finite whatever the data are (`0/0`, `y/0`), or is a
+    /// monomial of at most the fit's degree (already a candidate; a scaled copy such as `2*y`
+    /// is not caught here).
     pub fn validate(&self) -> Result<()> {
         if self.outputs.is_empty() {
             return Err(Error::param("output", "name at least one output"));
@@ -300,7 +302,7 @@ impl Settings {
             if let Some(why) = e.constant_fault() {
                 return Err(Error::param(
                     "term",
-                    format!("'{t}' is not finite whatever the data are ({why})"),
+                    format!("'{t}' has a part that is not finite whatever the data are ({why}); reformulate it"),
                 ));
             }
             // A monomial the basis already has would be a second column with the same values,

@@ -772,7 +772,8 @@ impl Model {
     /// section, no outputs, an order of 0 or above [`MAX_ORDER`], an empty name or a variable name
     /// used twice, two equal terms in one output, a coefficient that is not finite, a `std_error`
     /// that is negative or not finite, an `interval` that is not a finite [low, high], a term with
-    /// both exponents and an expression, an expression that does not parse, an exponent above
+    /// both exponents and an expression, an expression that does not parse or has a part that is
+    /// not finite whatever the state is (`0/0`, `y/0`, `exp(800)`), an exponent above
     /// [`MAX_EXPONENT`], an unknown variable, a term above the model's degree, and a
     /// `sign_smoothing` width of an unknown variable or one that is not finite and positive or
     /// whose cube is not a normal number.
@@ -885,7 +886,7 @@ impl Model {
             let parsed = Expr::parse(e, names).map_err(|e| e.to_string())?;
             return match parsed.constant_fault() {
                 Some(why) => Err(format!(
-                    "expression '{e}' is not finite whatever the state is ({why})"
+                    "expression '{e}' has a part that is not finite whatever the state is ({why})"
                 )),
                 None => Ok(()),
             };
