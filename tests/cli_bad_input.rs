@@ -301,6 +301,11 @@ fn demo_settings_are_checked_before_the_work() {
     fails(&["demo", "mimo", "--degrees", "0"], &["degree", "1..=12"]);
     // Was found inside the first fit, after the plant's data were simulated.
     fails(&["demo", "mimo", "--orders", "0"], &["orders", "1..=6"]);
+    fails(
+        &["demo", "mimo", "--degrees", "2,2"],
+        &["degree 2 is listed twice"],
+    );
+    fails(&["demo", "mimo", "--engines", "cpu,cpu"], &["listed twice"]);
     // A huge setting is written short (it was printed with 301 digits).
     let data = file("eps.csv", &good_csv());
     let out = fails(
@@ -746,10 +751,15 @@ fn terms_that_are_not_finite_are_refused_by_name() {
         &["'1' reads as a number", "rename"],
     );
     // A monomial already among the candidates (was accepted as a second column of y).
-    fails(
-        &["identify", &good, id, "--term", "y"],
-        &["'y' is a monomial of degree 1", "already a candidate"],
-    );
+    for copy in ["y", "2*y", "-u/3"] {
+        fails(
+            &["identify", &good, id, &format!("--term={copy}")],
+            &[
+                &format!("'{copy}' is a monomial of degree 1"),
+                "already a candidate",
+            ],
+        );
+    }
     let text = common::cli::lag_model_text(-1.0, Some(1.0));
     let v: serde_json::Value = serde_json::from_str(&text).unwrap();
     for (expr, says) in [("y/0", "divides by zero"), ("sqrt(-1)", "NaN")] {

@@ -56,6 +56,19 @@ pub fn run(o: &MimoOptions) -> Result<String> {
     for &d in &o.degrees {
         crate::basis::check_degree(d)?;
     }
+    // A degree or engine listed twice ran the same case twice, minutes each.
+    if let Some((_, j)) = crate::util::first_repeat(&o.degrees) {
+        return Err(Error::param(
+            "degrees",
+            format!("degree {} is listed twice", o.degrees[j]),
+        ));
+    }
+    if let Some((_, j)) = crate::util::first_repeat(&o.engines) {
+        return Err(Error::param(
+            "engines",
+            format!("{:?} is listed twice", o.engines[j]),
+        ));
+    }
     // Before the data are simulated (an order of 0 failed inside the first fit).
     let max = crate::identify::MAX_ORDER;
     if let Some(k) = o.orders.iter().find(|&&k| !(1..=max).contains(&k)) {

@@ -220,8 +220,8 @@ impl Settings {
     /// of fixed orders other than of outputs, an `eta` below 1 or not finite, a degree outside
     /// 1..=12, and a named term that does not parse over the variables of the highest order, is
     /// given twice, has a part that is not finite whatever the data are (`0/0`, `y/0`), or is a
-    /// monomial of at most the fit's degree (already a candidate; a scaled copy such as `2*y`
-    /// is not caught here).
+    /// monomial of at most the fit's degree, or a constant multiple of one (`2*y`: already a
+    /// candidate).
     pub fn validate(&self) -> Result<()> {
         if self.outputs.is_empty() {
             return Err(Error::param("output", "name at least one output"));
@@ -307,12 +307,12 @@ impl Settings {
             }
             // A monomial the basis already has would be a second column with the same values,
             // left to the selection to split its vote between two names.
-            if let Some(m) = e.monomial() {
+            if let Some(m) = e.monomial_up_to_scale() {
                 let deg: u32 = m.iter().map(|(_, k)| k).sum();
                 if deg as usize <= self.degree {
                     return Err(Error::param(
                         "term",
-                        format!("'{t}' is a monomial of degree {deg}, already a candidate at --degree {}; leave it out", self.degree),
+                        format!("'{t}' is a monomial of degree {deg} (up to a factor), already a candidate at --degree {}; leave it out", self.degree),
                     ));
                 }
             }

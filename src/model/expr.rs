@@ -196,6 +196,46 @@ impl Expr {
         v
     }
 
+    /// The exponents of the monomial the expression is a constant multiple of (`2*y`, `-y`,
+    /// `y^2/2`, `y^0`), or `None` when it is no such multiple. A named term of this form is a
+    /// candidate of the basis again, scaled.
+    pub fn monomial_up_to_scale(&self) -> Option<Vec<(usize, u32)>> {
+        fn walk(n: &Node, out: &mut Vec<(usize, u32)>) -> bool {
+            let number = |n: &Node| matches!(n, Node::Num(v) if *v != 0.0 && v.is_finite());
+            match n {
+                Node::Num(_) => number(n),
+                Node::Var(i) => {
+                    out.push((*i, 1));
+                    true
+                }
+                Node::Neg(a) => walk(a, out),
+                Node::Mul(a, b) => walk(a, out) && walk(b, out),
+                Node::Div(a, b) => number(b) && walk(a, out),
+                Node::Pow(_, e) if *e == 0.0 => true,
+                Node::Pow(a, e) if *e >= 1.0 && e.fract() == 0.0 => match **a {
+                    Node::Var(i) => {
+                        out.push((i, *e as u32));
+                        true
+                    }
+                    _ => false,
+                },
+                _ => false,
+            }
+        }
+        let mut v = Vec::new();
+        if !walk(&self.root, &mut v) {
+            return None;
+        }
+        let mut merged: Vec<(usize, u32)> = Vec::new();
+        for (i, e) in v {
+            match merged.iter_mut().find(|(j, _)| *j == i) {
+                Some(m) => m.1 += e,
+                None => merged.push((i, e)),
+            }
+        }
+        Some(merged)
+    }
+
     /// Whether the expression is a product of integer powers of single variables (a monomial of
     /// the model file), with those exponents. `None` for any other expression: a sum, a function, a
     /// number other than 1, or a power that is not a positive integer power of one variable.
@@ -685,6 +725,21 @@ impl Parser<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn monomials_up_to_a_factor_are_recognised() {
+        let vars = ["y".to_string(), "u".to_string()];
+        let m = |t: &str| Expr::parse(t, &vars).unwrap().monomial_up_to_scale();
+        assert_eq!(m("2*y"), Some(vec![(0, 1)]));
+        assert_eq!(m("-y"), Some(vec![(0, 1)]));
+        assert_eq!(m("y^2/2"), Some(vec![(0, 2)]));
+        assert_eq!(m("u*y*3"), Some(vec![(1, 1), (0, 1)]));
+        assert_eq!(m("y^0"), Some(vec![]));
+        assert_eq!(m("2"), Some(vec![]));
+        for other in ["y + 1", "y/u", "sign(y)", "y^0.5", "0*y", "y/0", "(y+u)^2"] {
+            assert_eq!(m(other), None, "{other}");
+        }
+    }
 
     #[test]
     fn parts_that_are_not_finite_whatever_the_variables_are_named() {
