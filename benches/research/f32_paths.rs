@@ -15,19 +15,11 @@ use ctsid::regression::{lars_path, Method, Path, PathOptions};
 #[path = "path_problem.rs"]
 mod problem;
 
-fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .and_then(|v| v.parse().ok())
-        .unwrap_or(default)
-}
-
 fn main() {
     let args: Vec<String> = std::env::args().filter(|a| a != "--bench").collect();
-    let n_s: usize = arg(&args, "--samples", 25_000);
-    let steps: usize = arg(&args, "--steps", 200);
-    let sizes: String = arg(&args, "--sizes", "11:6,17:6".to_string());
+    let n_s: usize = problem::arg(&args, "--samples", 25_000);
+    let steps: usize = problem::arg(&args, "--steps", 200);
+    let sizes: String = problem::arg(&args, "--sizes", "11:6,17:6".to_string());
     println!("| problem | f32 path | f64 path | active sets first differ | largest coefficient difference before it (relative) |");
     println!("|---|---|---|---|---|");
     for spec in sizes.split(',') {

@@ -1,6 +1,7 @@
 //! The seeded problem of `gpu_report`'s paths, shared with `f32_paths`: Z uniform in [-1, 1],
 //! a swept vector, and a label of six random monomials plus 1 % noise, drawn in that order
-//! from one generator per shape (so both reports see the same problem).
+//! from one generator per shape (so both reports see the same problem); and their option
+//! reader.
 
 use ctsid::basis::Basis;
 use ctsid::engine::Features;
@@ -49,4 +50,13 @@ pub fn label(rng: &mut Rng, basis: &Basis, f: &Features) -> Vec<f64> {
         *yi += 0.01 * sd * rng.uniform_in(-1.0, 1.0);
     }
     y
+}
+
+/// The value after `name` in `args`, or `default` when it is missing or does not parse.
+pub fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(default)
 }

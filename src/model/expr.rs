@@ -200,18 +200,31 @@ impl Expr {
     /// `y^2/2`, `y^0`), or `None` when it is no such multiple. A named term of this form is a
     /// candidate of the basis again, scaled.
     pub fn monomial_up_to_scale(&self) -> Option<Vec<(usize, u32)>> {
-        fn walk(n: &Node, out: &mut Vec<(usize, u32)>) -> bool {
+        self.powers(true)
+    }
+
+    /// Whether the expression is a product of integer powers of single variables (a monomial of
+    /// the model file), with those exponents. `None` for any other expression: a sum, a function, a
+    /// number other than 1, or a power that is not a positive integer power of one variable.
+    pub fn monomial(&self) -> Option<Vec<(usize, u32)>> {
+        self.powers(false)
+    }
+
+    /// The powers of a product of variables, by variable: [`Expr::monomial`], and with `scaled`
+    /// also numbers, signs, division by a number and zeroth powers as factors.
+    fn powers(&self, scaled: bool) -> Option<Vec<(usize, u32)>> {
+        fn walk(n: &Node, scaled: bool, out: &mut Vec<(usize, u32)>) -> bool {
             let number = |n: &Node| matches!(n, Node::Num(v) if *v != 0.0 && v.is_finite());
             match n {
-                Node::Num(_) => number(n),
+                Node::Num(v) => *v == 1.0 || (scaled && number(n)),
                 Node::Var(i) => {
                     out.push((*i, 1));
                     true
                 }
-                Node::Neg(a) => walk(a, out),
-                Node::Mul(a, b) => walk(a, out) && walk(b, out),
-                Node::Div(a, b) => number(b) && walk(a, out),
-                Node::Pow(_, e) if *e == 0.0 => true,
+                Node::Mul(a, b) => walk(a, scaled, out) && walk(b, scaled, out),
+                Node::Neg(a) if scaled => walk(a, scaled, out),
+                Node::Div(a, b) if scaled => number(b) && walk(a, scaled, out),
+                Node::Pow(_, e) if scaled && *e == 0.0 => true,
                 Node::Pow(a, e) if *e >= 1.0 && e.fract() == 0.0 => match **a {
                     Node::Var(i) => {
                         out.push((i, *e as u32));
@@ -223,44 +236,7 @@ impl Expr {
             }
         }
         let mut v = Vec::new();
-        if !walk(&self.root, &mut v) {
-            return None;
-        }
-        let mut merged: Vec<(usize, u32)> = Vec::new();
-        for (i, e) in v {
-            match merged.iter_mut().find(|(j, _)| *j == i) {
-                Some(m) => m.1 += e,
-                None => merged.push((i, e)),
-            }
-        }
-        Some(merged)
-    }
-
-    /// Whether the expression is a product of integer powers of single variables (a monomial of
-    /// the model file), with those exponents. `None` for any other expression: a sum, a function, a
-    /// number other than 1, or a power that is not a positive integer power of one variable.
-    pub fn monomial(&self) -> Option<Vec<(usize, u32)>> {
-        fn walk(n: &Node, out: &mut Vec<(usize, u32)>) -> bool {
-            match n {
-                Node::Num(v) => *v == 1.0,
-                Node::Var(i) => {
-                    out.push((*i, 1));
-                    true
-                }
-                Node::Mul(a, b) => walk(a, out) && walk(b, out),
-                Node::Pow(a, e) if *e >= 1.0 && e.fract() == 0.0 => {
-                    if let Node::Var(i) = **a {
-                        out.push((i, *e as u32));
-                        true
-                    } else {
-                        false
-                    }
-                }
-                _ => false,
-            }
-        }
-        let mut v = Vec::new();
-        if !walk(&self.root, &mut v) {
+        if !walk(&self.root, scaled, &mut v) {
             return None;
         }
         let mut merged: Vec<(usize, u32)> = Vec::new();
@@ -733,7 +709,7 @@ mod tests {
         assert_eq!(m("2*y"), Some(vec![(0, 1)]));
         assert_eq!(m("-y"), Some(vec![(0, 1)]));
         assert_eq!(m("y^2/2"), Some(vec![(0, 2)]));
-        assert_eq!(m("u*y*3"), Some(vec![(1, 1), (0, 1)]));
+        assert_eq!(m("u*y*3"), Some(vec![(0, 1), (1, 1)]));
         assert_eq!(m("y^0"), Some(vec![]));
         assert_eq!(m("2"), Some(vec![]));
         for other in ["y + 1", "y/u", "sign(y)", "y^0.5", "0*y", "y/0", "(y+u)^2"] {
