@@ -10,7 +10,7 @@
 
 use ctsid::basis::{Basis, BasisLimits};
 use ctsid::engine::{CpuEngine, CpuOptions, Precision};
-use ctsid::regression::{lars_path, Method, Path, PathOptions};
+use ctsid::regression::{lars_path, Path};
 
 #[path = "path_problem.rs"]
 mod problem;
@@ -31,12 +31,7 @@ fn main() {
         let basis = Basis::new(&names, d, BasisLimits::default()).expect("basis");
         let problem::Problem { mut rng, feats, .. } = problem::Problem::new(n_z, d, n_s);
         let y = problem::label(&mut rng, &basis, &feats);
-        let opts = PathOptions {
-            method: Method::LassoLars,
-            max_terms: steps,
-            max_steps: steps,
-            ..PathOptions::default()
-        };
+        let opts = problem::path_options(steps);
         let run = |precision| {
             let mut e = CpuEngine::new(
                 &basis,

@@ -34,8 +34,8 @@ use rayon::prelude::*;
 
 use ctsid::basis::{Basis, BasisLimits, Code};
 use ctsid::engine::gpu::{GpuEngine, GpuOptions, KernelShape};
-use ctsid::engine::{CpuEngine, CpuOptions, Features, Precision, SweepEngine};
-use ctsid::regression::{lars_path, Method, PathOptions};
+use ctsid::engine::{CpuEngine, CpuOptions, Precision, SweepEngine};
+use ctsid::regression::{lars_path, PathOptions};
 
 /// Plain rayon f64 reference: out_j = sum_i prod(z_i[vars of j]) * v_i, parallel over candidates.
 fn naive_f64_sweep(
@@ -192,12 +192,7 @@ fn main() {
 
         // A label with a sparse polynomial truth plus noise, for the paths.
         let y = problem::label(&mut rng, &basis, &feats);
-        let path_opts = PathOptions {
-            method: Method::LassoLars,
-            max_terms: steps,
-            max_steps: steps,
-            ..PathOptions::default()
-        };
+        let path_opts = problem::path_options(steps);
         let t = Instant::now();
         let gpu_path = lars_path(&mut eng, &y, None, &path_opts).expect("gpu path");
         let gpu_path_s = t.elapsed().as_secs_f64();
@@ -253,7 +248,7 @@ fn main() {
                 let gpu_at = first_difference(&gpu_path, &cpath, k);
                 let f32_at = f32_path
                     .as_ref()
-                    .map_or(None, |p| first_difference(p, &cpath, k));
+                    .and_then(|p| first_difference(p, &cpath, k));
                 let at = |d: Option<usize>| d.map_or("same".to_string(), |s| format!("step {s}"));
                 order_ok = format!("{} / {} (of {k})", at(gpu_at), at(f32_at));
             }

@@ -6,6 +6,7 @@
 use ctsid::basis::Basis;
 use ctsid::engine::Features;
 use ctsid::plants::rng::Rng;
+use ctsid::regression::{Method, PathOptions};
 
 pub struct Problem {
     /// The generator after Z and v were drawn (the label comes next).
@@ -59,4 +60,14 @@ pub fn arg<T: std::str::FromStr>(args: &[String], name: &str, default: T) -> T {
         .and_then(|i| args.get(i + 1))
         .and_then(|s| s.parse().ok())
         .unwrap_or(default)
+}
+
+/// The paths both reports run: LassoLars, at most `steps` steps and terms.
+pub fn path_options(steps: usize) -> PathOptions {
+    PathOptions {
+        method: Method::LassoLars,
+        max_terms: steps,
+        max_steps: steps,
+        ..PathOptions::default()
+    }
 }
