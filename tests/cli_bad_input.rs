@@ -774,6 +774,31 @@ fn terms_that_are_not_finite_are_refused_by_name() {
     }
 }
 
+/// `-o` inside the `--report` folder was replaced by a report file (`-o rep/report.md` lost the
+/// simulated CSV; discover's model became its summary): refused before the work.
+#[test]
+fn an_output_inside_the_report_folder_is_refused() {
+    let model = lag_model("inside.json", Some(1.0));
+    let good = file("good-inside.csv", &good_csv());
+    let rep = dir().join("inside-rep");
+    std::fs::create_dir_all(&rep).unwrap();
+    let inside = rep.join("report.md").display().to_string();
+    let out = fails(
+        &[
+            "simulate",
+            &model,
+            &good,
+            "--run-column run --tau 0.01 --report",
+            &rep.display().to_string(),
+            "-o",
+            &inside,
+        ],
+        &["inside the report folder"],
+    );
+    assert!(out.stdout.is_empty(), "the work ran before the refusal");
+    assert!(!std::path::Path::new(&inside).exists());
+}
+
 /// Terms near 1e308: the steady-input search summed the terms' magnitudes, which overflowed, and
 /// called the input ineffective ("dP/du = 0"); the error now names what is wrong (the default
 /// bandwidth the model's poles give).

@@ -50,6 +50,9 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     }
     if let Some(d) = &a.report {
         super::check_output_dir(d)?;
+        if let Some(o) = &a.output_model {
+            super::check_output_outside_report(o, d)?;
+        }
     }
     let mut conf = BTreeMap::new();
     for (c, (t, p)) in a

@@ -161,6 +161,36 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
     ctsid::util::output_target(out).map(|_| ())
 }
 
+/// Refuses an output file inside the report folder, or named as the folder: the report's
+/// files would replace it (`-o rep/report.md --report rep` lost the simulated CSV) or the
+/// folder could not be made. Checked before the work, like the other outputs.
+pub fn check_output_outside_report(out: &Path, report: &Path) -> Result<()> {
+    // Absolute, through links, where the folders exist; the report folder may not exist yet.
+    let resolve = |p: &Path| -> std::path::PathBuf {
+        let parent = p
+            .parent()
+            .filter(|q| !q.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        let base = std::fs::canonicalize(parent).unwrap_or_else(|_| parent.to_path_buf());
+        p.file_name().map_or(base.clone(), |n| base.join(n))
+    };
+    let (o, r) = (resolve(out), resolve(report));
+    if o == r || o.parent() == Some(r.as_path()) {
+        return Err(Error::Io {
+            path: out.display().to_string(),
+            message: if o == r {
+                "is also the report folder; write it elsewhere".into()
+            } else {
+                format!(
+                    "is inside the report folder {}, whose files would replace it; write it elsewhere",
+                    report.display()
+                )
+            },
+        });
+    }
+    Ok(())
+}
+
 /// Checks a report folder before any work: it is not an existing file and its parent exists.
 pub fn check_output_dir(dir: &Path) -> Result<()> {
     let name = dir.display().to_string();

@@ -2,7 +2,7 @@
 //! `--train / --validation / --test` for those that split runs.
 
 use clap::Args;
-use ctsid::identify::split::{parse_list_at_most, resolve};
+use ctsid::identify::split::{parse_runs_among, resolve};
 use ctsid::records::{CsvSpec, RecordSet};
 use ctsid::{Error, Result};
 
@@ -81,7 +81,7 @@ impl SplitArgs {
     pub fn resolve(&self, ids: &[String]) -> Result<Given> {
         let pick = |t: &Option<String>, what: &str| -> Result<Option<Vec<usize>>> {
             t.as_deref()
-                .map(|t| resolve(&parse_list_at_most(t, what, ids.len())?, ids, what))
+                .map(|t| resolve(&parse_runs_among(t, what, ids)?, ids, what))
                 .transpose()
         };
         Ok(Given {

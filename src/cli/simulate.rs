@@ -58,6 +58,9 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     args.segment.check()?;
     if let Some(d) = &args.report {
         super::check_output_dir(d)?;
+        if let Some(o) = &args.output {
+            super::check_output_outside_report(o.as_ref(), d)?;
+        }
     }
     let model = Model::read(&args.model)?;
     let sim_names: Vec<String> = model
@@ -75,13 +78,6 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             &sim_names,
             "simulate -o",
         )?;
-        // The same path for both: the file was written, then the report's folder failed.
-        if args.report.as_deref() == Some(std::path::Path::new(o)) {
-            return Err(Error::param(
-                "output",
-                format!("{o} is also the report folder; write the simulated file elsewhere"),
-            ));
-        }
     }
     let compiled = model.compile()?;
     let mut columns: Vec<String> = model.outputs.iter().map(|o| o.name.clone()).collect();

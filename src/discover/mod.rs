@@ -1630,17 +1630,19 @@ impl Discovery {
                 "| {} | {} | {} | {} | {} | {} |\n",
                 crate::report::md_cell(&r.run),
                 r.role,
-                num4(r.nrmse_nominal),
-                num4(r.above_noise),
-                r.nrmse_final.map(num4).unwrap_or_default(),
-                r.rms_final.map(num).unwrap_or_default()
+                or_diverged(r.nrmse_nominal, num4),
+                or_diverged(r.above_noise, num4),
+                r.nrmse_final
+                    .map(|x| or_diverged(x, num4))
+                    .unwrap_or_default(),
+                r.rms_final.map(|x| or_diverged(x, num)).unwrap_or_default()
             );
         }
         if !self.test_runs.is_empty() {
             s += &format!(
                 "test runs: mean free-run NRMSE before {}, after {}\n",
-                num4(self.nrmse_before),
-                num4(self.nrmse_after)
+                or_diverged(self.nrmse_before, num4),
+                or_diverged(self.nrmse_after, num4)
             );
         }
         s
@@ -1691,11 +1693,16 @@ impl Discovery {
     }
 }
 
-/// A gate's ratio for the summary: three decimals, "diverged" where the augmented model's free
-/// run (or residual) was infinite, "-" where it could not be formed (was printed `inf`, `NaN`).
+/// A gate's ratio for the summary, to three decimals (see [`or_diverged`]).
 fn gate_ratio(x: f64) -> String {
+    or_diverged(x, |x| format!("{x:.3}"))
+}
+
+/// A figure of the summary as `f` writes it, "diverged" where a free run was infinite and "-"
+/// where none could be formed (the summary printed `inf` and exited 0).
+fn or_diverged(x: f64, f: impl Fn(f64) -> String) -> String {
     if x.is_finite() {
-        format!("{x:.3}")
+        f(x)
     } else if x == f64::INFINITY {
         "diverged".into()
     } else {
@@ -1707,15 +1714,17 @@ fn gate_ratio(x: f64) -> String {
 mod tests {
     use super::{
         block_grams, blocking, blocking_within, contradicts, drifts, gate_ratio, gram_bytes,
-        spread, Blocking, Rows, BLOCK, MIN_BLOCKS,
+        or_diverged, spread, Blocking, Rows, BLOCK, MIN_BLOCKS,
     };
 
-    /// An effect singular on the data made the free run diverge: the summary said `ratio inf`.
+    /// An effect singular on the data made the free run diverge: the summary said `ratio inf`
+    /// (and `inf` in its runs' table).
     #[test]
     fn gate_ratios_that_are_not_finite_are_named() {
         assert_eq!(gate_ratio(0.81234), "0.812");
         assert_eq!(gate_ratio(f64::INFINITY), "diverged");
         assert_eq!(gate_ratio(f64::NAN), "-");
+        assert_eq!(or_diverged(f64::INFINITY, |x| format!("{x}")), "diverged");
     }
 
     #[test]

@@ -30,10 +30,20 @@ impl Item<'_> {
     }
 }
 
-/// The items of a list, unexpanded; refuses a range that runs backwards.
-fn items<'t>(text: &'t str, what: &str) -> Result<Vec<Item<'t>>> {
+/// The items of a list, unexpanded; refuses a range that runs backwards. An item that `is_id`
+/// names a run by (`2024-05`, `1-2`) is that run, not a range.
+fn items<'t>(text: &'t str, what: &str, is_id: &dyn Fn(&str) -> bool) -> Result<Vec<Item<'t>>> {
     let mut out = Vec::new();
     for whole in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        if is_id(whole) {
+            out.push(Item {
+                whole,
+                prefix: String::new(),
+                part: whole,
+                range: None,
+            });
+            continue;
+        }
         // Pieces of a cut run (`RUN#0-4`, see `RecordSet::segmented`) take ranges too.
         let (prefix, part) = match whole.rsplit_once('#') {
             Some((run, rest)) => (format!("{run}#"), rest),
@@ -63,7 +73,7 @@ fn items<'t>(text: &'t str, what: &str) -> Result<Vec<Item<'t>>> {
 /// How many names a list stands for, counted without expanding its ranges (`1-9999999` is
 /// 9,999,999); refuses what [`parse_list`] refuses of a list's form (a backwards range).
 pub fn count_names(text: &str, what: &str) -> Result<u64> {
-    Ok(items(text, what)?
+    Ok(items(text, what, &|_| false)?
         .iter()
         .fold(0u64, |n, it| n.saturating_add(it.count())))
 }
@@ -73,7 +83,24 @@ pub fn count_names(text: &str, what: &str) -> Result<u64> {
 /// would otherwise take gigabytes before the first unknown id is found. Refuses a range that runs
 /// backwards, more than `most` names, and a list that names nothing.
 pub fn parse_list_at_most(text: &str, what: &str, most: usize) -> Result<Vec<String>> {
-    let items = items(text, what)?;
+    parse_items(text, what, most, &|_| false)
+}
+
+/// [`parse_list_at_most`] of a list of the runs `ids` (at most as many names as runs): an item
+/// that is a run id exactly is that run, not a range (`2024-00` was refused as a backwards
+/// range, and `1-2` meant runs 1 and 2 beside a run named `1-2`).
+pub fn parse_runs_among(text: &str, what: &str, ids: &[String]) -> Result<Vec<String>> {
+    let known: std::collections::HashSet<&str> = ids.iter().map(String::as_str).collect();
+    parse_items(text, what, ids.len().max(1), &|w| known.contains(w))
+}
+
+fn parse_items(
+    text: &str,
+    what: &str,
+    most: usize,
+    is_id: &dyn Fn(&str) -> bool,
+) -> Result<Vec<String>> {
+    let items = items(text, what, is_id)?;
     let mut count: u64 = 0;
     for it in &items {
         count = count.saturating_add(it.count());
@@ -195,9 +222,8 @@ impl Split {
         test: &str,
     ) -> Result<Split> {
         let ids: Vec<String> = records.runs.iter().map(|r| r.id.clone()).collect();
-        let most = ids.len().max(1);
         let list = |text: &str, what: &str| -> Result<Vec<usize>> {
-            resolve(&parse_list_at_most(text, what, most)?, &ids, what)
+            resolve(&parse_runs_among(text, what, &ids)?, &ids, what)
         };
         let validation = validation.map(|v| list(v, "validation")).transpose()?;
         Split::new(list(train, "train")?, validation, list(test, "test")?, &ids)
@@ -309,6 +335,19 @@ mod tests {
     #[test]
     fn parses_ranges_and_lists() {
         assert_eq!(parse_runs("0-3,7").unwrap(), ["0", "1", "2", "3", "7"]);
+        // Run ids with a dash are runs, not ranges, where the record has them.
+        let ids: Vec<String> = ["2024-00", "2024-01", "1-2", "1", "2"]
+            .map(String::from)
+            .into();
+        assert_eq!(
+            parse_runs_among("2024-01,1-2", "train", &ids).unwrap(),
+            ["2024-01", "1-2"]
+        );
+        assert!(parse_runs("2024-00").is_err());
+        assert_eq!(
+            parse_runs_among("1-2", "train", &ids[3..]).unwrap(),
+            ["1", "2"]
+        );
         assert_eq!(parse_runs(" a, b ").unwrap(), ["a", "b"]);
         assert!(parse_runs("5-2").is_err());
         assert!(parse_runs(",").is_err());
