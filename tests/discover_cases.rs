@@ -250,6 +250,9 @@ fn a_user_effect_the_data_cannot_carry_is_an_error_not_a_silent_omission() {
         ("", "y^2", "has no name"),
         ("cubic_stiffness", "y^3", "built-in"),
         ("cube", "y^3", "already in the dictionary"),
+        // A multiple of a dictionary or nominal monomial (was kept, then vanished unnamed).
+        ("cube2", "2*y^3", "already in the dictionary"),
+        ("stiff", "-y", "a term of the nominal model"),
         ("root", "sqrt(y)", "not finite"),
         ("kink", "relu(y-100)", "constant on the training data"),
     ] {

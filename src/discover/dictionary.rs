@@ -192,7 +192,8 @@ fn polynomial_effects(
 /// first, then the inputs), leaving out monomials already in the nominal model
 /// (`nominal_monomials`, as exponent lists over `vars`). Refuses user effects that
 /// [`check_user_names`] refuses, one named like a built-in family, one whose expression does not
-/// parse over `vars`, and one already in the dictionary (or a term of the nominal model). Panics
+/// parse over `vars`, and one already in the dictionary (or a term of the nominal model), also
+/// as a constant multiple of a monomial there. Panics
 /// when `order` is 0 or above `vars.len()`, or when `scales.sd` has fewer than `order` entries,
 /// `scales.median` none, or `scales.p99` fewer than `vars.len()` (with inputs in `vars`).
 pub fn build(
@@ -220,8 +221,14 @@ pub fn build(
     for (k, (family, formula)) in list.into_iter().enumerate() {
         let expr = Expr::parse(&formula, vars)?;
         // Drop exact duplicates (a polynomial that a named family already covers keeps the name)
-        // and nominal monomials written as a family formula; a user's effect is named instead.
-        let twin = match expr.monomial() {
+        // and nominal monomials written as a family formula; a user's effect is named instead,
+        // also as a constant multiple (`2*y^3` was kept and then vanished from the output).
+        let mono = if k >= built_in {
+            expr.monomial_up_to_scale()
+        } else {
+            expr.monomial()
+        };
+        let twin = match mono {
             Some(m) if nominal_monomials.contains(&m) => Some("a term of the nominal model".into()),
             Some(m) => out
                 .iter()
