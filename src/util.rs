@@ -124,15 +124,17 @@ impl AtomicFile {
     /// Flushes and renames the temporary file over the target. Errors when the flush, the sync to
     /// disk or the rename fails; the target is then left as it was.
     pub fn commit(mut self) -> crate::Result<()> {
-        let io = |e: std::io::Error| crate::Error::file(self.target.display().to_string(), e);
         let file = self.file.take().expect("committed once");
-        let file = file.into_inner().map_err(|e| io(e.into_error()))?;
-        file.sync_all().map_err(io)?;
-        drop(file);
-        std::fs::rename(&self.tmp, &self.target).map_err(|e| {
-            // The file was taken out of `self`, so `Drop` would leave the temporary file.
+        let done = file
+            .into_inner()
+            .map_err(|e| e.into_error())
+            .and_then(|f| f.sync_all())
+            .and_then(|_| std::fs::rename(&self.tmp, &self.target));
+        // The file was taken out of `self`, so `Drop` would leave the temporary file behind on
+        // any of these failures (only the rename's was handled, unlike what the type promises).
+        done.map_err(|e| {
             let _ = std::fs::remove_file(&self.tmp);
-            io(e)
+            crate::Error::file(self.target.display().to_string(), e)
         })
     }
 }

@@ -132,9 +132,6 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
         path: name.clone(),
         message,
     };
-    if out.is_dir() {
-        return Err(err("is a folder; give a file name".into()));
-    }
     if name.ends_with('/') || name.ends_with(std::path::MAIN_SEPARATOR) {
         return Err(err(
             "names a folder (it ends in a separator); give a file name".into(),
@@ -157,7 +154,8 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
             "is also an input file; writing it would destroy the input, so give another output file".into(),
         ));
     }
-    // A device, a pipe, a dangling link or an over-long name: refused now, not after the work.
+    // A folder, a device, a pipe, a link into a missing folder or an over-long name: refused
+    // now, not after the work.
     ctsid::util::output_target(out).map(|_| ())
 }
 

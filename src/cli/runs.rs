@@ -2,7 +2,7 @@
 //! `--train / --validation / --test` for those that split runs.
 
 use clap::Args;
-use ctsid::identify::split::{parse_runs_among, resolve};
+use ctsid::identify::split::resolve_list;
 use ctsid::records::{CsvSpec, RecordSet};
 use ctsid::{Error, Result};
 
@@ -80,9 +80,7 @@ impl Given {
 impl SplitArgs {
     pub fn resolve(&self, ids: &[String]) -> Result<Given> {
         let pick = |t: &Option<String>, what: &str| -> Result<Option<Vec<usize>>> {
-            t.as_deref()
-                .map(|t| resolve(&parse_runs_among(t, what, ids)?, ids, what))
-                .transpose()
+            t.as_deref().map(|t| resolve_list(t, ids, what)).transpose()
         };
         Ok(Given {
             train: pick(&self.train, "train")?,

@@ -70,13 +70,7 @@ pub fn run(o: &MimoOptions) -> Result<String> {
         ));
     }
     // Before the data are simulated (an order of 0 failed inside the first fit).
-    let max = crate::identify::MAX_ORDER;
-    if let Some(k) = o.orders.iter().find(|&&k| !(1..=max).contains(&k)) {
-        return Err(Error::param(
-            "orders",
-            format!("order {k} is outside 1..={max}"),
-        ));
-    }
+    crate::identify::check_orders(&o.orders, "orders")?;
     let plant = Plant::mimo();
     let inputs = plant.input_names();
     let outputs = plant.output_names();

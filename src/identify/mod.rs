@@ -117,6 +117,21 @@ pub const FREE_RUN_RESOLUTION: f64 = 1e-3;
 
 /// Highest order an identification searches or fits (its derivatives go one order higher).
 pub const MAX_ORDER: usize = 6;
+
+/// Refuses an empty list of orders and an order outside 1..=[`MAX_ORDER`]; `name` is the setting.
+pub fn check_orders(c: &[usize], name: &str) -> Result<()> {
+    if c.is_empty() {
+        return Err(Error::param(name, "no candidate order"));
+    }
+    if let Some(o) = c.iter().find(|&&o| o == 0 || o > MAX_ORDER) {
+        return Err(Error::param(
+            name,
+            format!("order {o} is outside 1..={MAX_ORDER}"),
+        ));
+    }
+    Ok(())
+}
+
 pub use identifier::Identifier;
 use profile::{eta_rule, eta_rule_parsimonious, Profile};
 use rayon::prelude::*;
@@ -238,15 +253,7 @@ impl Settings {
             Orders::Search(c) => (c, "orders"),
             Orders::Fixed(c) => (c, "order"),
         };
-        if c.is_empty() {
-            return Err(Error::param(name, "no candidate order"));
-        }
-        if let Some(o) = c.iter().find(|&&o| o == 0 || o > MAX_ORDER) {
-            return Err(Error::param(
-                name,
-                format!("order {o} is outside 1..={MAX_ORDER}"),
-            ));
-        }
+        check_orders(c, name)?;
         if let Orders::Search(c) = &self.orders {
             if let Some((_, j)) = crate::util::first_repeat(c) {
                 return Err(Error::param(

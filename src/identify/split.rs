@@ -94,6 +94,11 @@ pub fn parse_runs_among(text: &str, what: &str, ids: &[String]) -> Result<Vec<St
     parse_items(text, what, ids.len().max(1), &|w| known.contains(w))
 }
 
+/// The indices in `ids` of the runs a list names: [`parse_runs_among`], then [`resolve`].
+pub fn resolve_list(text: &str, ids: &[String], what: &str) -> Result<Vec<usize>> {
+    resolve(&parse_runs_among(text, what, ids)?, ids, what)
+}
+
 fn parse_items(
     text: &str,
     what: &str,
@@ -222,9 +227,7 @@ impl Split {
         test: &str,
     ) -> Result<Split> {
         let ids: Vec<String> = records.runs.iter().map(|r| r.id.clone()).collect();
-        let list = |text: &str, what: &str| -> Result<Vec<usize>> {
-            resolve(&parse_runs_among(text, what, &ids)?, &ids, what)
-        };
+        let list = |text: &str, what: &str| resolve_list(text, &ids, what);
         let validation = validation.map(|v| list(v, "validation")).transpose()?;
         Split::new(list(train, "train")?, validation, list(test, "test")?, &ids)
     }

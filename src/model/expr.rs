@@ -138,28 +138,45 @@ impl Expr {
     /// part that is zero without variables (`y/0`). `None` when there is none. (Such a term was
     /// read from a model file and then blamed on the step size, or dropped from a fit quietly.)
     pub fn constant_fault(&self) -> Option<String> {
-        fn walk(n: &Node) -> Option<String> {
-            let mut vars = Vec::new();
-            collect_vars(n, &mut vars);
-            if vars.is_empty() {
-                let v = eval(n, &[], None);
-                return (!v.is_finite()).then(|| format!("a part of it without variables is {v}"));
-            }
-            match n {
-                Node::Num(_) | Node::Var(_) => None,
-                Node::Neg(a) | Node::Pow(a, _) | Node::Fun(_, a, _) => walk(a),
-                Node::Div(a, b) => {
-                    let mut bv = Vec::new();
-                    collect_vars(b, &mut bv);
-                    if bv.is_empty() && eval(b, &[], None) == 0.0 {
-                        return Some("it divides by zero".into());
-                    }
-                    walk(a).or_else(|| walk(b))
-                }
-                Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) => walk(a).or_else(|| walk(b)),
+        // One pass: each node says whether it reads a variable; a part without any is evaluated
+        // once, where its parent has one (or at the root), not at every level below.
+        fn finite(n: &Node) -> std::result::Result<(), String> {
+            let v = eval(n, &[], None);
+            match v.is_finite() {
+                true => Ok(()),
+                false => Err(format!("a part of it without variables is {v}")),
             }
         }
-        walk(&self.root)
+        fn walk(n: &Node) -> std::result::Result<bool, String> {
+            let kids: Vec<&Node> = match n {
+                Node::Num(_) | Node::Var(_) => vec![],
+                Node::Neg(a) | Node::Pow(a, _) | Node::Fun(_, a, _) => vec![a],
+                Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
+                    vec![a, b]
+                }
+            };
+            let reads: Vec<bool> = kids
+                .iter()
+                .map(|k| walk(k))
+                .collect::<std::result::Result<_, _>>()?;
+            let any = matches!(n, Node::Var(_)) || reads.contains(&true);
+            if any {
+                for (k, _) in kids.iter().zip(&reads).filter(|(_, r)| !**r) {
+                    finite(k)?;
+                }
+                if let (Node::Div(_, b), [_, false]) = (n, reads.as_slice()) {
+                    if eval(b, &[], None) == 0.0 {
+                        return Err("it divides by zero".into());
+                    }
+                }
+            }
+            Ok(any)
+        }
+        match walk(&self.root) {
+            Ok(true) => None,
+            Ok(false) => finite(&self.root).err(),
+            Err(why) => Some(why),
+        }
     }
 
     /// The indices (into `z`) of the variables the expression reads, in order of appearance.
