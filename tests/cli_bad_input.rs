@@ -632,6 +632,35 @@ fn regress_edge_cases_found_by_the_sixth_reading() {
         ],
         &["3 samples of positive weight are too few"],
     );
+    // Weights spanning more than f64's sums keep (one 1e20 times the others made every centred
+    // column numerically constant: a wrong model, exit 0; the reader refuses such a weight as a
+    // glitch from about 1e13, the fit itself, for half the rows at 1e13, beyond MAX_WEIGHT_RATIO =
+    // 1e12). A weight 1e9 times the others pins its row and still fits.
+    let spread = |big: f64, every: usize| {
+        rows(
+            &|i| {
+                let (x, z) = (sin(0.7, i), (1.3 * i as f64).cos());
+                let w = if i % every == 7 % every { big } else { 1.0 + (i % 3) as f64 };
+                format!("{x},{z},{},{w}", 2.0 * x + z + 0.01 * sin(5.1, i))
+            },
+            "x,z,y,w",
+        )
+    };
+    fails(
+        &[
+            "regress",
+            &file("w13.csv", &spread(1e13, 2)),
+            "--features x,z --label y --degree 3 --weights w --engine cpu",
+        ],
+        &["'weights'", "they span 1e13", "rescale them or drop rows"],
+    );
+    let (ok, out, err) = ctsid(&[
+        "regress",
+        &file("w9.csv", &spread(1e9, 1000)),
+        "--features x,z --label y --degree 3 --weights w --engine cpu",
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.contains("*x") && out.contains("*z"), "{out}");
     // --epsilon: the term that failed the relevance test was kept (the path's last breakpoint).
     let eps = file(
         "eps.csv",
