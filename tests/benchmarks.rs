@@ -189,3 +189,54 @@ fn unknown_benchmarks_and_missing_data_are_one_line_errors() {
         &["EMPS_train"],
     );
 }
+
+/// A record whose rows are out of order (two swapped), or whose time column says another
+/// sampling period, is refused by row: the protocols split and score samples by position, and
+/// a shuffled file was scored as if it were the benchmark's.
+#[test]
+fn a_record_out_of_order_or_at_another_rate_is_refused() {
+    let Some(est) = shared_data("cascaded_tanks/cascaded_tanks_estimation.csv") else {
+        return;
+    };
+    let test = shared_data("cascaded_tanks/cascaded_tanks_test.csv").unwrap();
+    let text = std::fs::read_to_string(&est).unwrap();
+    let mut lines: Vec<&str> = text.lines().collect();
+    let root = std::path::Path::new(&temp_file("bench-order", "x", ""))
+        .parent()
+        .unwrap()
+        .to_path_buf();
+    let write = |name: &str, lines: &[&str]| {
+        let dir = root.join(name).join("cascaded_tanks");
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("cascaded_tanks_estimation.csv"), lines.join("\n")).unwrap();
+        std::fs::copy(&test, dir.join("cascaded_tanks_test.csv")).unwrap();
+        root.join(name).display().to_string()
+    };
+    // Rows 101 and 102 of the file (samples 99 and 100) swapped.
+    lines.swap(100, 101);
+    let swapped = write("swapped", &lines);
+    fails(
+        &["benchmark", "tanks", "--data", &swapped],
+        &["row 101", "column 'k' is 100 where sample 99 was expected"],
+    );
+    lines.swap(100, 101);
+    // The time column at twice the benchmark's 4 s.
+    let twice: Vec<String> = lines
+        .iter()
+        .enumerate()
+        .map(|(i, l)| {
+            if i == 0 {
+                return l.to_string();
+            }
+            let mut c: Vec<String> = l.split(',').map(String::from).collect();
+            c[1] = format!("{}", 8.0 * (i - 1) as f64);
+            c.join(",")
+        })
+        .collect();
+    let twice: Vec<&str> = twice.iter().map(String::as_str).collect();
+    let slow = write("slow", &twice);
+    fails(
+        &["benchmark", "tanks", "--data", &slow],
+        &["row 3", "column 't_s' is 8 where k * 4 = 4 was expected"],
+    );
+}

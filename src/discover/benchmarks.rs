@@ -23,20 +23,63 @@ pub struct Setup {
 
 /// The named columns of a single-run CSV through the crate's record loader (so a missing column
 /// or a bad value is the usual one-line error), one vector per column. The benchmarks' time
-/// columns are rounded to a few digits, so the known sampling period is given instead.
+/// columns are rounded to a few digits, so the known sampling period is given instead; the
+/// sample index `k` and the time `t_s` every benchmark file carries are checked against it
+/// ([`check_sample_index`]), since the protocols read samples by position.
 pub(crate) fn columns(path: &str, names: &[&str], tau: f64) -> Result<Vec<Vec<f64>>> {
+    let mut all: Vec<String> = names.iter().map(|c| c.to_string()).collect();
+    all.extend(["k".to_string(), "t_s".to_string()]);
     let spec = CsvSpec {
-        columns: names.iter().map(|c| c.to_string()).collect(),
+        columns: all,
         run_column: None,
         time_column: None,
         tau: Some(tau),
     };
     let rs = RecordSet::from_csv(path, &spec)?;
-    Ok(rs
+    let mut cols = rs
         .runs
         .into_iter()
         .next()
-        .map_or_else(Vec::new, |r| r.channels))
+        .map_or_else(Vec::new, |r| r.channels);
+    let t = cols.pop().unwrap_or_default();
+    let k = cols.pop().unwrap_or_default();
+    check_sample_index(path, &k, &t, tau)?;
+    Ok(cols)
+}
+
+/// The benchmark files' `k` counts the samples from 0 in file order and `t_s = k tau` (to a
+/// quarter of a step: the stamps are rounded to a few digits): a shuffled, cut or resampled file
+/// would otherwise be split and scored by position as if it were the benchmark's.
+fn check_sample_index(path: &str, k: &[f64], t: &[f64], tau: f64) -> Result<()> {
+    let bad = |row: usize, what: String| {
+        Err(Error::InvalidData(format!(
+            "{path}: row {}: {what}; the benchmark reads samples by position: is it the benchmark's file, whole and in order?",
+            row + 2
+        )))
+    };
+    for (i, (&ki, &ti)) in k.iter().zip(t).enumerate() {
+        if ki != i as f64 {
+            return bad(
+                i,
+                format!(
+                    "column 'k' is {} where sample {i} was expected",
+                    crate::util::short(ki)
+                ),
+            );
+        }
+        if !((ti - ki * tau).abs() <= 0.25 * tau) {
+            return bad(
+                i,
+                format!(
+                    "column 't_s' is {} where k * {} = {} was expected",
+                    crate::util::short(ti),
+                    crate::util::short(tau),
+                    crate::util::short(ki * tau)
+                ),
+            );
+        }
+    }
+    Ok(())
 }
 
 fn run(id: &str, y: &[f64], u: &[f64], first_row: usize) -> Run {
