@@ -640,7 +640,11 @@ fn regress_edge_cases_found_by_the_sixth_reading() {
         rows(
             &|i| {
                 let (x, z) = (sin(0.7, i), (1.3 * i as f64).cos());
-                let w = if i % every == 7 % every { big } else { 1.0 + (i % 3) as f64 };
+                let w = if i % every == 7 % every {
+                    big
+                } else {
+                    1.0 + (i % 3) as f64
+                };
                 format!("{x},{z},{},{w}", 2.0 * x + z + 0.01 * sin(5.1, i))
             },
             "x,z,y,w",
@@ -842,4 +846,34 @@ fn a_model_near_the_end_of_f64_is_not_called_uncontrollable() {
         &["bandwidth"],
     );
     assert!(!String::from_utf8_lossy(&out.stderr).contains("dP/du = 0"));
+}
+
+/// `score-derivatives` on a folder whose signal is cut short, or without `signals.json`: the
+/// gates are for the signals as published, and a cut file was scored against them.
+#[test]
+fn a_cut_test_signal_is_not_scored_against_the_published_gates() {
+    let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/signals");
+    let cut = dir().join("signals-cut");
+    std::fs::create_dir_all(&cut).unwrap();
+    for f in [
+        "sys3_multisine.csv",
+        "chirp.csv",
+        "etc_s1.csv",
+        "signals.json",
+    ] {
+        std::fs::copy(src.join(f), cut.join(f)).unwrap();
+    }
+    let sines = std::fs::read_to_string(src.join("sines.csv")).unwrap();
+    let kept: Vec<&str> = sines.lines().take(901).collect();
+    std::fs::write(cut.join("sines.csv"), kept.join("\n")).unwrap();
+    let folder = cut.display().to_string();
+    fails(
+        &["score-derivatives", "--signals", &folder],
+        &["sines.csv: 900 samples every 0.01 s, signals.json gives 1000 every 0.01 s"],
+    );
+    std::fs::remove_file(cut.join("signals.json")).unwrap();
+    fails(
+        &["score-derivatives", "--signals", &folder],
+        &["signals.json", "each signal's length and period"],
+    );
 }
