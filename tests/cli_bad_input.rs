@@ -846,6 +846,16 @@ fn a_model_near_the_end_of_f64_is_not_called_uncontrollable() {
         &["bandwidth"],
     );
     assert!(!String::from_utf8_lossy(&out.stderr).contains("dP/du = 0"));
+    // Sensor noise of 1e300 overflowed the observer and was blamed on the bandwidth alone.
+    let lag = lag_model("lag-noise.json", Some(2.0));
+    fails(
+        &[
+            "control",
+            &lag,
+            "--setpoint 1 --from 0 --tau 0.01 --noise 1e300",
+        ],
+        &["diverged", "the sensor noise (sd 1e300)"],
+    );
 }
 
 /// `score-derivatives` on a folder whose signal is cut short, or without `signals.json`: the

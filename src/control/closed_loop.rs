@@ -562,9 +562,19 @@ pub fn track(d: &Design, plant: &Plant, s: &Scenario, tk: &Tracking) -> Result<T
                 *q += dq;
             }
         }
+        // With sensor noise the noise is as likely a cause as the bandwidth (`--noise 1e300`
+        // overflowed the observer and was blamed on the bandwidth alone).
         let diverged = |why: String| {
+            let hint = if s.noise_sd > 0.0 {
+                format!(
+                    "lower the bandwidth or the sensor noise (sd {}), or check the model",
+                    crate::util::short(s.noise_sd)
+                )
+            } else {
+                "lower the bandwidth or check the model".to_string()
+            };
             Error::InvalidData(format!(
-                "the closed loop diverged between t = {t:.6} and {:.6} s ({why}): lower the bandwidth or check the model",
+                "the closed loop diverged between t = {t:.6} and {:.6} s ({why}): {hint}",
                 t + d.tau
             ))
         };
