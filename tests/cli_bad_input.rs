@@ -887,3 +887,89 @@ fn a_cut_test_signal_is_not_scored_against_the_published_gates() {
         &["signals.json", "each signal's length and period"],
     );
 }
+
+/// An eighth reading (control's references, model-file names, discover on short pieces), each
+/// once a silent wrong answer or a lost input.
+#[test]
+fn references_names_and_short_pieces_found_by_the_eighth_reading() {
+    let lag = lag_model("lag8.json", Some(2.0));
+    let step = "--setpoint 1 --from 0 --tau 0.01";
+    // `-o` onto the reference file replaced the user's reference with the trace.
+    let r = file("ref8.csv", "t,r\n0,0\n1,0\n1,1\n5,1\n");
+    fails(
+        &["control", &lag, step, "--reference", &r, "-o", &r],
+        &["is also an input file"],
+    );
+    assert!(std::fs::read_to_string(&r).unwrap().starts_with("t,r\n"));
+    // A reference that ends before t = 0 or within ten samples ran ten samples without a word.
+    let early = file("ref8-early.csv", "t,r\n-5,0\n-1,1\n");
+    fails(
+        &["control", &lag, step, "--reference", &early],
+        &[
+            "it ends at t = -1 s, within the first 10 samples",
+            "--duration",
+        ],
+    );
+    // Knots 1e-320 s apart: the slope overflowed and the error blamed a NaN setpoint.
+    let steep = file("ref8-steep.csv", "t,r\n0,0\n1e-320,1\n2,1\n");
+    fails(
+        &["control", &lag, step, "--reference", &steep],
+        &["knots 1 and 2 are 1e-320 s apart"],
+    );
+    // A state named with a comma: the trace's header had one field more than its rows.
+    let comma = file(
+        "comma8.json",
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"a,b","order":1,"terms":[{"exponents":{"a,b":1},"coefficient":-2},{"exponents":{"u":1},"coefficient":3}]}]}"#,
+    );
+    let trace = dir().join("trace8.csv").display().to_string();
+    let (ok, _, err) = ctsid(&["control", &comma, step, "-o", &trace]);
+    assert!(ok, "{err}");
+    let text = std::fs::read_to_string(&trace).unwrap();
+    let mut rdr = csv::Reader::from_reader(text.as_bytes());
+    let width = rdr.headers().unwrap().len();
+    assert!(rdr.headers().unwrap().iter().any(|h| h == "a,b_hat"));
+    assert!(rdr.records().all(|r| r.unwrap().len() == width));
+    // An input named like the output's left-hand side (`y_d1` beside `y` of order 1) read
+    // `y_d1 = -2*y + 3*y_d1`; a line break in a name split the printed equations.
+    let lhs = file(
+        "lhs8.json",
+        r#"{"format":"ctsid-model/1","inputs":["y_d1"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-2},{"exponents":{"y_d1":1},"coefficient":3}]}]}"#,
+    );
+    fails(&["show", &lhs], &["'y_d1' is used twice", "left-hand side"]);
+    let nl = file(
+        "nl8.json",
+        r#"{"format":"ctsid-model/1","inputs":["u"],"outputs":[{"name":"y\n#x","order":1,"terms":[{"exponents":{"u":1},"coefficient":3}]}]}"#,
+    );
+    fails(&["show", &nl], &["holds a control character"]);
+    // discover on pieces of 13 samples: every free run "diverged", the gates compared inf with
+    // inf, and a re-tuned model came back with exit 0.
+    let mut text = String::from("t,u,y\n");
+    let (mut y, h) = (0.0f64, 0.001);
+    for k in 0..600 {
+        let t = k as f64 * 0.01;
+        let u = |t: f64| 1.5 * (1.1 * t).sin() + 0.8 * (3.7 * t).sin();
+        text += &format!("{t},{},{y}\n", u(t));
+        for j in 0..10 {
+            let s = t + j as f64 * h;
+            y += h * (-2.0 * y - y * y * y + 3.0 * u(s));
+        }
+    }
+    let data = file("short8.csv", &text);
+    let nominal = file(
+        "nominal8.json",
+        &common::cli::lag_model_text(-2.0, Some(3.0)),
+    );
+    let out = dir().join("short8-out.json");
+    fails(
+        &[
+            "discover",
+            &data,
+            "--nominal",
+            &nominal,
+            "--time-column t --segment 0.13 -o",
+            out.to_str().unwrap(),
+        ],
+        &["'segment'", "13 samples", "needs at least 15"],
+    );
+    assert!(!out.exists());
+}

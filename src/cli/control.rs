@@ -17,7 +17,6 @@ use ctsid::control::{self, DesignOptions, Scenario};
 use ctsid::model::Model;
 use ctsid::util::{num4, short};
 use ctsid::{Error, Result};
-use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Args, Debug)]
@@ -120,7 +119,22 @@ pub fn run(a: ControlArgs) -> Result<()> {
     let plant_model = plant_model(&a, &model)?;
     let (compiled, x0, u0) = control::model_at_rest(&plant_model, a.from, d.u_star)?;
     let default_duration = match &tracking {
-        Some(tk) if a.reference.is_some() => tk.reference.end().max(10.0 * d.tau),
+        Some(tk) if a.reference.is_some() => {
+            let end = tk.reference.end();
+            // A reference that ends within the first ten samples (or before t = 0) gives no
+            // duration of its own: the run was stretched to ten samples without a word.
+            if a.duration.is_none() && end < 10.0 * d.tau {
+                return Err(Error::param(
+                    "reference",
+                    format!(
+                        "it ends at t = {} s, within the first 10 samples of {} s; give --duration or a reference that runs longer",
+                        ctsid::util::short(end),
+                        ctsid::util::short(d.tau)
+                    ),
+                ));
+            }
+            end
+        }
         _ => control::default_duration(&d),
     };
     let scenario = Scenario {
@@ -210,6 +224,10 @@ fn check_args(a: &ControlArgs) -> Result<()> {
     let mut inputs = vec![a.model.as_path()];
     if let Some(p) = &a.plant {
         inputs.push(p.as_path());
+    }
+    // A reference file is an input too (`-o` onto it replaced the user's reference).
+    if let Some(r) = a.reference.as_deref().filter(|r| *r != "steps") {
+        inputs.push(std::path::Path::new(r));
     }
     if let Some(o) = &a.output {
         super::check_output_file(o, &inputs)?;
@@ -411,24 +429,32 @@ const DESIGN_STRAY: f64 = 5.0;
 
 fn write_trace(path: &std::path::Path, tr: &control::Trace, names: &[String]) -> Result<()> {
     let io = |e: std::io::Error| Error::file(path.display().to_string(), e);
-    let mut w = ctsid::util::AtomicFile::create(path)?;
-    let hats: Vec<String> = names.iter().map(|n| format!("{n}_hat")).collect();
-    writeln!(w, "t,reference,y,y_measured,{},u", hats.join(",")).map_err(io)?;
+    let mut file = ctsid::util::AtomicFile::create(path)?;
+    // Through the CSV writer: a state named with a comma or a quote (`a,b`) is quoted, not
+    // split into two header fields over one column of values.
+    let mut w = csv::Writer::from_writer(&mut file);
+    let bad = |e: csv::Error| io(std::io::Error::other(e.to_string()));
+    let mut header: Vec<String> = ["t", "reference", "y", "y_measured"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    header.extend(names.iter().map(|n| format!("{n}_hat")));
+    header.push("u".into());
+    w.write_record(&header).map_err(bad)?;
     for i in 0..tr.t.len() {
-        let est: Vec<String> = tr.estimate.iter().map(|e| format!("{:e}", e[i])).collect();
-        writeln!(
-            w,
-            "{},{},{:e},{:e},{},{:e}",
-            tr.t[i],
-            tr.reference[i],
-            tr.y[i],
-            tr.y_measured[i],
-            est.join(","),
-            tr.u[i]
-        )
-        .map_err(io)?;
+        let mut row = vec![
+            tr.t[i].to_string(),
+            tr.reference[i].to_string(),
+            format!("{:e}", tr.y[i]),
+            format!("{:e}", tr.y_measured[i]),
+        ];
+        row.extend(tr.estimate.iter().map(|e| format!("{:e}", e[i])));
+        row.push(format!("{:e}", tr.u[i]));
+        w.write_record(&row).map_err(bad)?;
     }
-    w.commit()
+    w.flush().map_err(io)?;
+    drop(w);
+    file.commit()
 }
 
 fn write_plots(

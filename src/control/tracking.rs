@@ -81,6 +81,16 @@ impl Reference {
                     t[k - 1]
                 )));
             }
+            // Two knots a hair apart (1e-320 s) make a slope that overflows: the loop then
+            // asked for the steady input of a NaN reference and blamed the setpoint.
+            if t[k] > t[k - 1] && !((r[k] - r[k - 1]) / (t[k] - t[k - 1])).is_finite() {
+                return Err(bad(format!(
+                    "knots {} and {} are {} s apart, too close for the slope between them; give a step as two knots at one time",
+                    k,
+                    k + 1,
+                    crate::util::short(t[k] - t[k - 1])
+                )));
+            }
             if k >= 2 && t[k] == t[k - 1] && t[k - 1] == t[k - 2] {
                 return Err(bad(format!(
                     "three knots at t = {}; a step is two knots at one time",

@@ -936,6 +936,23 @@ impl Model {
             }
             put(u.clone(), Var::Input(i), &mut table)?;
         }
+        // Each output's left-hand side (its derivative of its order) is a name too: an input
+        // `y_d1` beside `y` of order 1 read `y_d1 = -2*y + 3*y_d1`, one name for two things.
+        for o in &self.outputs {
+            let lhs = derivative_name(&o.name, o.order);
+            if table.contains_key(&lhs) {
+                return Err(format!("the variable name '{lhs}' is used twice: it is the left-hand side of output '{}' of order {} (outputs, their derivatives and inputs must have distinct names)", o.name, o.order));
+            }
+        }
+        // A line break or another control character in a name splits the printed equations
+        // and the written tables' lines.
+        let names = self.outputs.iter().map(|o| &o.name).chain(&self.inputs);
+        if let Some(n) = names.into_iter().find(|n| n.chars().any(char::is_control)) {
+            return Err(format!(
+                "the name {:?} holds a control character (a line break, a tab); rename it",
+                crate::util::clip(n, 40)
+            ));
+        }
         Ok(table)
     }
 
