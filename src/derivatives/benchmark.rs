@@ -137,7 +137,7 @@ fn check_against_meta(sig: &Signal, meta: &serde_json::Value) -> Result<()> {
         )));
     };
     let have = sig.truth.first().map_or(0, Vec::len);
-    if have as u64 != n || !((sig.tau - tau).abs() <= 1e-9 * tau) {
+    if have as u64 != n || (sig.tau - tau).abs() > 1e-9 * tau {
         return Err(Error::InvalidData(format!(
             "{}.csv: {have} samples every {} s, signals.json gives {n} every {} s; the gates are for the signals as published",
             sig.name,

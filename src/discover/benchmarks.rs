@@ -67,7 +67,7 @@ fn check_sample_index(path: &str, k: &[f64], t: &[f64], tau: f64) -> Result<()> 
                 ),
             );
         }
-        if !((ti - ki * tau).abs() <= 0.25 * tau) {
+        if (ti - ki * tau).abs() > 0.25 * tau {
             return bad(
                 i,
                 format!(
