@@ -634,7 +634,7 @@ fn regress_edge_cases_found_by_the_sixth_reading() {
     );
     // Weights spanning more than f64's sums keep (one 1e20 times the others made every centred
     // column numerically constant: a wrong model, exit 0; the reader refuses such a weight as a
-    // glitch from about 1e13, the fit itself, for half the rows at 1e13, beyond MAX_WEIGHT_RATIO =
+    // glitch from about 1e13, `regress`, for half the rows at 1e13, beyond MAX_WEIGHT_RATIO =
     // 1e12). A weight 1e9 times the others pins its row and still fits.
     let spread = |big: f64, every: usize| {
         rows(

@@ -112,6 +112,9 @@ pub fn run(a: RegressArgs) -> Result<()> {
     }
     let mut cols = read_columns(&a.data, &wanted)?;
     let weights = a.weights.as_ref().map(|_| cols.pop().unwrap());
+    if let Some(w) = &weights {
+        ctsid::regression::check_weight_span(w)?;
+    }
     let label = cols.pop().unwrap();
     let features = Features::new(a.features.clone(), cols)?;
     let started = std::time::Instant::now();

@@ -47,10 +47,36 @@ use std::collections::BTreeMap;
 
 pub use crate::engine::select::EngineChoice;
 
-/// Largest ratio of the largest to the smallest positive weight a fit accepts: beyond it the
-/// small weights' rows drop below the rounding of the weighted sums (f64 keeps about 16 digits;
-/// the column statistics need a few of them for the smaller rows' spread).
+/// Largest ratio of the largest to the smallest positive weight [`check_weight_span`] accepts:
+/// beyond it the small weights' rows drop below the rounding of the weighted sums (f64 keeps
+/// about 16 digits; the column statistics need a few of them for the smaller rows' spread).
 pub const MAX_WEIGHT_RATIO: f64 = 1e12;
+
+/// Refuses weights a user gives whose largest and smallest positive values span more than
+/// [`MAX_WEIGHT_RATIO`]: beside one weight 1e20 times the others the other rows vanished from
+/// the weighted means and norms, every centred column looked constant, and the path returned a
+/// wrong model without a word (a weight 1e9 or 1e12 times the others pins its row and fits as
+/// it should). For weights from a user (`ctsid regress --weights`), not for the pipeline's own:
+/// its robust reweighting takes rows it distrusts down to 1e-14 of the others on purpose.
+pub fn check_weight_span(w: &[f64]) -> Result<()> {
+    let (lo, hi) = w
+        .iter()
+        .filter(|&&x| x > 0.0)
+        .fold((f64::INFINITY, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
+    if hi / lo > MAX_WEIGHT_RATIO {
+        return Err(Error::param(
+            "weights",
+            format!(
+                "they span {} (largest {}, smallest positive {}), more than the {} f64 sums keep: the small ones vanish beside the large; rescale them or drop rows",
+                crate::util::short(hi / lo),
+                crate::util::short(hi),
+                crate::util::short(lo),
+                crate::util::short(MAX_WEIGHT_RATIO)
+            ),
+        ));
+    }
+    Ok(())
+}
 
 /// Fewest samples a fit accepts: below this, selection among candidates means nothing.
 pub const MIN_SAMPLES: usize = 10;
@@ -480,8 +506,7 @@ impl Regression {
     /// [`crate::engine::WithColumns`]). Refuses feature names that [`Basis::new`] refuses (too many
     /// candidates among them), features that fail [`Features::check`], with no samples or with a
     /// value that is not finite, fewer than [`MIN_SAMPLES`] samples, a label of another length or
-    /// not finite, weights of another length, negative, not finite, all zero or spanning more than
-    /// [`MAX_WEIGHT_RATIO`], a named column of
+    /// not finite, weights of another length, negative, not finite or all zero, a named column of
     /// another length or with a value that is not finite, a GPU asked for where there is none, f32 sweeps asked for (GPU or
     /// [`Precision::F32`]) that the label would overflow, and a coefficient beyond f64's range in
     /// the data's units; errs ([`Error::Numerical`]) when the chosen terms are linearly dependent.
@@ -669,28 +694,6 @@ impl Regression {
                 "{n_rows} samples{} are too few to select terms (at least {MIN_SAMPLES}); give more data",
                 if weights.is_some() { " of positive weight" } else { "" }
             )));
-        }
-        // Weights spanning more than f64 can add up: beside one weight 1e20 times the others,
-        // the other rows vanish from the weighted means and norms, every centred column looks
-        // constant, and the path returned a wrong model without a word. (A large weight that
-        // pins a row, 1e9 or 1e12 times the others, fits as it should.)
-        if let Some(w) = weights.filter(|w| w.len() == all) {
-            let (lo, hi) = w
-                .iter()
-                .filter(|&&x| x > 0.0)
-                .fold((f64::INFINITY, 0.0f64), |(l, h), &x| (l.min(x), h.max(x)));
-            if hi / lo > MAX_WEIGHT_RATIO {
-                return Err(Error::param(
-                    "weights",
-                    format!(
-                        "they span {} (largest {}, smallest positive {}), more than the {} f64 sums keep: the small ones vanish beside the large; rescale them or drop rows",
-                        crate::util::short(hi / lo),
-                        crate::util::short(hi),
-                        crate::util::short(lo),
-                        crate::util::short(MAX_WEIGHT_RATIO)
-                    ),
-                ));
-            }
         }
         // eBIC's n: the effective number of independent samples, never more than the rows.
         let n = self
