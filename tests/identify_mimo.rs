@@ -144,7 +144,8 @@ fn mimo_orders_are_chosen_on_free_run_simulation() {
 /// Returns the true model and the model file written.
 /// `ctsid identify CSV` (runs in column `run`, time in `t`, the CPU engine, quietly) with `args`,
 /// which must succeed; the model file it writes beside the record.
-fn identify_csv(csv: &std::path::Path, args: &[&str]) -> Model {
+/// The model `ctsid identify` writes for `csv` with `args`, and the report it prints.
+fn identify_csv(csv: &std::path::Path, args: &[&str]) -> (Model, String) {
     let out = csv.with_extension("model.json");
     let run = std::process::Command::new(env!("CARGO_BIN_EXE_ctsid"))
         .args(["identify", csv.to_str().unwrap()])
@@ -167,10 +168,13 @@ fn identify_csv(csv: &std::path::Path, args: &[&str]) -> Model {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
-    Model::read(out.to_str().unwrap()).unwrap()
+    (
+        Model::read(out.to_str().unwrap()).unwrap(),
+        String::from_utf8_lossy(&run.stdout).into_owned(),
+    )
 }
 
-fn own_record_through_identify(noise: f64) -> (Model, Model) {
+fn own_record_through_identify(noise: f64) -> (Model, Model, String) {
     let t = Term::new;
     let truth = Model::new(
         &["u1", "u2"],
@@ -222,7 +226,7 @@ fn own_record_through_identify(noise: f64) -> (Model, Model) {
     let csv = dir.join("own.csv");
     write_csv(&plant, &runs, csv.to_str().unwrap(), false).unwrap();
     let t0 = std::time::Instant::now();
-    let found = identify_csv(
+    let (found, printed) = identify_csv(
         &csv,
         &[
             "--output", "a,b,c", "--input", "u1,u2", "--degree", "3", "--orders", "1..4",
@@ -234,16 +238,20 @@ fn own_record_through_identify(noise: f64) -> (Model, Model) {
         t0.elapsed().as_secs_f64()
     );
     let _ = std::fs::remove_dir_all(&dir);
-    (truth, found)
+    (truth, found, printed)
 }
 
-/// Noise-free: the true orders and exactly the true terms. At 1 % noise: the true orders; the
-/// terms are printed (measured: every one but `a*u1` in b's equation, for which b*u1, u1*u2 and
-/// three smaller terms stand in, and two small extras in a's: the losses at noise that issue 21
-/// item 2 is about).
+/// Noise-free: the true orders and exactly the true terms. At 1 % noise: the true orders and
+/// every true term within 5 %, at most one other. Measured: 13 / 13, none other, coefficients
+/// within 4.3 % (b's `a*u1` 1.043); the derivative fit keeps `b*u1` and four small products for
+/// `a*u1` (a and b move together); the completion adds `a*u1` (z = 13.1 on the gate runs) and
+/// pruning then removes `b*u1` and the products. The screen used to set `a*u1` aside both as an
+/// addition (the residual under the pooled noise floor) and as a swap for `b*u1` (a predicted
+/// drop of 11.9 under the threshold of 25; `complete::DROP_SCREEN` is 9 and serves both now):
+/// 12 / 13 and seven others, b's free run 0.81 % from the noise-free truth (0.15 % now).
 #[test]
 fn mimo_csv_record_of_mixed_orders_through_identify() {
-    let (truth, found) = own_record_through_identify(0.0);
+    let (truth, found, _) = own_record_through_identify(0.0);
     let orders: Vec<usize> = found.outputs.iter().map(|o| o.order).collect();
     assert_eq!(orders, vec![2, 3, 1], "{found}");
     for i in 0..3 {
@@ -256,13 +264,32 @@ fn mimo_csv_record_of_mixed_orders_through_identify() {
             );
         }
     }
-    let (_, found) = own_record_through_identify(0.01);
+    let (_, found, printed) = own_record_through_identify(0.01);
     let orders: Vec<usize> = found.outputs.iter().map(|o| o.order).collect();
     assert_eq!(orders, vec![2, 3, 1], "{found}");
+    let mut extras = Vec::new();
     for i in 0..3 {
         let (rows, extra) = coefficient_errors(&found, &truth, i);
         eprintln!("1 % noise, output {i}: {rows:?}, extra {extra:?}");
+        for (term, want, got, rel) in rows {
+            assert!(
+                rel.abs() < 0.05,
+                "output {i}: {term}: {got} vs {want}\n{found}"
+            );
+        }
+        extras.extend(extra);
     }
+    assert!(extras.len() <= 1, "extra terms {extras:?}\n{found}");
+    // The report says what the completion tried and kept.
+    let line = printed
+        .lines()
+        .find(|l| l.starts_with("Completion on simulation error"))
+        .unwrap_or_else(|| panic!("no completion line\n{printed}"));
+    assert!(
+        line.contains("kept a*u1 added to 'b' (z ")
+            || line.contains("kept a*u1 in place of b*u1 in 'b' (z "),
+        "{line}"
+    );
 }
 
 /// At 1 % noise (d = 4, the demo's 40 runs, orders fixed at 3), every true term of the three
@@ -351,8 +378,12 @@ fn searched_at_three_percent(
 /// truth (docs/method/identification.md, "The MIMO search over seeds"). Since the completion
 /// tries stand-ins of lower degree (`identify::lower_degree_offers`, which give d = 6 at 1 % all
 /// 18 true terms on seeds 1 and 2), y1 takes one here, `u1*u2*y1_d2` for `y1^2*y2*y3` (better
-/// on the gate runs by z = 208), and its free run ends 7.67 % from the truth: the bound on the
-/// NRMSE is 8 % (was 6 %); the orders and the count of true terms are held as before.
+/// on the gate runs by z = 208), and its free run ended 7.67-7.79 % from the truth, y1^3 missing:
+/// the linearised screen set it aside (a predicted drop of 350 noise variances) because the
+/// residual sat under the pooled noise floor (21,435 against 30,000; the plant's noise is a share
+/// of each run's amplitude). Where no excess over the floor can be measured the screen now
+/// passes an addition on the drop's significance (`complete::DROP_SCREEN`): 17 / 18, no other,
+/// 0.61 / 0.57 / 1.83 %.
 #[test]
 fn mimo_plant_at_three_percent_noise_seed_three_gets_the_true_orders() {
     let (truth, runs, id) = searched_at_three_percent(3);
@@ -366,12 +397,12 @@ fn mimo_plant_at_three_percent_noise_seed_three_gets_the_true_orders() {
         eprintln!("seed 3, output {i}: NRMSE vs truth {pooled}");
         assert_eq!(diverged, 0);
         assert!(
-            pooled < 0.08,
+            pooled < 0.025,
             "output {i}: NRMSE vs truth {pooled}\n{}",
             id.model
         );
     }
-    assert!(found >= 15, "{found} / 18\n{}", id.model);
+    assert!(found >= 17, "{found} / 18\n{}", id.model);
 }
 
 /// A two-output record with Coulomb friction on the first output, identified with
@@ -406,7 +437,7 @@ fn mimo_identify_with_a_sign_term_scores_each_order_without_a_panic() {
         }
     }
     std::fs::write(&csv, text).unwrap();
-    let found = identify_csv(
+    let (found, _) = identify_csv(
         &csv,
         &[
             "--output",

@@ -1,6 +1,7 @@
 //! `ctsid identify`: the main job on measured data.
 
 use clap::Args;
+use ctsid::identify::complete::Trial;
 use ctsid::identify::split::{count_names, parse_list};
 use ctsid::identify::{identify, Identification, Orders, OutputReport, Settings, Split};
 use ctsid::model::Interpolation;
@@ -137,6 +138,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     text += &format!("Weighting: {}.\n", id.weighting);
     if let Some(r) = &id.refinement {
         text += &format!("Refinement by free-run simulation error: {}.\n", r.message);
+        text += &completion_text(&r.completion);
     }
     out!("{text}")?;
 
@@ -157,6 +159,54 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         eprintln!("report written to {}", dir.display());
     }
     Ok(())
+}
+
+/// The completion's trials in words ([`ctsid::identify::complete`]): the moves kept, those the
+/// gate runs refused (with their significance), and how many the linearised screen set aside
+/// before any refinement. Empty where nothing was tried (noise-free data, or no held-out run).
+fn completion_text(trials: &[Trial]) -> String {
+    let trials: Vec<&Trial> = trials.iter().filter(|t| !t.term.is_empty()).collect();
+    if trials.is_empty() {
+        return String::new();
+    }
+    let figures = |t: &Trial| {
+        format!(
+            "z {:.1}, gate NRMSE {} -> {}",
+            t.z,
+            ctsid::util::num4(t.gate_before),
+            ctsid::util::num4(t.gate_after)
+        )
+    };
+    let (screened, tried): (Vec<&Trial>, Vec<&Trial>) =
+        trials.iter().partition(|t| t.screened_out());
+    let list = |kept: bool| -> Vec<String> {
+        tried
+            .iter()
+            .filter(|t| t.kept == kept)
+            .map(|t| format!("{} ({})", t.describe(), figures(t)))
+            .collect()
+    };
+    let (kept, refused) = (list(true), list(false));
+    let mut text = format!(
+        "Completion on simulation error (a term is kept when the gate runs' free runs improve at z >= {} and by {} % of the error above the noise, a removal when they get no significantly worse): ",
+        ctsid::identify::complete::Z_KEEP,
+        100.0 * ctsid::identify::complete::MIN_GAIN
+    );
+    text += &if kept.is_empty() {
+        "none kept".to_string()
+    } else {
+        format!("kept {}", kept.join("; "))
+    };
+    if !refused.is_empty() {
+        text += &format!("; refused {}", refused.join("; "));
+    }
+    if !screened.is_empty() {
+        text += &format!(
+            "; {} more set aside by the linearised screen (too small a predicted gain on the fit runs)",
+            screened.len()
+        );
+    }
+    text + ".\n"
 }
 
 /// The identification's settings from the arguments, checked.

@@ -1579,13 +1579,9 @@ fn complete_selected(
     let (completed, trials) = completion_trials(model, report, prep, outputs, split, asks)?;
     for t in trials.iter().filter(|t| t.kept) {
         if let Some(p) = prep.settings.progress {
-            let what = match (&t.replaced, t.removed) {
-                (_, true) => format!("{} removed from '{}'", t.term, t.output),
-                (Some(r), _) => format!("{} in place of {r} in '{}'", t.term, t.output),
-                (None, _) => format!("{} added to '{}'", t.term, t.output),
-            };
             p(&format!(
-                "completion on simulation error: {what} (gate runs better by {:.1} noise standard deviations)",
+                "completion on simulation error: {} (gate runs better by {:.1} noise standard deviations)",
+                t.describe(),
                 t.z
             ));
         }
