@@ -858,8 +858,8 @@ fn a_model_near_the_end_of_f64_is_not_called_uncontrollable() {
     );
 }
 
-/// `score-derivatives` on a folder whose signal is cut short, or without `signals.json`: the
-/// gates are for the signals as published, and a cut file was scored against them.
+/// `score-derivatives` on a folder whose signal is cut short: the gates are for the signals as
+/// published, and a cut file was scored against them.
 #[test]
 fn a_cut_test_signal_is_not_scored_against_the_published_gates() {
     let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/signals");
@@ -879,12 +879,7 @@ fn a_cut_test_signal_is_not_scored_against_the_published_gates() {
     let folder = cut.display().to_string();
     fails(
         &["score-derivatives", "--signals", &folder],
-        &["sines.csv: 900 samples every 0.01 s, signals.json gives 1000 every 0.01 s"],
-    );
-    std::fs::remove_file(cut.join("signals.json")).unwrap();
-    fails(
-        &["score-derivatives", "--signals", &folder],
-        &["signals.json", "each signal's length and period"],
+        &["sines.csv: 900 samples every 0.01 s, the published signal has 1000 every 0.01 s"],
     );
 }
 
@@ -901,20 +896,24 @@ fn references_names_and_short_pieces_found_by_the_eighth_reading() {
         &["is also an input file"],
     );
     assert!(std::fs::read_to_string(&r).unwrap().starts_with("t,r\n"));
-    // A reference that ends before t = 0 or within ten samples ran ten samples without a word.
+    // A reference that ends before t = 0 or within ten samples (a constant of one knot) ran ten
+    // samples without a word: it now runs as long as a step would, and says so.
     let early = file("ref8-early.csv", "t,r\n-5,0\n-1,1\n");
-    fails(
-        &["control", &lag, step, "--reference", &early],
-        &[
-            "it ends at t = -1 s, within the first 10 samples",
-            "--duration",
-        ],
+    let (ok, out, err) = ctsid(&["control", &lag, step, "--reference", &early]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("note: the reference ends at t = -1 s, within the first 10 samples"),
+        "{err}"
     );
+    assert!(!out.contains(" 0.1000 s"), "{out}");
+    let constant = file("ref8-const.csv", "t,r\n0,1\n");
+    let (ok, _, err) = ctsid(&["control", &lag, step, "--reference", &constant]);
+    assert!(ok && err.contains("as a step's would"), "{err}");
     // Knots 1e-320 s apart: the slope overflowed and the error blamed a NaN setpoint.
     let steep = file("ref8-steep.csv", "t,r\n0,0\n1e-320,1\n2,1\n");
     fails(
         &["control", &lag, step, "--reference", &steep],
-        &["knots 1 and 2 are 1e-320 s apart"],
+        &["the slope between knots 1 and 2 (0 to 1 over 1e-320 s) overflows"],
     );
     // A state named with a comma: the trace's header had one field more than its rows.
     let comma = file(

@@ -119,22 +119,25 @@ pub fn run(a: ControlArgs) -> Result<()> {
     let plant_model = plant_model(&a, &model)?;
     let (compiled, x0, u0) = control::model_at_rest(&plant_model, a.from, d.u_star)?;
     let default_duration = match &tracking {
-        Some(tk) if a.reference.is_some() => {
+        // A reference file that ends within the first ten samples (a constant of one knot, or
+        // knots before t = 0) gives no duration of its own: the run was ten samples long without
+        // a word; it now lasts as a step would, and says so. (The built-in `steps` scenario
+        // lasts --duration, 5 s by default.)
+        Some(tk) if a.reference.as_deref().is_some_and(|r| r != "steps") => {
             let end = tk.reference.end();
-            // A reference that ends within the first ten samples (or before t = 0) gives no
-            // duration of its own: the run was stretched to ten samples without a word.
             if a.duration.is_none() && end < 10.0 * d.tau {
-                return Err(Error::param(
-                    "reference",
-                    format!(
-                        "it ends at t = {} s, within the first 10 samples of {} s; give --duration or a reference that runs longer",
-                        ctsid::util::short(end),
-                        ctsid::util::short(d.tau)
-                    ),
-                ));
+                let t = control::default_duration(&d);
+                eprintln!(
+                    "note: the reference ends at t = {} s, within the first 10 samples; the run lasts {} s as a step's would (give --duration to choose)",
+                    ctsid::util::short(end),
+                    ctsid::util::num4(t)
+                );
+                t
+            } else {
+                end.max(10.0 * d.tau)
             }
-            end
         }
+        Some(tk) if a.reference.is_some() => tk.reference.end().max(10.0 * d.tau),
         _ => control::default_duration(&d),
     };
     let scenario = Scenario {

@@ -81,13 +81,15 @@ impl Reference {
                     t[k - 1]
                 )));
             }
-            // Two knots a hair apart (1e-320 s) make a slope that overflows: the loop then
-            // asked for the steady input of a NaN reference and blamed the setpoint.
+            // A slope that overflows (knots 1e-320 s apart, or values near f64's end): the loop
+            // then asked for the steady input of a NaN reference and blamed the setpoint.
             if t[k] > t[k - 1] && !((r[k] - r[k - 1]) / (t[k] - t[k - 1])).is_finite() {
                 return Err(bad(format!(
-                    "knots {} and {} are {} s apart, too close for the slope between them; give a step as two knots at one time",
+                    "the slope between knots {} and {} ({} to {} over {} s) overflows; give a step as two knots at one time, or smaller values",
                     k,
                     k + 1,
+                    crate::util::short(r[k - 1]),
+                    crate::util::short(r[k]),
                     crate::util::short(t[k] - t[k - 1])
                 )));
             }

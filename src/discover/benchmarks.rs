@@ -36,25 +36,28 @@ pub(crate) fn columns(path: &str, names: &[&str], tau: f64) -> Result<Vec<Vec<f6
         tau: Some(tau),
     };
     let rs = RecordSet::from_csv(path, &spec)?;
-    let mut cols = rs
-        .runs
-        .into_iter()
-        .next()
-        .map_or_else(Vec::new, |r| r.channels);
+    let Some(run) = rs.runs.into_iter().next() else {
+        return Ok(Vec::new());
+    };
+    let mut cols = run.channels;
     let t = cols.pop().unwrap_or_default();
     let k = cols.pop().unwrap_or_default();
-    check_sample_index(path, &k, &t, tau)?;
+    check_sample_index(path, (&k, &t, &run.rows), tau)?;
     Ok(cols)
 }
 
 /// The benchmark files' `k` counts the samples from 0 in file order and `t_s = k tau` (to a
 /// quarter of a step: the stamps are rounded to a few digits): a shuffled, cut or resampled file
 /// would otherwise be split and scored by position as if it were the benchmark's.
-fn check_sample_index(path: &str, k: &[f64], t: &[f64], tau: f64) -> Result<()> {
-    let bad = |row: usize, what: String| {
+fn check_sample_index(
+    path: &str,
+    (k, t, rows): (&[f64], &[f64], &[usize]),
+    tau: f64,
+) -> Result<()> {
+    let bad = |i: usize, what: String| {
         Err(Error::InvalidData(format!(
             "{path}: row {}: {what}; the benchmark reads samples by position: is it the benchmark's file, whole and in order?",
-            row + 2
+            rows.get(i).copied().unwrap_or(i + 2)
         )))
     };
     for (i, (&ki, &ti)) in k.iter().zip(t).enumerate() {

@@ -302,7 +302,7 @@ fn check_setup(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<(usize, V
     }
     // The same rules as identify's split: indices in range, no run in two lists.
     let ids: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
-    crate::identify::Split::new(
+    let split = crate::identify::Split::new(
         o.train.clone(),
         Some(o.validation.clone()),
         o.test.clone(),
@@ -311,21 +311,14 @@ fn check_setup(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<(usize, V
     // Every run is simulated from an initial state fitted on its first samples: a run too short
     // for that fit was called diverged, and the gates then compared inf with inf (exit 0 and
     // a re-tuned model from runs of 13 samples).
-    let min = crate::simulate::initial_window(n);
-    for &r in o.train.iter().chain(&o.validation).chain(&o.test) {
-        let len = rs.runs[r].len();
-        if len < min {
-            return Err(Error::RunTooShort {
-                run: rs.runs[r].id.clone(),
-                len,
-                min,
-                what: format!(
-                    "estimating the initial state of output '{}' (order {n}) for its free run",
-                    eq.name
-                ),
-            });
-        }
-    }
+    split.require_free_runs(
+        rs,
+        n,
+        &format!(
+            "estimating the initial state of output '{}' (order {n}) for its free run",
+            eq.name
+        ),
+    )?;
     let yc = rs.channel_index(&eq.name)?;
     let uc: Vec<usize> = nominal
         .inputs

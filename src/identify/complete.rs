@@ -574,7 +574,8 @@ fn run_normal(
 }
 
 /// Which `pending` candidates a linearisation on the fit runs predicts to pass [`MIN_GAIN`]
-/// (with half of it as margin): one simulation with sensitivities per run for all of them, at
+/// (with half of it as margin; where the residual sits at or below the noise floor, and for
+/// swaps, a drop of [`DROP_SCREEN`] instead): one simulation with sensitivities per run for all of them, at
 /// `best` with every candidate at coefficient zero, then a least-squares solve per candidate.
 /// A full refinement costs about ten such simulations per run; the screen spends one on every
 /// candidate and the refinement only on those it passes (Silverbox: three near misses, each of

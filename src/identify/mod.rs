@@ -964,20 +964,11 @@ fn checked_channels(
     // Every run is simulated free from an initial state fitted on its first samples (the gate
     // and test runs' scores): a run long enough for derivatives but not for that fit gave NaN
     // scores and a refinement judged `inf -> inf`.
-    let min = simulate::initial_window(max_order);
-    let named = split
-        .train
-        .iter()
-        .chain(split.validation.iter().flatten())
-        .chain(&split.test);
-    if let Some(&r) = named.into_iter().find(|&&r| rs.runs[r].len() < min) {
-        return Err(Error::RunTooShort {
-            run: rs.runs[r].id.clone(),
-            len: rs.runs[r].len(),
-            min,
-            what: format!("a free run's initial state (order {max_order})"),
-        });
-    }
+    split.require_free_runs(
+        rs,
+        max_order,
+        &format!("a free run's initial state (order {max_order})"),
+    )?;
     Ok((outputs, inputs))
 }
 

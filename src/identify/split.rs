@@ -232,6 +232,34 @@ impl Split {
         Split::new(list(train, "train")?, validation, list(test, "test")?, &ids)
     }
 
+    /// Refuses a named run (training, validation or test) shorter than the fit of a free run's
+    /// initial state at `order` needs ([`crate::simulate::initial_window`]): every run is
+    /// simulated from such a state for the scores and gates, and a shorter one scored NaN or
+    /// `inf` (a refinement judged `inf -> inf`, discover's gates comparing inf with inf). `what`
+    /// names the need in the error.
+    pub fn require_free_runs(
+        &self,
+        rs: &crate::records::RecordSet,
+        order: usize,
+        what: &str,
+    ) -> Result<()> {
+        let min = crate::simulate::initial_window(order);
+        let named = self
+            .train
+            .iter()
+            .chain(self.validation.iter().flatten())
+            .chain(&self.test);
+        match named.into_iter().find(|&&r| rs.runs[r].len() < min) {
+            Some(&r) => Err(Error::RunTooShort {
+                run: rs.runs[r].id.clone(),
+                len: rs.runs[r].len(),
+                min,
+                what: what.to_string(),
+            }),
+            None => Ok(()),
+        }
+    }
+
     /// Validates that the lists are non-empty where required and do not overlap. Refuses an empty
     /// `train`, an empty (but given) `validation`, an index out of range of `ids`, a run in two
     /// lists and a run listed twice in one.

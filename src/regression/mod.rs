@@ -506,7 +506,8 @@ impl Regression {
     /// [`crate::engine::WithColumns`]). Refuses feature names that [`Basis::new`] refuses (too many
     /// candidates among them), features that fail [`Features::check`], with no samples or with a
     /// value that is not finite, fewer than [`MIN_SAMPLES`] samples, a label of another length or
-    /// not finite, weights of another length, negative, not finite or all zero, a named column of
+    /// not finite, weights of another length, negative, not finite or all zero (weights spanning
+    /// more than f64's sums keep are the caller's to refuse: [`check_weight_span`]), a named column of
     /// another length or with a value that is not finite, a GPU asked for where there is none, f32 sweeps asked for (GPU or
     /// [`Precision::F32`]) that the label would overflow, and a coefficient beyond f64's range in
     /// the data's units; errs ([`Error::Numerical`]) when the chosen terms are linearly dependent.
