@@ -123,9 +123,10 @@ pub fn run(a: ControlArgs) -> Result<()> {
         // knots before t = 0) gives no duration of its own: the run was ten samples long without
         // a word; it now lasts as a step would, and says so. (The built-in `steps` scenario
         // lasts --duration, 5 s by default.)
-        Some(tk) if a.reference.as_deref().is_some_and(|r| r != "steps") => {
+        Some(tk) if a.reference.is_some() => {
             let end = tk.reference.end();
-            if a.duration.is_none() && end < 10.0 * d.tau {
+            let file = a.reference.as_deref() != Some("steps");
+            if file && a.duration.is_none() && end < 10.0 * d.tau {
                 let t = control::default_duration(&d);
                 eprintln!(
                     "note: the reference ends at t = {} s, within the first 10 samples; the run lasts {} s as a step's would (give --duration to choose)",
@@ -137,7 +138,6 @@ pub fn run(a: ControlArgs) -> Result<()> {
                 end.max(10.0 * d.tau)
             }
         }
-        Some(tk) if a.reference.is_some() => tk.reference.end().max(10.0 * d.tau),
         _ => control::default_duration(&d),
     };
     let scenario = Scenario {

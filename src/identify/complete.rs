@@ -119,12 +119,16 @@ pub struct Trial {
     pub gate_before: f64,
     pub gate_after: f64,
     pub kept: bool,
+    /// The linearised screen set the move aside before any refinement (its figures are NaN).
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub screened: bool,
 }
 
 impl Trial {
-    /// The linearised screen set the trial aside before any refinement (its figures are NaN).
+    /// The linearised screen set the move aside before any refinement. (Said by a field, not
+    /// read from a NaN z: a refined trial whose free runs equal the model's gives z = 0 / 0.)
     pub fn screened_out(&self) -> bool {
-        self.z.is_nan()
+        self.screened
     }
 
     /// The move in words: `T added to 'y'`, `T in place of R in 'y'`, `T removed from 'y'`.
@@ -346,6 +350,7 @@ fn screened_out(best: &Model, i: usize, name: &str, replaces: Option<usize>) -> 
         gate_before: f64::NAN,
         gate_after: f64::NAN,
         kept: false,
+        screened: true,
     }
 }
 
@@ -374,6 +379,7 @@ fn try_term(
         gate_before: gate_nrmse(best_sims, gate_runs),
         gate_after: f64::INFINITY,
         kept: false,
+        screened: false,
     };
     // A near miss with no path coefficient starts small: refinement frees nonzero
     // coefficients only.
@@ -480,6 +486,7 @@ fn try_removal(
         gate_before: gate_nrmse(best_sims, gate_runs),
         gate_after: f64::INFINITY,
         kept: false,
+        screened: false,
     };
     let judged = judge(&mut trial, &m, best_sims, ctx.runs, ctx.noise, ctx.opts);
     let floor = noise_floor(gate_runs, ctx.noise);
