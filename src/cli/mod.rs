@@ -88,8 +88,11 @@ pub fn show_progress(quiet: bool) -> Option<fn(&str)> {
     (!quiet && std::io::stderr().is_terminal()).then_some(progress_line as fn(&str))
 }
 
+/// A progress line with the seconds since the first one, so a long run shows where its time goes.
 fn progress_line(line: &str) {
-    eprintln!("{line}");
+    static START: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+    let start = START.get_or_init(std::time::Instant::now);
+    eprintln!("[{:7.2} s] {line}", start.elapsed().as_secs_f64());
 }
 
 /// Loads the channels of `spec` from `path` and notes on standard error the samples that look
