@@ -121,7 +121,8 @@ impl AtomicFile {
         Err(last.expect("sixteen tries"))
     }
 
-    /// Flushes and renames the temporary file over the target. Errors when the flush, the sync to
+    /// Flushes and renames the temporary file over the target; while an [`Outputs`] is open on
+    /// this thread, the rename waits for [`Outputs::commit`]. Errors when the flush, the sync to
     /// disk or the rename fails; the target is then left as it was.
     pub fn commit(mut self) -> crate::Result<()> {
         let file = self.file.take().expect("committed once");
@@ -129,7 +130,10 @@ impl AtomicFile {
             .into_inner()
             .map_err(|e| e.into_error())
             .and_then(|f| f.sync_all())
-            .and_then(|_| std::fs::rename(&self.tmp, &self.target));
+            .and_then(|_| match Outputs::stage(&self.tmp, &self.target) {
+                true => Ok(()),
+                false => std::fs::rename(&self.tmp, &self.target),
+            });
         // The file was taken out of `self`, so `Drop` would leave the temporary file behind on
         // any of these failures (only the rename's was handled, unlike what the type promises).
         done.map_err(|e| {
@@ -145,6 +149,110 @@ impl std::io::Write for AtomicFile {
     }
     fn flush(&mut self) -> std::io::Result<()> {
         self.file.as_mut().expect("open until committed").flush()
+    }
+}
+
+/// The files one command writes, renamed into place all together or not at all.
+///
+/// While an `Outputs` is open on a thread, every [`AtomicFile`] that thread commits (so every
+/// model file, CSV and report figure ctsid writes) is written and synced to its temporary file
+/// beside the target, and renamed over the target only by [`Outputs::commit`]. Dropped without a
+/// commit (the command failed on the way: a report folder that cannot be written after the
+/// model file was done), it removes those temporary files, and no target is touched. Without an
+/// open `Outputs`, files are renamed as they are committed.
+///
+/// A later `begin` on a thread that has one open joins it (only the first commits). Renames are
+/// the last step and can still fail one by one (a full file system fails earlier, at the
+/// write or the sync); the error then names the first target not replaced, and the files
+/// renamed before it stay.
+///
+/// ```
+/// let dir = std::env::temp_dir().join(format!("ctsid-outputs-doc-{}", std::process::id()));
+/// std::fs::create_dir_all(&dir)?;
+/// {
+///     let _outputs = ctsid::util::Outputs::begin();
+///     ctsid::util::write_atomic(&dir.join("model.json"), b"{}")?;
+///     // An error here returns before the commit: model.json is not written.
+/// }
+/// assert!(!dir.join("model.json").exists());
+/// let outputs = ctsid::util::Outputs::begin();
+/// ctsid::util::write_atomic(&dir.join("model.json"), b"{}")?;
+/// outputs.commit()?;
+/// assert!(dir.join("model.json").exists());
+/// # std::fs::remove_dir_all(&dir)?;
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+pub struct Outputs {
+    /// Whether this one opened the thread's staging (a nested `begin` only joins it).
+    owner: bool,
+    /// Thread-bound: the staging lives in a thread local.
+    _local: std::marker::PhantomData<*const ()>,
+}
+
+thread_local! {
+    /// Temporary files and their targets, while an [`Outputs`] is open on this thread.
+    static STAGED: std::cell::RefCell<Option<Vec<(std::path::PathBuf, std::path::PathBuf)>>> =
+        const { std::cell::RefCell::new(None) };
+}
+
+impl Outputs {
+    /// Opens the staging of this thread's outputs (see the type's docs).
+    pub fn begin() -> Outputs {
+        let owner = STAGED.with(|s| {
+            let mut s = s.borrow_mut();
+            let fresh = s.is_none();
+            if fresh {
+                *s = Some(Vec::new());
+            }
+            fresh
+        });
+        Outputs {
+            owner,
+            _local: std::marker::PhantomData,
+        }
+    }
+
+    /// Keeps `tmp` for `target` where an `Outputs` is open on this thread; false where none is.
+    fn stage(tmp: &std::path::Path, target: &std::path::Path) -> bool {
+        STAGED.with(|s| match s.borrow_mut().as_mut() {
+            Some(list) => {
+                list.push((tmp.to_path_buf(), target.to_path_buf()));
+                true
+            }
+            None => false,
+        })
+    }
+
+    fn take(&self) -> Vec<(std::path::PathBuf, std::path::PathBuf)> {
+        if !self.owner {
+            return Vec::new();
+        }
+        STAGED.with(|s| s.borrow_mut().take()).unwrap_or_default()
+    }
+
+    /// Renames every staged file over its target, in the order they were written (a target
+    /// written twice gets the later one). Errors when a rename fails, naming its target; the
+    /// staged files after it are removed.
+    pub fn commit(self) -> crate::Result<()> {
+        let mut list = self.take().into_iter();
+        while let Some((tmp, target)) = list.next() {
+            if let Err(e) = std::fs::rename(&tmp, &target) {
+                let _ = std::fs::remove_file(&tmp);
+                list.for_each(|(t, _)| {
+                    let _ = std::fs::remove_file(t);
+                });
+                return Err(crate::Error::file(target.display().to_string(), e));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Outputs {
+    fn drop(&mut self) {
+        for (tmp, _) in self.take() {
+            let _ = std::fs::remove_file(tmp);
+        }
     }
 }
 

@@ -972,3 +972,54 @@ fn references_names_and_short_pieces_found_by_the_eighth_reading() {
     );
     assert!(!out.exists());
 }
+
+/// A command's files are written all or none: `simulate -o SIM --report REP` whose report cannot
+/// be finished (REP/report.md is a folder) wrote the simulated CSV and the figures before the
+/// error; now neither, no temporary file is left, and nothing says "wrote".
+#[test]
+fn a_report_that_fails_half_way_leaves_no_output() {
+    let model = lag_model("half.json", Some(1.0));
+    let good = file("good-half.csv", &good_csv());
+    let rep = dir().join("half-rep");
+    std::fs::create_dir_all(rep.join("report.md")).unwrap();
+    let sim = dir().join("half-sim.csv");
+    let _ = std::fs::remove_file(&sim);
+    let out = fails(
+        &[
+            "simulate",
+            &model,
+            &good,
+            "--run-column run --tau 0.01 --report",
+            &rep.display().to_string(),
+            "-o",
+            &sim.display().to_string(),
+        ],
+        &["report.md"],
+    );
+    assert!(!String::from_utf8_lossy(&out.stderr).contains("wrote"));
+    assert!(!sim.exists(), "the simulated CSV was written");
+    let left: Vec<String> = std::fs::read_dir(&rep)
+        .unwrap()
+        .chain(std::fs::read_dir(dir()).unwrap())
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".ctsid-") || n.ends_with(".svg"))
+        .collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+    // The same command with a report it can write leaves both, and says so.
+    std::fs::remove_dir(rep.join("report.md")).unwrap();
+    let (ok, _, err) = ctsid(&[
+        "simulate",
+        &model,
+        &good,
+        "--run-column run --tau 0.01 --report",
+        &rep.display().to_string(),
+        "-o",
+        &sim.display().to_string(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(sim.exists() && rep.join("report.md").is_file());
+    assert!(
+        err.contains("wrote") && err.contains("report written"),
+        "{err}"
+    );
+}

@@ -212,11 +212,11 @@ pub fn run(a: ControlArgs) -> Result<()> {
     }
     if let Some(path) = &a.output {
         write_trace(path, &tr, &names)?;
-        eprintln!("wrote {}", path.display());
+        super::written(format!("wrote {}", path.display()));
     }
     if let Some(dir) = &a.report {
         write_plots(dir, &d, &tr, a.from)?;
-        eprintln!("plots written to {}", dir.display());
+        super::written(format!("plots written to {}", dir.display()));
     }
     Ok(())
 }
@@ -562,7 +562,7 @@ fn run_tracking(
     )?;
     if let Some(path) = &a.output {
         write_trace(path, &tr, names)?;
-        eprintln!("wrote {}", path.display());
+        super::written(format!("wrote {}", path.display()));
     }
     if let Some(dir) = &a.report {
         let title = format!("{}: {reference}, {law}", d.output);
@@ -573,7 +573,7 @@ fn run_tracking(
             control::tracking::describe(&m, tr.t.len(), tr.decision_seconds)
         );
         ctsid::report::write_file(dir, "report.md", &text)?;
-        eprintln!("plots written to {}", dir.display());
+        super::written(format!("plots written to {}", dir.display()));
     }
     Ok(())
 }

@@ -152,11 +152,11 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
             "settings": {"degree": a.degree, "eta": a.eta, "engine": a.engine.to_string(), "method": s.method, "train": split.train.iter().map(|&r| ids[r].clone()).collect::<Vec<_>>()},
         }));
         model.write(path)?;
-        eprintln!("model written to {}", path.display());
+        super::written(format!("model written to {}", path.display()));
     }
     if let Some(dir) = &a.report {
         write_report(dir, &a, &id, (&rs, &ids), &text)?;
-        eprintln!("report written to {}", dir.display());
+        super::written(format!("report written to {}", dir.display()));
     }
     Ok(())
 }

@@ -66,7 +66,29 @@ pub enum Command {
     Benchmark(benchmark::BenchmarkArgs),
 }
 
+/// Runs one command. Its files are written all or none ([`ctsid::util::Outputs`]): a command
+/// that fails after writing its model file but before its report is done leaves neither (the
+/// model file was written and the failing report's error followed), and the lines saying what was
+/// written come after the files are in place.
 pub fn run(cli: Cli) -> Result<()> {
+    let outputs = ctsid::util::Outputs::begin();
+    dispatch(cli)?;
+    outputs.commit()?;
+    WRITTEN.with(|w| w.take().iter().for_each(|line| eprintln!("{line}")));
+    Ok(())
+}
+
+thread_local! {
+    /// What [`written`] says, printed once the command's files are in place.
+    static WRITTEN: std::cell::RefCell<Vec<String>> = const { std::cell::RefCell::new(Vec::new()) };
+}
+
+/// Says on standard error, once the command's files are in place, that one was written.
+pub fn written(line: String) {
+    WRITTEN.with(|w| w.borrow_mut().push(line));
+}
+
+fn dispatch(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Identify(a) => identify::run(a),
         Command::Demo(a) => demo::run(a),

@@ -149,7 +149,7 @@ pub fn run(a: RegressArgs) -> Result<()> {
         let text =
             serde_json::to_string_pretty(&model).map_err(|e| Error::InvalidData(e.to_string()))?;
         ctsid::util::write_atomic(out, text.as_bytes())?;
-        eprintln!("model written to {}", out.display());
+        super::written(format!("model written to {}", out.display()));
     }
     Ok(())
 }

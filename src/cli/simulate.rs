@@ -192,11 +192,11 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             &sim_names,
             |r, i, k| format!("{}", simulated[r][k][i]),
         )?;
-        eprintln!("wrote {path}");
+        super::written(format!("wrote {path}"));
     }
     if let Some(dir) = &args.report {
         write_report(dir, &args, &model, &rs, &simulated)?;
-        eprintln!("report written to {}", dir.display());
+        super::written(format!("report written to {}", dir.display()));
     }
     Ok(())
 }
