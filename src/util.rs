@@ -64,6 +64,14 @@ impl AtomicFile {
     pub fn create(target: &std::path::Path) -> crate::Result<AtomicFile> {
         let io = |e: std::io::Error| crate::Error::file(target.display().to_string(), e);
         let target = output_target(target)?;
+        // A report's own file names are not checked against the command's inputs up front
+        // (`simulate rep/sim_0_y.svg rep/report.md --report rep` replaced both inputs).
+        if Outputs::was_read(&target) {
+            return Err(crate::Error::Io {
+                path: target.display().to_string(),
+                message: "is a file this command read; writing it would destroy an input, so write elsewhere".into(),
+            });
+        }
         let mode = std::fs::metadata(&target).ok().map(|m| m.permissions());
         let (tmp, file) = Self::fresh(&target, mode).map_err(io)?;
         Ok(AtomicFile {
@@ -159,7 +167,9 @@ impl std::io::Write for AtomicFile {
 /// beside the target, and renamed over the target only by [`Outputs::commit`]. Dropped without a
 /// commit (the command failed on the way: a report folder that cannot be written after the
 /// model file was done), it removes those temporary files, and no target is touched. Without an
-/// open `Outputs`, files are renamed as they are committed.
+/// open `Outputs`, files are renamed as they are committed. While it is open, a file read
+/// through [`open_regular`] (records, model files, references) cannot be an output: its
+/// [`AtomicFile::create`] is refused.
 ///
 /// A later `begin` on a thread that has one open joins it (only the first commits). Renames are
 /// the last step and can still fail one by one (a full file system fails earlier, at the
@@ -189,10 +199,41 @@ pub struct Outputs {
     _local: std::marker::PhantomData<*const ()>,
 }
 
+/// What an open [`Outputs`] holds: the staged files (temporary file, target) and the files the
+/// command has read ([`open_regular`]), which none of its outputs may replace.
+#[derive(Default)]
+struct Staging {
+    files: Vec<(std::path::PathBuf, std::path::PathBuf)>,
+    inputs: Vec<FileId>,
+}
+
+/// A file's identity across names (hard and symbolic links): device and inode on unix, the
+/// canonical path elsewhere.
+#[derive(PartialEq)]
+struct FileId(
+    #[cfg(unix)] (u64, u64),
+    #[cfg(not(unix))] std::path::PathBuf,
+);
+
+impl FileId {
+    fn of(path: &std::path::Path) -> Option<FileId> {
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::MetadataExt;
+            std::fs::metadata(path)
+                .ok()
+                .map(|m| FileId((m.dev(), m.ino())))
+        }
+        #[cfg(not(unix))]
+        {
+            path.canonicalize().ok().map(FileId)
+        }
+    }
+}
+
 thread_local! {
-    /// Temporary files and their targets, while an [`Outputs`] is open on this thread.
-    static STAGED: std::cell::RefCell<Option<Vec<(std::path::PathBuf, std::path::PathBuf)>>> =
-        const { std::cell::RefCell::new(None) };
+    /// The staging of this thread's outputs, while an [`Outputs`] is open on it.
+    static STAGED: std::cell::RefCell<Option<Staging>> = const { std::cell::RefCell::new(None) };
 }
 
 impl Outputs {
@@ -202,7 +243,7 @@ impl Outputs {
             let mut s = s.borrow_mut();
             let fresh = s.is_none();
             if fresh {
-                *s = Some(Vec::new());
+                *s = Some(Staging::default());
             }
             fresh
         });
@@ -215,11 +256,28 @@ impl Outputs {
     /// Keeps `tmp` for `target` where an `Outputs` is open on this thread; false where none is.
     fn stage(tmp: &std::path::Path, target: &std::path::Path) -> bool {
         STAGED.with(|s| match s.borrow_mut().as_mut() {
-            Some(list) => {
-                list.push((tmp.to_path_buf(), target.to_path_buf()));
+            Some(st) => {
+                st.files.push((tmp.to_path_buf(), target.to_path_buf()));
                 true
             }
             None => false,
+        })
+    }
+
+    /// Notes, where an `Outputs` is open on this thread, that the command read `path`.
+    fn read(path: &std::path::Path) {
+        STAGED.with(|s| {
+            if let (Some(st), Some(id)) = (s.borrow_mut().as_mut(), FileId::of(path)) {
+                st.inputs.push(id);
+            }
+        })
+    }
+
+    /// Whether `target` is a file this thread's open `Outputs` has seen read.
+    fn was_read(target: &std::path::Path) -> bool {
+        STAGED.with(|s| match (s.borrow().as_ref(), FileId::of(target)) {
+            (Some(st), Some(id)) => st.inputs.contains(&id),
+            _ => false,
         })
     }
 
@@ -227,7 +285,10 @@ impl Outputs {
         if !self.owner {
             return Vec::new();
         }
-        STAGED.with(|s| s.borrow_mut().take()).unwrap_or_default()
+        STAGED
+            .with(|s| s.borrow_mut().take())
+            .map(|st| st.files)
+            .unwrap_or_default()
     }
 
     /// Renames every staged file over its target, in the order they were written (a target
@@ -461,7 +522,9 @@ pub fn open_regular(
             m.len()
         )));
     }
-    std::fs::File::open(path).map_err(file_err)
+    let file = std::fs::File::open(path).map_err(file_err)?;
+    Outputs::read(path);
+    Ok(file)
 }
 
 #[cfg(test)]

@@ -1023,3 +1023,75 @@ fn a_report_that_fails_half_way_leaves_no_output() {
         "{err}"
     );
 }
+
+/// A report's own file names were never checked against the inputs: `simulate
+/// rep/sim_0_y.svg rep/report.md --report rep` replaced the model and the data with the report
+/// (exit 0). Refused now, and neither input is touched.
+#[test]
+fn a_report_file_that_is_an_input_is_refused() {
+    let rep = dir().join("input-rep");
+    std::fs::create_dir_all(&rep).unwrap();
+    let model = rep.join("sim_0_y.svg");
+    let data = rep.join("report.md");
+    let model_text = common::cli::lag_model_text(-1.0, Some(1.0));
+    std::fs::write(&model, &model_text).unwrap();
+    std::fs::write(&data, good_csv()).unwrap();
+    fails(
+        &[
+            "simulate",
+            &model.display().to_string(),
+            &data.display().to_string(),
+            "--run-column run --tau 0.01 --report",
+            &rep.display().to_string(),
+        ],
+        &["this command read", "destroy an input"],
+    );
+    assert_eq!(std::fs::read_to_string(&model).unwrap(), model_text);
+    assert_eq!(std::fs::read_to_string(&data).unwrap(), good_csv());
+}
+
+/// The ninth reading: a constant regression feature was credited in the model (`l = 0.4*a*k` for
+/// `l = 2*a`, `k` = 5); a model file's input named `2` showed as `3*2`; identify refused an input
+/// named `2` as a 'features' setting it does not have; `control --duration 1e12` printed the
+/// whole design before its error.
+#[test]
+fn findings_of_the_ninth_reading() {
+    let mut rk = String::from("a,k,l\n");
+    for i in 0..200 {
+        let a = (0.37 * i as f64).sin();
+        rk += &format!("{a},5,{}\n", 10.0 + 2.0 * a + 0.01 * (1.7 * i as f64).cos());
+    }
+    let rk = file("constant-feature.csv", &rk);
+    fails(
+        &["regress", &rk, "--features a,k --label l --degree 2"],
+        &["'k' is constant (5)", "leave it out"],
+    );
+    let numbered = file(
+        "numbered-input.json",
+        r#"{"format":"ctsid-model/2","tau":0.01,"inputs":["2"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-2.0},{"exponents":{"2":1},"coefficient":3.0}]}]}"#,
+    );
+    fails(&["show", &numbered], &["'2' reads as a number"]);
+    let renamed = good_csv().replacen("run,t,u,y", "run,t,2,y", 1);
+    let data = file("numbered-channel.csv", &renamed);
+    fails(
+        &[
+            "identify",
+            &data,
+            "--output y --input 2 --run-column run --time-column t --degree 1 --order 1",
+        ],
+        &["setting 'input'", "'2' reads as a number"],
+    );
+    let model = lag_model("long-duration.json", Some(1.0));
+    let out = fails(
+        &[
+            "control",
+            &model,
+            "--setpoint 1 --from 0 --tau 0.01 --duration 1e12",
+        ],
+        &["'duration'", "samples"],
+    );
+    assert!(
+        out.stdout.is_empty(),
+        "the design was printed before the error"
+    );
+}

@@ -153,8 +153,9 @@ pub fn run(a: ControlArgs) -> Result<()> {
         u0,
     };
 
+    // Before the design is printed: a setting that makes the run meaningless is the answer.
+    control::check_duration(&d, &scenario)?;
     if let Some(tk) = &tracking {
-        // Before the design is printed: a setting that makes the run meaningless is the answer.
         control::check_block(&d, &scenario, tk)?;
     }
     let names = print_design(&a, &d)?;

@@ -116,6 +116,20 @@ pub fn run(a: RegressArgs) -> Result<()> {
         ctsid::regression::check_weight_span(w)?;
     }
     let label = cols.pop().unwrap();
+    // A constant feature makes every monomial with it a multiple of one without it: the model
+    // read `l = 0.4*a*k` for `l = 2*a` with `k` = 5 throughout (identify refuses a constant
+    // channel the same way).
+    for (name, c) in a.features.iter().zip(&cols) {
+        if c.iter().all(|v| *v == c[0]) {
+            return Err(Error::param(
+                "features",
+                format!(
+                    "'{name}' is constant ({}) over the data; a constant feature only rescales other terms, so leave it out",
+                    ctsid::util::short(c[0])
+                ),
+            ));
+        }
+    }
     let features = Features::new(a.features.clone(), cols)?;
     let started = std::time::Instant::now();
     let model = reg.fit(&features, &label, &a.label, weights.as_deref())?;

@@ -358,6 +358,13 @@ fn check_plant(plant: &Plant) -> Result<()> {
     Ok(())
 }
 
+/// Checks the run's length before any work: at most [`MAX_SAMPLES`] samples and at least 10 at
+/// the design's tau (a caller prints the design only after this; `--duration 1e12` printed the
+/// whole design before the error).
+pub fn check_duration(d: &Design, s: &Scenario) -> Result<()> {
+    sample_count(d, s).map(|_| ())
+}
+
 /// The number of samples of a run, checked against [`MAX_SAMPLES`] and a floor of 10.
 fn sample_count(d: &Design, s: &Scenario) -> Result<usize> {
     let samples = (s.duration / d.tau).round() + 1.0;

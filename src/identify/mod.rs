@@ -281,6 +281,17 @@ impl Settings {
             ));
         }
         crate::basis::check_degree(self.degree)?;
+        // A channel named like a number cannot be told from a constant in a term; refused here
+        // by the option that names it (the basis refused it later as a 'features' setting,
+        // which identify does not have).
+        for (list, what) in [(&self.outputs, "output"), (&self.inputs, "input")] {
+            if let Some(v) = list.iter().find(|v| v.trim().parse::<f64>().is_ok()) {
+                return Err(Error::param(
+                    what,
+                    format!("'{v}' reads as a number, which terms and expressions cannot tell from a constant; rename the channel"),
+                ));
+            }
+        }
         // A channel named like an output's derivative (`y_d1` beside output `y`) would be taken
         // for that state (the fits' name tables refuse it only after the search has started).
         for c in &all {
