@@ -1095,3 +1095,45 @@ fn findings_of_the_ninth_reading() {
         "the design was printed before the error"
     );
 }
+
+/// A test run on which the identified model diverges: the heading printed `overall NRMSE NaN %`
+/// (the pooled error of no run); it now says that the test run diverged, and over how many runs
+/// a pooled figure is when only some diverge.
+#[test]
+fn a_diverging_test_run_gives_no_nan_heading() {
+    // y' = -2 y + 3 u - 0.5 y^3 (Euler, 200 substeps per sample), six runs of 300 samples; the
+    // last has 40 times the input, far outside what the quadratic fit of the others saw.
+    let mut s = String::from("run,t,u,y\n");
+    let mut seed = 5u64;
+    for r in 0..6 {
+        let amp = if r < 5 { 1.0 } else { 40.0 };
+        let mut y = 0.0f64;
+        for k in 0..300 {
+            let t = k as f64 * 0.01;
+            let rf = (r + 1) as f64;
+            let u = amp * ((0.7 * t * rf).sin() + 0.5 * (3.1 * t + r as f64).sin());
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let noise = 0.005 * (((seed >> 11) as f64 / (1u64 << 53) as f64) - 0.5) * 3.4;
+            s += &format!("{r},{t:.2},{u:.6},{:.6}\n", y + noise);
+            for _ in 0..200 {
+                y += 0.00005 * (-2.0 * y + 3.0 * u - 0.5 * y * y * y);
+            }
+        }
+    }
+    let data = file("diverging-test.csv", &s);
+    let (ok, out, err) = ctsid(&[
+        "identify",
+        &data,
+        "--output y --input u --run-column run --time-column t --degree 2 --order 1 --train 0-3 --validation 4 --test 5 --quiet",
+    ]);
+    assert!(ok, "{err}");
+    assert!(!out.contains("NaN"), "{out}");
+    assert!(
+        out.contains("(the test run diverged)") || out.contains("(overall NRMSE"),
+        "{out}"
+    );
+    // The run does diverge with this model (else the test checks nothing).
+    assert!(out.contains("diverged:"), "{out}");
+}

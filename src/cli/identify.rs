@@ -326,14 +326,27 @@ fn test_section(id: &Identification, outputs: &[String]) -> String {
             }
         }
     }
+    // Diverged runs have no error to pool: the heading says over how many runs it is, and a
+    // test part where every run diverged has no overall figure (it printed `NaN %`).
+    let failed = id.simulations.iter().filter(|s| s.error.is_some()).count();
+    let total = id.simulations.len();
     let overall: Vec<String> = id
         .test_nrmse()
         .iter()
         .map(|v| format!("{:.2} %", 100.0 * v))
         .collect();
+    let heading = match failed {
+        0 => format!("overall NRMSE {}", overall.join(", ")),
+        1 if total == 1 => "the test run diverged".to_string(),
+        f if f == total => format!("all {total} test runs diverged"),
+        f => format!(
+            "overall NRMSE {} over the {} of {total} test runs that did not diverge",
+            overall.join(", "),
+            total - f
+        ),
+    };
     format!(
-        "## Free-run simulation on test runs (overall NRMSE {})\n\n{}\n",
-        overall.join(", "),
+        "## Free-run simulation on test runs ({heading})\n\n{}\n",
         t.markdown()
     )
 }
