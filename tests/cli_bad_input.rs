@@ -1094,6 +1094,17 @@ fn findings_of_the_ninth_reading() {
         out.stdout.is_empty(),
         "the design was printed before the error"
     );
+    // A term that is not finite where the free run starts was blamed on the model's stability
+    // (the step size collapsed at t = 0); the error names the term.
+    let inf = file(
+        "nonfinite-term.json",
+        r#"{"format":"ctsid-model/2","tau":0.01,"inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-2.0},{"expression":"1/(y-y)","coefficient":0.1}]}]}"#,
+    );
+    let good = file("good-nonfinite.csv", &good_csv());
+    fails(
+        &["simulate", &inf, &good, "--run-column run --tau 0.01"],
+        &["the term '1/(y-y)' of output 'y' is inf", "initial state"],
+    );
 }
 
 /// A test run on which the identified model diverges: the heading printed `overall NRMSE NaN %`

@@ -305,6 +305,33 @@ impl CompiledModel {
             .sum()
     }
 
+    /// The first term (output index, its text, its value) whose value is not finite at state `x`
+    /// and inputs `u`: a simulation that starts there fails at once, and the error should name
+    /// the term, not call the model unstable (`sqrt(y)` from a negative `y`, `1/(y-y)`).
+    pub(crate) fn nonfinite_term(&self, x: &[f64], u: &[f64]) -> Option<(usize, String, f64)> {
+        let z: Vec<f64> = x.iter().chain(u).copied().collect();
+        self.terms.iter().enumerate().find_map(|(i, terms)| {
+            terms.iter().find_map(|t| {
+                let v = t.basis(&z, &self.eps);
+                (!v.is_finite()).then(|| (i, self.term_text(t), v))
+            })
+        })
+    }
+
+    fn term_text(&self, t: &CTerm) -> String {
+        match &t.kind {
+            Kind::Expression { expr, .. } => expr.text().to_string(),
+            Kind::Monomial(f) => f
+                .iter()
+                .map(|&(v, e)| match e {
+                    1 => self.names[v].clone(),
+                    _ => format!("{}^{e}", self.names[v]),
+                })
+                .collect::<Vec<_>>()
+                .join("*"),
+        }
+    }
+
     /// The value of every term of output `i` at `z` without its coefficient (the regression
     /// columns of that equation), in file order.
     pub(crate) fn term_values_unchecked(&self, i: usize, z: &[f64]) -> Vec<f64> {

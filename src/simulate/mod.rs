@@ -1154,10 +1154,44 @@ pub fn free_run(
         ..opts.clone()
     };
     let x0 = initial_state(model, &run.t, &run.y, &run.u, window, &opts)?;
+    check_terms_at_start(model, &x0, run, &opts)?;
     let tr = simulate_model(model, &x0, &run.t, &run.u, &opts)?;
     Ok((0..model.n_outputs())
         .map(|i| tr.series_of(model.offset(i)))
         .collect())
+}
+
+/// Refuses a free run whose right-hand side is not finite at its initial state, naming the
+/// term: the integrator's step then collapsed at t = 0 and the error called the model unstable
+/// (`sqrt(y)` from a negative level, `1/(y-y)`).
+fn check_terms_at_start(
+    model: &CompiledModel,
+    x0: &[f64],
+    run: &RunData,
+    opts: &SimOptions,
+) -> Result<()> {
+    let u0: Vec<f64> = run
+        .u
+        .iter()
+        .map(|c| c.first().copied().unwrap_or(0.0))
+        .collect();
+    match model.nonfinite_term(x0, &u0) {
+        Some((i, term, v)) => {
+            let state: Vec<String> = model
+                .names()
+                .iter()
+                .zip(x0.iter().chain(&u0))
+                .map(|(n, x)| format!("{n} = {}", crate::util::num4(*x)))
+                .collect();
+            Err(Error::Numerical(format!(
+                "run '{}': the term '{term}' of output '{}' is {v} at the free run's initial state ({}); the model cannot be simulated from there",
+                opts.run,
+                model.names()[model.offset(i)],
+                state.join(", ")
+            )))
+        }
+        None => Ok(()),
+    }
 }
 
 /// Simulates `sys` driven by `input` from state `x0` at `times[0]`, returning the states at every
