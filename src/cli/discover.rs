@@ -27,7 +27,10 @@ pub struct DiscoverArgs {
     /// test = the rest (of the runs no given list names).
     #[command(flatten)]
     pub split: super::runs::SplitArgs,
-    /// Prior half-width of a nominal term, `TERM=PCT` (`y_d1=10`, `u=fixed`, `1=approximate`).
+    /// Prior half-width of a nominal term, `TERM=PCT` (`y_d1=10`, `u=fixed`, `1=approximate`):
+    /// the prior of the effect search's weak-form fit and the yardstick of the re-tuned report.
+    /// The final refit on simulation error holds only `fixed` (0) terms and frees the others,
+    /// however small their confidence.
     #[arg(long)]
     pub confidence: Vec<String>,
     /// Extra dictionary entries, `NAME=EXPRESSION` (`backlash=relu(abs(y)-0.1)*sign(y)`).
