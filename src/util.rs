@@ -45,6 +45,15 @@ pub fn short(x: f64) -> String {
     }
 }
 
+/// Whether a name reads as a number to the expression parser (digits, a point or a sign first,
+/// and a valid f64): such a channel could not be told from a constant. `inf` and `nan`, which
+/// `f64` parses but the parser reads as names, are names.
+pub fn reads_as_number(name: &str) -> bool {
+    let t = name.trim();
+    t.starts_with(|c: char| c.is_ascii_digit() || matches!(c, '.' | '+' | '-'))
+        && t.parse::<f64>().is_ok()
+}
+
 /// A file written whole or not at all: the bytes go to a temporary file in the target's folder
 /// (`.ctsid-PID-N.tmp`, short whatever the target's name), renamed over the target by
 /// [`AtomicFile::commit`]. Dropped without a commit (an error on the way), the temporary file is
@@ -63,12 +72,13 @@ impl AtomicFile {
     /// Errors when the temporary file cannot be created (a missing folder, no write permission).
     pub fn create(target: &std::path::Path) -> crate::Result<AtomicFile> {
         let io = |e: std::io::Error| crate::Error::file(target.display().to_string(), e);
+        let given = target;
         let target = output_target(target)?;
         // A report's own file names are not checked against the command's inputs up front
         // (`simulate rep/sim_0_y.svg rep/report.md --report rep` replaced both inputs).
         if Outputs::was_read(&target) {
             return Err(crate::Error::Io {
-                path: target.display().to_string(),
+                path: given.display().to_string(),
                 message: "is a file this command read; writing it would destroy an input, so write elsewhere".into(),
             });
         }
@@ -205,6 +215,8 @@ pub struct Outputs {
 struct Staging {
     files: Vec<(std::path::PathBuf, std::path::PathBuf)>,
     inputs: Vec<FileId>,
+    /// Folders created for the outputs, removed again (when empty) if the command fails.
+    folders: Vec<std::path::PathBuf>,
 }
 
 /// A file's identity across names (hard and symbolic links): device and inode on unix, the
@@ -281,14 +293,33 @@ impl Outputs {
         })
     }
 
-    fn take(&self) -> Vec<(std::path::PathBuf, std::path::PathBuf)> {
-        if !self.owner {
-            return Vec::new();
+    /// Creates the folder `dir` (and missing parents) for outputs; where an `Outputs` is open on
+    /// this thread and the command fails, the folders it created are removed again if empty.
+    pub fn create_folder(dir: &std::path::Path) -> std::io::Result<()> {
+        let mut missing = Vec::new();
+        let mut p = Some(dir);
+        while let Some(d) = p.filter(|d| !d.as_os_str().is_empty() && !d.exists()) {
+            missing.push(d.to_path_buf());
+            p = d.parent();
         }
-        STAGED
-            .with(|s| s.borrow_mut().take())
-            .map(|st| st.files)
-            .unwrap_or_default()
+        std::fs::create_dir_all(dir)?;
+        STAGED.with(|s| {
+            if let Some(st) = s.borrow_mut().as_mut() {
+                st.folders.extend(missing);
+            }
+        });
+        Ok(())
+    }
+
+    fn take_all(&self) -> Option<Staging> {
+        if !self.owner {
+            return None;
+        }
+        STAGED.with(|s| s.borrow_mut().take())
+    }
+
+    fn take(&self) -> Vec<(std::path::PathBuf, std::path::PathBuf)> {
+        self.take_all().map(|st| st.files).unwrap_or_default()
     }
 
     /// Renames every staged file over its target, in the order they were written (a target
@@ -311,8 +342,15 @@ impl Outputs {
 
 impl Drop for Outputs {
     fn drop(&mut self) {
-        for (tmp, _) in self.take() {
-            let _ = std::fs::remove_file(tmp);
+        if let Some(st) = self.take_all() {
+            for (tmp, _) in st.files {
+                let _ = std::fs::remove_file(tmp);
+            }
+            // Innermost first (each was recorded before its parents); a folder that holds
+            // anything else stays.
+            for d in st.folders {
+                let _ = std::fs::remove_dir(d);
+            }
         }
     }
 }
@@ -403,6 +441,33 @@ pub fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> crate::Result<()> {
 mod atomic_tests {
     use super::*;
     use std::io::Write;
+
+    /// Folders created for a command's outputs go again when it fails, unless something else
+    /// was put in them.
+    #[test]
+    fn folders_of_a_failed_command_are_removed() {
+        let base = std::env::temp_dir().join(format!("ctsid-folders-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&base);
+        std::fs::create_dir_all(&base).unwrap();
+        {
+            let _outputs = Outputs::begin();
+            Outputs::create_folder(&base.join("a").join("b")).unwrap();
+            write_atomic(&base.join("a").join("b").join("f.txt"), b"x").unwrap();
+        }
+        assert!(!base.join("a").exists());
+        {
+            let _outputs = Outputs::begin();
+            Outputs::create_folder(&base.join("c")).unwrap();
+            std::fs::write(base.join("c").join("own.txt"), "kept").unwrap();
+        }
+        assert!(base.join("c").join("own.txt").exists());
+        let outputs = Outputs::begin();
+        Outputs::create_folder(&base.join("d")).unwrap();
+        write_atomic(&base.join("d").join("f.txt"), b"x").unwrap();
+        outputs.commit().unwrap();
+        assert!(base.join("d").join("f.txt").exists());
+        std::fs::remove_dir_all(&base).ok();
+    }
 
     #[test]
     fn a_file_is_replaced_whole_or_left_as_it_was() {

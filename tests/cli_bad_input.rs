@@ -69,6 +69,50 @@ fn a_failing_standard_output_is_an_error_line_not_a_panic() {
             "{err}"
         );
     }
+    // Files whole before standard output failed are kept (all or none would have thrown away a
+    // long run's report for a closed pipe).
+    let model = lag_model("full-model.json", Some(1.0));
+    let sim = dir().join("full-sim.csv");
+    let rep = dir().join("full-rep");
+    let _ = std::fs::remove_file(&sim);
+    let _ = std::fs::remove_dir_all(&rep);
+    let args = [
+        "simulate",
+        &model,
+        &data,
+        "--run-column run --tau 0.01 -o",
+        &sim.display().to_string(),
+        "--report",
+        &rep.display().to_string(),
+    ];
+    let out = bin()
+        .args(words(&args))
+        .stdout(std::fs::File::create("/dev/full").unwrap())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    // simulate prints its rows before it writes: nothing was staged, nothing is written.
+    assert!(!sim.exists() && !rep.exists());
+    // demo writes its report, then prints: the report stays.
+    let dd = dir().join("full-demo");
+    let _ = std::fs::remove_dir_all(&dd);
+    let out = bin()
+        .args(words(&[
+            "demo",
+            "etc",
+            "--degree 1 --engine cpu --quiet --out",
+            &dd.display().to_string(),
+        ]))
+        .stdout(std::fs::File::create("/dev/full").unwrap())
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(err.contains("standard output"), "{err}");
+    assert!(
+        dd.join("report.md").is_file(),
+        "the demo's report was thrown away"
+    );
 }
 
 #[test]
@@ -1089,6 +1133,14 @@ fn findings_of_the_ninth_reading() {
             "--setpoint 1 --from 0 --tau 0.01 --duration 1e12",
         ],
         &["'duration'", "samples"],
+    );
+    fails(
+        &[
+            "control",
+            &model,
+            "--setpoint 1 --from 0 --tau 0.01 --duration=-1",
+        ],
+        &["'duration'", "give a value > 0"],
     );
     assert!(
         out.stdout.is_empty(),

@@ -208,7 +208,7 @@ impl Basis {
         // The constant candidate is named `1`: a variable named like a number would share its
         // name (and an expression could not tell it from the number), so that a channel named
         // `1` gave another model than the same data named `u`.
-        if let Some(v) = names.iter().find(|v| v.trim().parse::<f64>().is_ok()) {
+        if let Some(v) = names.iter().find(|v| crate::util::reads_as_number(v)) {
             return Err(Error::param(
                 "features",
                 format!("'{v}' reads as a number, which terms and expressions cannot tell from a constant; rename the channel"),

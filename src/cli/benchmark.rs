@@ -135,7 +135,8 @@ fn published(x: Option<f64>, none: &str) -> String {
 
 fn write_outputs(dir: &std::path::Path, b: &Benchmark, o: &Outcome) -> Result<()> {
     use ctsid::report::{svg, write_file};
-    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir.display().to_string(), e))?;
+    ctsid::util::Outputs::create_folder(dir)
+        .map_err(|e| Error::file(dir.display().to_string(), e))?;
     let model_path = dir.join(format!("{}.model.json", b.name));
     // Written through the path itself: a folder whose name is not UTF-8 went through a lossy
     // string and the model landed elsewhere.

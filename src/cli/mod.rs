@@ -70,12 +70,25 @@ pub enum Command {
 /// that fails after writing its model file but before its report is done leaves neither (the
 /// model file was written and the failing report's error followed), and the lines saying what was
 /// written come after the files are in place.
+///
+/// A command whose only failure is standard output (`| head` closing the pipe, a full disk
+/// behind `>`) keeps the files it wrote before: each is whole, and a long run's report should
+/// not be lost to a closed pipe.
 pub fn run(cli: Cli) -> Result<()> {
     let outputs = ctsid::util::Outputs::begin();
-    dispatch(cli)?;
-    outputs.commit()?;
-    WRITTEN.with(|w| w.take().iter().for_each(|line| eprintln!("{line}")));
-    Ok(())
+    let done = dispatch(cli);
+    let keep = done.is_ok() || STDOUT_FAILED.with(|f| f.get());
+    let committed = if keep { outputs.commit() } else { Ok(()) };
+    let lines = WRITTEN.with(|w| w.take());
+    if committed.is_ok() && keep {
+        lines.iter().for_each(|line| eprintln!("{line}"));
+    }
+    done.and(committed)
+}
+
+thread_local! {
+    /// Whether a write to standard output failed in this command ([`write_stdout`]).
+    static STDOUT_FAILED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
 }
 
 thread_local! {
@@ -145,7 +158,10 @@ pub fn write_stdout(text: &str) -> Result<()> {
     let mut o = std::io::stdout().lock();
     o.write_all(text.as_bytes())
         .and_then(|_| o.flush())
-        .map_err(|e| Error::file("standard output", e))
+        .map_err(|e| {
+            STDOUT_FAILED.with(|f| f.set(true));
+            Error::file("standard output", e)
+        })
 }
 
 /// Checks an output file before any work is done: its folder exists, it is not a folder, it

@@ -308,12 +308,7 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
 /// Checks a scenario's duration, noise and input limits (the limits must hold the design's
 /// steady input where the law needs it: the pole placement).
 fn check_scenario(d: &Design, s: &Scenario, law: &Law) -> Result<()> {
-    if !(s.duration.is_finite() && s.duration > 0.0) {
-        return Err(Error::param(
-            "duration",
-            format!("{} s; give a value > 0", s.duration),
-        ));
-    }
+    check_duration(d, s)?;
     crate::util::finite_nonneg("noise", s.noise_sd)?;
     if let Some((lo, hi)) = s.u_limits {
         if !(lo.is_finite() && hi.is_finite() && lo < hi) {
@@ -362,6 +357,12 @@ fn check_plant(plant: &Plant) -> Result<()> {
 /// the design's tau (a caller prints the design only after this; `--duration 1e12` printed the
 /// whole design before the error).
 pub fn check_duration(d: &Design, s: &Scenario) -> Result<()> {
+    if !(s.duration.is_finite() && s.duration > 0.0) {
+        return Err(Error::param(
+            "duration",
+            format!("{} s; give a value > 0", s.duration),
+        ));
+    }
     sample_count(d, s).map(|_| ())
 }
 

@@ -285,7 +285,7 @@ impl Settings {
         // by the option that names it (the basis refused it later as a 'features' setting,
         // which identify does not have).
         for (list, what) in [(&self.outputs, "output"), (&self.inputs, "input")] {
-            if let Some(v) = list.iter().find(|v| v.trim().parse::<f64>().is_ok()) {
+            if let Some(v) = list.iter().find(|v| crate::util::reads_as_number(v)) {
                 return Err(Error::param(
                     what,
                     format!("'{v}' reads as a number, which terms and expressions cannot tell from a constant; rename the channel"),

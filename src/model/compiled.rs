@@ -310,6 +310,10 @@ impl CompiledModel {
     /// the term, not call the model unstable (`sqrt(y)` from a negative `y`, `1/(y-y)`).
     pub(crate) fn nonfinite_term(&self, x: &[f64], u: &[f64]) -> Option<(usize, String, f64)> {
         let z: Vec<f64> = x.iter().chain(u).copied().collect();
+        // A state or input of another length is the caller's error, reported where it is used.
+        if z.len() != self.names.len() {
+            return None;
+        }
         self.terms.iter().enumerate().find_map(|(i, terms)| {
             terms.iter().find_map(|t| {
                 let v = t.basis(&z, &self.eps);

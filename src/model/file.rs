@@ -947,7 +947,7 @@ impl Model {
         // A name that reads as a number cannot be told from a constant: an input `2` showed as
         // `3*2` and a term `{"expression": "2"}` read the number, not the input.
         let names = self.outputs.iter().map(|o| &o.name).chain(&self.inputs);
-        if let Some(n) = names.into_iter().find(|n| n.trim().parse::<f64>().is_ok()) {
+        if let Some(n) = names.into_iter().find(|n| crate::util::reads_as_number(n)) {
             return Err(format!(
                 "the name '{}' reads as a number, which terms and expressions cannot tell from a constant; rename it",
                 crate::util::clip(n, 40)

@@ -13,7 +13,8 @@ use std::path::Path;
 /// other than ASCII letters, digits and `._-` become `_` (names carry run ids from the data). Errs
 /// when the folder cannot be created or the file cannot be written.
 pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::file(dir.display().to_string(), e))?;
+    crate::util::Outputs::create_folder(dir)
+        .map_err(|e| Error::file(dir.display().to_string(), e))?;
     // Names carry run ids and channel names from the data: keep them inside `dir`, and short
     // enough for the file system, with their extension.
     let file = match name.rsplit_once('.') {

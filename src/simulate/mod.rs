@@ -1170,12 +1170,19 @@ fn check_terms_at_start(
     run: &RunData,
     opts: &SimOptions,
 ) -> Result<()> {
-    let u0: Vec<f64> = run
-        .u
-        .iter()
-        .map(|c| c.first().copied().unwrap_or(0.0))
-        .collect();
-    match model.nonfinite_term(x0, &u0) {
+    let u_at = |k: usize| -> Vec<f64> {
+        run.u
+            .iter()
+            .map(|c| c.get(k).or(c.first()).copied().unwrap_or(0.0))
+            .collect()
+    };
+    let u0 = u_at(0);
+    // The integrator's stages sit after t0: a term that is singular only at the first input
+    // sample (`u/abs(u)` with u = 0 there) simulated before and still does.
+    let bad = model
+        .nonfinite_term(x0, &u0)
+        .filter(|_| model.nonfinite_term(x0, &u_at(1)).is_some());
+    match bad {
         Some((i, term, v)) => {
             let state: Vec<String> = model
                 .names()
@@ -1783,6 +1790,42 @@ mod tests {
         }
         assert!(worst < 1e-4, "worst relative mismatch {worst:e}");
         assert_eq!(tr.state_at(0), &x0);
+    }
+
+    /// The start check names a term not finite at the initial state, lets a term singular only
+    /// at the first input sample through (the stages sit after t0), and a run with the wrong
+    /// number of inputs is an error, not an index panic.
+    #[test]
+    fn terms_at_the_start_of_a_free_run() {
+        let model = |expr: &str| {
+            let text = format!(
+                r#"{{"format": "ctsid-model/2", "inputs": ["u"], "outputs": [
+                {{"name": "y", "order": 1, "terms": [
+                    {{"exponents": {{"y": 1}}, "coefficient": -1.0}},
+                    {{"expression": "{expr}", "coefficient": 0.5}}]}}]}}"#
+            );
+            crate::model::Model::from_json_str(&text, "test")
+                .unwrap()
+                .compile()
+                .unwrap()
+        };
+        let t: Vec<f64> = (0..50).map(|k| 0.01 * k as f64).collect();
+        let run = RunData {
+            id: "r".into(),
+            y: vec![vec![0.0; 50]],
+            u: vec![t.clone()],
+            t: t.clone(),
+            states: None,
+            x0: Vec::new(),
+        };
+        let e = free_run(&model("1/(y-y)"), &run, 5, &SimOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("the term '1/(y-y)'"), "{e}");
+        assert!(free_run(&model("u/abs(u)"), &run, 5, &SimOptions::default()).is_ok());
+        let none = RunData {
+            u: Vec::new(),
+            ..run
+        };
+        assert!(free_run(&model("u"), &none, 5, &SimOptions::default()).is_err());
     }
 
     #[test]
