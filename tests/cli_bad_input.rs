@@ -4,7 +4,7 @@
 mod common;
 
 use common::cli::{bin, ctsid, fails, overall_nrmse, run, temp_file, words};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 fn dir() -> PathBuf {
     let d = std::env::temp_dir().join(format!("ctsid-badinput-{}", std::process::id()));
@@ -19,6 +19,33 @@ fn file(name: &str, text: &str) -> String {
 /// A first-order model file `y' = -y + gain u` (no input term without a gain).
 fn lag_model(name: &str, gain: Option<f64>) -> String {
     file(name, &common::cli::lag_model_text(-1.0, gain))
+}
+
+/// `simulate MODEL DATA --run-column run --tau 0.01 --report REP [-o OUT]`, the report cases'
+/// command line.
+fn simulate_report(model: &str, data: &str, rep: &Path, out: Option<&Path>) -> Vec<String> {
+    let mut a: Vec<String> = [
+        "simulate",
+        model,
+        data,
+        "--run-column",
+        "run",
+        "--tau",
+        "0.01",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    a.extend(["--report".to_string(), rep.display().to_string()]);
+    if let Some(o) = out {
+        a.extend(["-o".to_string(), o.display().to_string()]);
+    }
+    a
+}
+
+/// `args` as the `&str` slice the runners take.
+fn strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
 }
 
 /// `ctsid simulate ARGS`, which must succeed: its pooled NRMSE in percent of output y.
@@ -76,17 +103,9 @@ fn a_failing_standard_output_is_an_error_line_not_a_panic() {
     let rep = dir().join("full-rep");
     let _ = std::fs::remove_file(&sim);
     let _ = std::fs::remove_dir_all(&rep);
-    let args = [
-        "simulate",
-        &model,
-        &data,
-        "--run-column run --tau 0.01 -o",
-        &sim.display().to_string(),
-        "--report",
-        &rep.display().to_string(),
-    ];
+    let args = simulate_report(&model, &data, &rep, Some(&sim));
     let out = bin()
-        .args(words(&args))
+        .args(&args)
         .stdout(std::fs::File::create("/dev/full").unwrap())
         .output()
         .unwrap();
@@ -859,21 +878,13 @@ fn an_output_inside_the_report_folder_is_refused() {
     let good = file("good-inside.csv", &good_csv());
     let rep = dir().join("inside-rep");
     std::fs::create_dir_all(&rep).unwrap();
-    let inside = rep.join("report.md").display().to_string();
+    let inside = rep.join("report.md");
     let out = fails(
-        &[
-            "simulate",
-            &model,
-            &good,
-            "--run-column run --tau 0.01 --report",
-            &rep.display().to_string(),
-            "-o",
-            &inside,
-        ],
+        &strs(&simulate_report(&model, &good, &rep, Some(&inside))),
         &["inside the report folder"],
     );
     assert!(out.stdout.is_empty(), "the work ran before the refusal");
-    assert!(!std::path::Path::new(&inside).exists());
+    assert!(!inside.exists());
 }
 
 /// Terms near 1e308: the steady-input search summed the terms' magnitudes, which overflowed, and
@@ -1028,18 +1039,8 @@ fn a_report_that_fails_half_way_leaves_no_output() {
     std::fs::create_dir_all(rep.join("report.md")).unwrap();
     let sim = dir().join("half-sim.csv");
     let _ = std::fs::remove_file(&sim);
-    let out = fails(
-        &[
-            "simulate",
-            &model,
-            &good,
-            "--run-column run --tau 0.01 --report",
-            &rep.display().to_string(),
-            "-o",
-            &sim.display().to_string(),
-        ],
-        &["report.md"],
-    );
+    let args = simulate_report(&model, &good, &rep, Some(&sim));
+    let out = fails(&strs(&args), &["report.md"]);
     assert!(!String::from_utf8_lossy(&out.stderr).contains("wrote"));
     assert!(!sim.exists(), "the simulated CSV was written");
     let left: Vec<String> = std::fs::read_dir(&rep)
@@ -1051,15 +1052,7 @@ fn a_report_that_fails_half_way_leaves_no_output() {
     assert!(left.is_empty(), "left behind: {left:?}");
     // The same command with a report it can write leaves both, and says so.
     std::fs::remove_dir(rep.join("report.md")).unwrap();
-    let (ok, _, err) = ctsid(&[
-        "simulate",
-        &model,
-        &good,
-        "--run-column run --tau 0.01 --report",
-        &rep.display().to_string(),
-        "-o",
-        &sim.display().to_string(),
-    ]);
+    let (ok, _, err) = ctsid(&strs(&args));
     assert!(ok, "{err}");
     assert!(sim.exists() && rep.join("report.md").is_file());
     assert!(
@@ -1080,14 +1073,9 @@ fn a_report_file_that_is_an_input_is_refused() {
     let model_text = common::cli::lag_model_text(-1.0, Some(1.0));
     std::fs::write(&model, &model_text).unwrap();
     std::fs::write(&data, good_csv()).unwrap();
+    let (m, d) = (model.display().to_string(), data.display().to_string());
     fails(
-        &[
-            "simulate",
-            &model.display().to_string(),
-            &data.display().to_string(),
-            "--run-column run --tau 0.01 --report",
-            &rep.display().to_string(),
-        ],
+        &strs(&simulate_report(&m, &d, &rep, None)),
         &["this command read", "destroy an input"],
     );
     assert_eq!(std::fs::read_to_string(&model).unwrap(), model_text);
