@@ -243,6 +243,12 @@ impl FileId {
     }
 }
 
+/// Whether two existing paths are one file (hard and symbolic links included); false where
+/// either cannot be read.
+pub fn same_file(a: &std::path::Path, b: &std::path::Path) -> bool {
+    matches!((FileId::of(a), FileId::of(b)), (Some(x), Some(y)) if x == y)
+}
+
 thread_local! {
     /// The staging of this thread's outputs, while an [`Outputs`] is open on it.
     static STAGED: std::cell::RefCell<Option<Staging>> = const { std::cell::RefCell::new(None) };
@@ -311,6 +317,7 @@ impl Outputs {
         Ok(())
     }
 
+    /// The staging, for the `Outputs` that opened it (a joined one has nothing to commit).
     fn take_all(&self) -> Option<Staging> {
         if !self.owner {
             return None;
@@ -318,15 +325,15 @@ impl Outputs {
         STAGED.with(|s| s.borrow_mut().take())
     }
 
-    fn take(&self) -> Vec<(std::path::PathBuf, std::path::PathBuf)> {
-        self.take_all().map(|st| st.files).unwrap_or_default()
-    }
-
     /// Renames every staged file over its target, in the order they were written (a target
     /// written twice gets the later one). Errors when a rename fails, naming its target; the
     /// staged files after it are removed.
     pub fn commit(self) -> crate::Result<()> {
-        let mut list = self.take().into_iter();
+        let mut list = self
+            .take_all()
+            .map(|st| st.files)
+            .unwrap_or_default()
+            .into_iter();
         while let Some((tmp, target)) = list.next() {
             if let Err(e) = std::fs::rename(&tmp, &target) {
                 let _ = std::fs::remove_file(&tmp);

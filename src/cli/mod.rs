@@ -89,9 +89,6 @@ pub fn run(cli: Cli) -> Result<()> {
 thread_local! {
     /// Whether a write to standard output failed in this command ([`write_stdout`]).
     static STDOUT_FAILED: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
-}
-
-thread_local! {
     /// What [`written`] says, printed once the command's files are in place.
     static WRITTEN: std::cell::RefCell<Vec<String>> = const { std::cell::RefCell::new(Vec::new()) };
 }
@@ -190,7 +187,7 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
             )));
         }
     }
-    if inputs.iter().any(|i| same_file(out, i)) {
+    if inputs.iter().any(|i| ctsid::util::same_file(out, i)) {
         return Err(err(
             "is also an input file; writing it would destroy the input, so give another output file".into(),
         ));
@@ -260,19 +257,4 @@ pub fn trimmed(s: &str) -> std::result::Result<String, String> {
         return Err("an empty name in the list (a doubled or trailing comma?)".into());
     }
     Ok(t.to_string())
-}
-
-/// Whether two existing paths are one file (hard and symbolic links included).
-#[cfg(unix)]
-fn same_file(a: &Path, b: &Path) -> bool {
-    use std::os::unix::fs::MetadataExt;
-    match (std::fs::metadata(a), std::fs::metadata(b)) {
-        (Ok(x), Ok(y)) => x.dev() == y.dev() && x.ino() == y.ino(),
-        _ => false,
-    }
-}
-
-#[cfg(not(unix))]
-fn same_file(a: &Path, b: &Path) -> bool {
-    matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
 }

@@ -325,14 +325,13 @@ impl CompiledModel {
     fn term_text(&self, t: &CTerm) -> String {
         match &t.kind {
             Kind::Expression { expr, .. } => expr.text().to_string(),
-            Kind::Monomial(f) => f
-                .iter()
-                .map(|&(v, e)| match e {
-                    1 => self.names[v].clone(),
-                    _ => format!("{}^{e}", self.names[v]),
-                })
-                .collect::<Vec<_>>()
-                .join("*"),
+            Kind::Monomial(f) => {
+                let pairs: Vec<(&str, u32)> = f
+                    .iter()
+                    .map(|&(v, e)| (self.names[v].as_str(), e))
+                    .collect();
+                super::Term::new(&pairs, 1.0).monomial()
+            }
         }
     }
 
