@@ -1,13 +1,15 @@
 //! The compiled model: a fast evaluator of every right-hand side, its Jacobians with respect to
 //! states and inputs, and its derivatives with respect to the coefficients.
 //!
-//! Monomials are evaluated as products of powers; expression terms by their parsed tree, with
-//! `sign` smoothed over the widths the model file gives (see [`super::expr`]). Every term's
-//! partial derivatives are prepared once here (monomials by the power rule, expressions
-//! symbolically), so the integrator's Newton matrices and the refinement's sensitivities are
-//! exact derivatives of the very right-hand side the simulation integrates.
+//! Monomials are evaluated as products of powers; expression terms as a straight-line program of
+//! the expression and its partial derivatives ([`super::tape`]), with `sign` smoothed over the
+//! widths the model file gives (see [`super::expr`]). Every term's partial derivatives are
+//! prepared once here (monomials by the power rule, expressions symbolically), so the
+//! integrator's Newton matrices and the refinement's sensitivities are exact derivatives of the
+//! very right-hand side the simulation integrates.
 
 use super::expr::Expr;
+use super::tape::Tape;
 use super::{Interpolation, Model, Var};
 use crate::error::{Error, Result};
 
@@ -16,11 +18,8 @@ use crate::error::{Error, Result};
 enum Kind {
     /// `prod z_v^e` as (slot in z, exponent).
     Monomial(Vec<(usize, u32)>),
-    /// An expression and its nonzero partial derivatives (slot in z, d expr / d z_slot).
-    Expression {
-        expr: Expr,
-        grad: Vec<(usize, Expr)>,
-    },
+    /// An expression (as written) and its nonzero partial derivatives in one program.
+    Expression { text: String, tape: Tape },
 }
 
 /// `x.powi(e)` without the library call for the exponents monomials mostly have (the same
@@ -51,7 +50,7 @@ impl CTerm {
                 2 => a * z[v] * z[v],
                 _ => a * z[v].powi(e as i32),
             }),
-            Kind::Expression { expr, .. } => expr.eval_smooth(z, eps),
+            Kind::Expression { tape, .. } => tape.value(z, eps),
         }
     }
 
@@ -69,19 +68,16 @@ impl CTerm {
                     grad[v] += p;
                 }
             }
-            Kind::Expression { grad: g, .. } => {
-                for (v, d) in g {
-                    grad[*v] += self.coef * d.eval_smooth(z, eps);
-                }
-            }
+            Kind::Expression { tape, .. } => tape.add_gradient(self.coef, z, eps, grad),
         }
     }
 }
 
-/// Nodes the derivative trees of a model's expression terms may have in all (a few hundred MB):
-/// a product of n factors has a derivative of about n^2 / 2 nodes, so a file of a few KB could
-/// otherwise ask for gigabytes. Models written by ctsid stay far below it.
-const MAX_GRADIENT_NODES: u64 = 4_000_000;
+/// Entries the programs of a model's expression terms may have in all (about 100 MB): an
+/// expression of at most 2,000 tokens and its derivatives take at most a few thousand entries
+/// per variable, so only a file of very many long terms reaches it. Models written by ctsid
+/// stay far below it.
+const MAX_TAPE_ENTRIES: usize = 4_000_000;
 
 /// Fast evaluator of a model's right-hand sides.
 ///
@@ -113,34 +109,29 @@ impl CompiledModel {
         };
         let names = m.variable_names();
         let mut terms = Vec::with_capacity(m.outputs.len());
-        let mut grad_nodes: u64 = 0;
+        let mut entries: usize = 0;
         for o in &m.outputs {
             let mut ts = Vec::with_capacity(o.terms.len());
             for t in &o.terms {
                 let kind = match &t.expression {
                     Some(text) => {
-                        let expr = Expr::parse(text, &names)?;
-                        // The gradient's trees, one per variable, within a model-wide budget.
-                        let vars = expr.variables().len() as u64;
-                        grad_nodes =
-                            grad_nodes.saturating_add(expr.derivative_size().saturating_mul(vars));
-                        if grad_nodes > MAX_GRADIENT_NODES {
+                        let tape = Tape::new(&Expr::parse(text, &names)?);
+                        // The programs, within a model-wide budget.
+                        entries = entries.saturating_add(tape.len());
+                        if entries > MAX_TAPE_ENTRIES {
                             return Err(Error::Model {
                                 path: "<memory>".into(),
                                 message: format!(
-                                    "the term '{}' of '{}' makes the model's derivatives too large to build (more than {MAX_GRADIENT_NODES} nodes); write long products as monomial exponents",
+                                    "the term '{}' of '{}' makes the model's derivatives too large to build (more than {MAX_TAPE_ENTRIES} operations with the others); write long products as monomial exponents",
                                     crate::util::clip(text, 60),
                                     o.name
                                 ),
                             });
                         }
-                        let grad = expr
-                            .variables()
-                            .into_iter()
-                            .map(|v| (v, expr.derivative(v)))
-                            .filter(|(_, d)| !d.is_zero())
-                            .collect();
-                        Kind::Expression { expr, grad }
+                        Kind::Expression {
+                            text: text.clone(),
+                            tape,
+                        }
                     }
                     None => Kind::Monomial(
                         t.exponents
@@ -324,7 +315,7 @@ impl CompiledModel {
 
     fn term_text(&self, t: &CTerm) -> String {
         match &t.kind {
-            Kind::Expression { expr, .. } => expr.text().to_string(),
+            Kind::Expression { text, .. } => text.trim().to_string(),
             Kind::Monomial(f) => {
                 let pairs: Vec<(&str, u32)> = f
                     .iter()

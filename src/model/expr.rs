@@ -19,7 +19,7 @@
 use crate::error::{Error, Result};
 
 #[derive(Debug, Clone, PartialEq)]
-enum Node {
+pub(super) enum Node {
     Num(f64),
     Var(usize),
     Neg(Box<Node>),
@@ -34,7 +34,7 @@ enum Node {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
-enum Fun {
+pub(super) enum Fun {
     Sign,
     Abs,
     Sqrt,
@@ -95,6 +95,11 @@ impl Expr {
     /// The expression as written.
     pub fn text(&self) -> &str {
         &self.text
+    }
+
+    /// The parsed tree (for [`super::tape`]).
+    pub(super) fn root(&self) -> &Node {
+        &self.root
     }
 
     /// Value at `z`; `sign` is exact. Panics when `z` is too short for a variable the expression
@@ -314,42 +319,49 @@ fn eval(n: &Node, z: &[f64], eps: Option<&[f64]>) -> f64 {
         Node::Sub(a, b) => eval(a, z, eps) - eval(b, z, eps),
         Node::Mul(a, b) => eval(a, z, eps) * eval(b, z, eps),
         Node::Div(a, b) => eval(a, z, eps) / eval(b, z, eps),
-        Node::Pow(a, e) => {
-            let x = eval(a, z, eps);
-            if e.fract() == 0.0 {
-                x.powi(*e as i32)
-            } else {
-                x.powf(*e)
-            }
-        }
+        Node::Pow(a, e) => num_power(eval(a, z, eps), *e),
         Node::Fun(f, a, var) => {
             let x = eval(a, z, eps);
             let width = match (eps, var) {
                 (Some(e), Some(i)) => e.get(*i).copied().filter(|w| *w > 0.0),
                 _ => None,
             };
-            match f {
-                Fun::Sign => match width {
-                    Some(e) => x / (x * x + e * e).sqrt(),
-                    None => sign(x),
-                },
-                Fun::SignSlope => match width {
-                    Some(e) => e * e / (x * x + e * e).powf(1.5),
-                    None => 0.0,
-                },
-                Fun::Abs => x.abs(),
-                Fun::Sqrt => x.sqrt(),
-                Fun::Tanh => x.tanh(),
-                Fun::Sin => x.sin(),
-                Fun::Cos => x.cos(),
-                Fun::Exp => x.exp(),
-                Fun::Sat => x.clamp(-1.0, 1.0),
-                Fun::Relu => x.max(0.0),
-                Fun::SqrtSlope => sqrt_slope(x),
-                Fun::Step => (x > 0.0) as u8 as f64,
-                Fun::Inside => (x.abs() < 1.0) as u8 as f64,
-            }
+            apply(*f, x, width)
         }
+    }
+}
+
+/// `x^e` as the tree and the tape both compute it.
+pub(super) fn num_power(x: f64, e: f64) -> f64 {
+    if e.fract() == 0.0 {
+        x.powi(e as i32)
+    } else {
+        x.powf(e)
+    }
+}
+
+/// `f(x)`, with `sign` and its slope smoothed over `width` where there is one.
+pub(super) fn apply(f: Fun, x: f64, width: Option<f64>) -> f64 {
+    match f {
+        Fun::Sign => match width {
+            Some(e) => x / (x * x + e * e).sqrt(),
+            None => sign(x),
+        },
+        Fun::SignSlope => match width {
+            Some(e) => e * e / (x * x + e * e).powf(1.5),
+            None => 0.0,
+        },
+        Fun::Abs => x.abs(),
+        Fun::Sqrt => x.sqrt(),
+        Fun::Tanh => x.tanh(),
+        Fun::Sin => x.sin(),
+        Fun::Cos => x.cos(),
+        Fun::Exp => x.exp(),
+        Fun::Sat => x.clamp(-1.0, 1.0),
+        Fun::Relu => x.max(0.0),
+        Fun::SqrtSlope => sqrt_slope(x),
+        Fun::Step => (x > 0.0) as u8 as f64,
+        Fun::Inside => (x.abs() < 1.0) as u8 as f64,
     }
 }
 

@@ -42,6 +42,7 @@
 mod compiled;
 pub mod expr;
 mod file;
+mod tape;
 
 pub use compiled::CompiledModel;
 pub use expr::Expr;
