@@ -164,6 +164,7 @@ struct Builder {
     index: HashMap<Key, u32>,
 }
 
+#[allow(clippy::redundant_guards)] // float literals in patterns read worse (as in `expr`)
 impl Builder {
     fn op(&mut self, op: Op) -> u32 {
         let next = self.ops.len() as u32;
