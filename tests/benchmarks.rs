@@ -240,3 +240,60 @@ fn a_record_out_of_order_or_at_another_rate_is_refused() {
         &["row 3", "column 't_s' is 8 where k * 4 = 4 was expected"],
     );
 }
+
+/// A copy with another number of rows than the published file, or with a missing-value code in
+/// it, is refused: a tanks record with `-9999` in one row was fitted (`y_V_d2 = 0`) and scored
+/// against the published rows with exit status 0, a cut copy of the EMPS pulses scored 7.86 mm
+/// against 5.15 under the same protocol line, and rows appended to a tanks record were left out
+/// without a word (the tenth reading, session 18).
+#[test]
+fn a_cut_extended_or_coded_record_is_refused() {
+    let Some(est) = shared_data("cascaded_tanks/cascaded_tanks_estimation.csv") else {
+        return;
+    };
+    let test = shared_data("cascaded_tanks/cascaded_tanks_test.csv").unwrap();
+    let text = std::fs::read_to_string(&est).unwrap();
+    let lines: Vec<String> = text.lines().map(String::from).collect();
+    let root = std::path::Path::new(&temp_file("bench-whole", "x", ""))
+        .parent()
+        .unwrap()
+        .to_path_buf();
+    let write = |name: &str, lines: &[String]| {
+        let dir = root.join(name).join("cascaded_tanks");
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("cascaded_tanks_estimation.csv"), lines.join("\n")).unwrap();
+        std::fs::copy(&test, dir.join("cascaded_tanks_test.csv")).unwrap();
+        root.join(name).display().to_string()
+    };
+    // Row 301 (sample 299): its level replaced by a missing-value code.
+    let mut coded = lines.clone();
+    let mut cells: Vec<String> = coded[300].split(',').map(String::from).collect();
+    let y = lines[0].split(',').position(|c| c == "y_V").unwrap();
+    cells[y] = "-9999".into();
+    coded[300] = cells.join(",");
+    let dir = write("coded", &coded);
+    fails(
+        &["benchmark", "tanks", "--data", &dir],
+        &[
+            "row 301, column 'y_V'",
+            "-9999",
+            "the benchmark's file has none",
+        ],
+    );
+    let dir = write("cut", &lines[..1000]);
+    fails(
+        &["benchmark", "tanks", "--data", &dir],
+        &["999 rows, the benchmark's file has 1024"],
+    );
+    // Two rows more, continuing the record's time and index.
+    let mut longer = lines.clone();
+    for k in 1024..1026 {
+        longer.push(format!("{k},{},3.0,5.0", 4 * k));
+    }
+    assert!(lines[0].starts_with("k,t_s,"), "{}", lines[0]);
+    let dir = write("longer", &longer);
+    fails(
+        &["benchmark", "tanks", "--data", &dir],
+        &["1026 rows, the benchmark's file has 1024"],
+    );
+}

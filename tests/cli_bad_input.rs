@@ -1188,3 +1188,37 @@ fn a_diverging_test_run_gives_no_nan_heading() {
     // The run does diverge with this model (else the test checks nothing).
     assert!(out.contains("diverged:"), "{out}");
 }
+
+/// A run id holding a comma cannot be named in a run list (`--test 'a,b'` tested runs `a` and
+/// `b` and trained on `a,b`): refused where the records are read (the tenth reading).
+#[test]
+fn a_run_id_with_a_comma_is_refused() {
+    let mut text = String::from("run,t,u,y\n");
+    for id in ["\"a,b\"", "a", "b", "c"] {
+        for k in 0..40 {
+            let t = k as f64 * 0.1;
+            text.push_str(&format!("{id},{t},{},{}\n", t.sin(), t.cos()));
+        }
+    }
+    let csv = temp_file("comma-runs", "runs.csv", &text);
+    fails(
+        &[
+            "identify",
+            &csv,
+            "--run-column",
+            "run",
+            "--time-column",
+            "t",
+            "--output",
+            "y",
+            "--input",
+            "u",
+            "--degree",
+            "1",
+            "--test",
+            "a,b",
+            "--quiet",
+        ],
+        &["run id 'a,b' holds a comma"],
+    );
+}

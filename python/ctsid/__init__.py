@@ -30,6 +30,7 @@ import json
 import math
 import numbers
 import os
+from collections.abc import Iterable
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
@@ -52,13 +53,31 @@ __all__ = [
 RunList = Union[str, Sequence[Any], None]
 
 
+# Integers beyond this cannot cross into the extension (an unsigned 64-bit word): 2**70 raised
+# Python's own "OverflowError: int too big to convert", naming no setting.
+_INT_MAX = 2**64 - 1
+
+
 def _int(name: str, v: Any, low: int = 0) -> int:
     """An integer setting: Python or numpy integers only (``2.7`` was cut to 2 without a word)."""
     if isinstance(v, bool) or not isinstance(v, numbers.Integral):
         raise TypeError(f"{name}: give an integer, not {v!r}")
     if v < low:
         raise ValueError(f"{name}: {v} is below {low}")
+    if v > _INT_MAX:
+        raise ValueError(f"{name}: {v} is beyond the largest integer ctsid takes ({_INT_MAX})")
     return int(v)
+
+
+def _unmasked(name: str, a: Any) -> Any:
+    """Refuses a numpy masked array with masked samples: ``np.asarray`` drops the mask and
+    hands on the values under it (a masked stretch of zeros was fitted as data)."""
+    if isinstance(a, np.ma.MaskedArray) and np.ma.is_masked(a):
+        raise CtsidError(
+            f"{name}: a masked array with {int(np.ma.count_masked(a))} masked (missing) samples; "
+            "fill or cut them first"
+        )
+    return a
 
 
 def _real(name: str, v: Any) -> float:
@@ -85,9 +104,11 @@ def _path(name: str, p: Any) -> str:
 
 
 def _names(name: str, v: Any) -> List[str]:
-    """A list of names: one string is refused (it was split into characters)."""
+    """A list of names: one string is refused (it was split into characters), as is None."""
     if isinstance(v, str):
         raise TypeError(f"{name}: give a list of names, e.g. [{v!r}]")
+    if v is None or not isinstance(v, Iterable):
+        raise TypeError(f"{name}: give a list of names, not {v!r}")
     return [str(x) for x in v]
 
 
@@ -164,7 +185,7 @@ def _table(d: Any, columns: Optional[Sequence[str]]) -> Dict[str, np.ndarray]:
             raise ValueError("columns: names the columns of a numpy array; a DataFrame has its own")
         _unique(d.columns, "data")
         return {str(c): d[c].to_numpy() for c in d.columns}
-    a = np.asarray(d)
+    a = np.asarray(_unmasked("data", d))
     if a.ndim != 2:
         raise ValueError(
             f"data: a {a.ndim}-D array; give a 2-D array (samples x columns) with "
@@ -393,7 +414,7 @@ def derive(y: Any, tau: float, order: int) -> Tuple[np.ndarray, np.ndarray]:
     """Derivatives y, y', ..., y^(order) of one uniformly sampled signal by the self-tuning
     smoother: ``(values, sigmas)``, each an array (order + 1) x samples; row 0 is the smoothed
     signal, ``sigmas`` the per-sample standard deviations."""
-    raw = np.asarray(y)
+    raw = np.asarray(_unmasked("y", y))
     if raw.dtype.kind not in "biuf":
         raise CtsidError(f"y: values are not numbers ({raw.dtype})")
     a = raw.astype(float)

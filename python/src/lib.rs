@@ -52,7 +52,25 @@ fn record_set(tau: f64, names: Vec<String>, runs: Vec<PyRun>) -> ctsid::Result<R
             }
         })
         .collect();
-    RecordSet::new(tau, names, runs)
+    let rs = RecordSet::new(tau, names, runs)?;
+    warn_suspects(&rs);
+    Ok(rs)
+}
+
+/// The command line's note on samples that look like a missing-value code or a glitch (legal
+/// values, kept), as a Python `UserWarning`: without it a `-9999` in a run was fitted and the
+/// package said nothing where the command line notes it.
+fn warn_suspects(rs: &RecordSet) {
+    for s in rs.suspect_samples() {
+        Python::attach(|py| {
+            let warned = py
+                .import("warnings")
+                .and_then(|m| m.call_method1("warn", (format!("ctsid: {}", s.note()),)));
+            if let Err(e) = warned {
+                e.restore(py);
+            }
+        });
+    }
 }
 
 /// Train, validation and test runs from the run lists the CLI takes (`"0-3"`, `"a,b"`): training

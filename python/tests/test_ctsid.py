@@ -199,3 +199,32 @@ def test_settings_of_the_wrong_kind_are_refused_not_coerced(fitted, tmp_path):
     same = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run",
                           **dict(SETTINGS, degree=np.int64(2), order=np.int64(3)))
     assert same.to_json() == model.to_json()
+
+
+def test_findings_of_the_tenth_reading(fitted):
+    """Masked samples, a missing-value code, run ids with commas, huge integers, None names."""
+    data, _ = fitted
+    run0 = data[data.run == 0][["y", "u"]].to_numpy()
+    mask = np.zeros_like(run0, dtype=bool)
+    mask[300:310, 0] = True
+    # The mask was dropped and the values under it fitted.
+    with pytest.raises(ctsid.CtsidError, match="10 masked"):
+        ctsid.identify(np.ma.masked_array(run0, mask), columns=["y", "u"], outputs=["y"],
+                       inputs=["u"], tau=TAU, degree=1, order=3)
+    with pytest.raises(ctsid.CtsidError, match="masked"):
+        ctsid.derive(np.ma.masked_array(run0[:, 0], mask[:, 0]), TAU, 2)
+    # A missing-value code in a run: the command line notes it, the package said nothing.
+    coded = run0.copy()
+    coded[300, 0] = -1e7
+    with pytest.warns(UserWarning, match="row 300, column 'y'"):
+        ctsid.derive(coded[:, 0], TAU, 1)
+    # A run id with a comma cannot be named in a run list.
+    with pytest.raises(ctsid.CtsidError, match="comma"):
+        ctsid.identify({"a,b": run0, "c": run0}, columns=["y", "u"], outputs=["y"],
+                       inputs=["u"], tau=TAU, degree=1, order=3, test=["a,b"])
+    with pytest.raises(ValueError, match="degree: .* beyond"):
+        ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run",
+                       degree=2**70, order=3)
+    with pytest.raises(TypeError, match="outputs: give a list"):
+        ctsid.identify(data, outputs=None, inputs=["u"], tau=TAU, run_column="run",
+                       degree=1, order=3)

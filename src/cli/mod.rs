@@ -135,16 +135,7 @@ pub fn load_records(
 ) -> Result<ctsid::records::RecordSet> {
     let rs = ctsid::records::RecordSet::from_csv(path, spec)?;
     for s in rs.suspect_samples() {
-        let others = match s.count {
-            0 | 1 => String::new(),
-            n => format!(" ({} more as far out)", n - 1),
-        };
-        eprintln!(
-            "note: {}: {} is {:.1e} times further from the channel's median than nearly all its samples{others}: a missing-value code or a glitch? if so, remove or repair it",
-            s.place(),
-            ctsid::util::short(s.value),
-            s.ratio
-        );
+        eprintln!("note: {}", s.note());
     }
     Ok(rs)
 }

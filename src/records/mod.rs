@@ -91,6 +91,20 @@ pub struct Suspect {
 }
 
 impl Suspect {
+    /// The one-line note the command line prints (and the Python package warns) for it.
+    pub fn note(&self) -> String {
+        let others = match self.count {
+            0 | 1 => String::new(),
+            n => format!(" ({} more as far out)", n - 1),
+        };
+        format!(
+            "{}: {} is {:.1e} times further from the channel's median than nearly all its samples{others}: a missing-value code or a glitch? if so, remove or repair it",
+            self.place(),
+            crate::util::short(self.value),
+            self.ratio
+        )
+    }
+
     /// Where it is: 'row 42, column 'y'' for a file, else run and sample.
     pub fn place(&self) -> String {
         match self.row {
@@ -170,7 +184,8 @@ pub struct CsvSpec {
 impl RecordSet {
     /// Builds a record set from in-memory runs (validated like a file). Refuses a tau that
     /// [`check_tau`] refuses, a channel name given twice, a run id used twice, a run with another number of channels
-    /// than names or with channels of different lengths, a NaN, infinite or too large sample
+    /// than names or with channels of different lengths, a run id with a comma (run lists
+    /// separate ids by commas), a NaN, infinite or too large sample
     /// ([`first_unusable`]), a channel whose largest magnitude is below [`MIN_MAGNITUDE`] (all
     /// zeros aside) and a sample [`MAX_OUTLIER`] times further from its channel's median than
     /// nearly all others.
@@ -192,6 +207,14 @@ impl RecordSet {
                 ids[j],
                 i + 1,
                 j + 1
+            )));
+        }
+        // Run lists name runs separated by commas (`--test a,b`): a run 'a,b' could not be
+        // named, and `--test 'a,b'` tested runs 'a' and 'b' and trained on it.
+        if let Some(r) = runs.iter().find(|r| r.id.contains(',')) {
+            return Err(Error::InvalidData(format!(
+                "run id '{}' holds a comma, which separates run ids in run lists; rename the run",
+                crate::util::clip(&r.id, 40)
             )));
         }
         for r in &runs {
