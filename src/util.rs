@@ -292,7 +292,7 @@ impl Outputs {
     }
 
     /// Whether `target` is a file this thread's open `Outputs` has seen read.
-    fn was_read(target: &std::path::Path) -> bool {
+    pub fn was_read(target: &std::path::Path) -> bool {
         STAGED.with(|s| match (s.borrow().as_ref(), FileId::of(target)) {
             (Some(st), Some(id)) => st.inputs.contains(&id),
             _ => false,

@@ -297,3 +297,47 @@ fn a_cut_extended_or_coded_record_is_refused() {
         &["1026 rows, the benchmark's file has 1024"],
     );
 }
+
+/// `--out`'s files are checked before the work: a pipe in the place of `NAME.csv`, or
+/// `NAME_test.csv` linked to the record the benchmark reads, failed only after the whole run.
+#[test]
+fn out_files_are_checked_before_the_work() {
+    let Some(est) = shared_data("cascaded_tanks/cascaded_tanks_estimation.csv") else {
+        return;
+    };
+    let root = std::path::Path::new(&temp_file("bench-outfiles", "x", ""))
+        .parent()
+        .unwrap()
+        .to_path_buf();
+    let piped = root.join("piped");
+    std::fs::create_dir_all(&piped).unwrap();
+    let fifo = piped.join("tanks.csv");
+    let _ = std::fs::remove_file(&fifo);
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    if made.is_ok_and(|s| s.success()) {
+        let out = fails(
+            &["benchmark", "tanks", "--out", &piped.display().to_string()],
+            &["tanks.csv", "not a regular file"],
+        );
+        assert!(
+            out.stdout.is_empty(),
+            "{}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+    }
+    let linked = root.join("linked");
+    std::fs::create_dir_all(&linked).unwrap();
+    let link = linked.join("tanks_test.csv");
+    let _ = std::fs::remove_file(&link);
+    std::os::unix::fs::symlink(&est, &link).unwrap();
+    let out = fails(
+        &["benchmark", "tanks", "--out", &linked.display().to_string()],
+        &["tanks_test.csv", "a record this benchmark reads"],
+    );
+    assert!(
+        out.stdout.is_empty(),
+        "{}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    assert_eq!(std::fs::read(&est).unwrap(), std::fs::read(&link).unwrap());
+}

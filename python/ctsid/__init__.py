@@ -30,6 +30,7 @@ import json
 import math
 import numbers
 import os
+import warnings
 from collections.abc import Iterable
 from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
@@ -397,7 +398,11 @@ def identify(
         engine=str(engine),
         refine=_flag("refine", refine),
     )
-    return Model(inner, json.loads(summary))
+    summary = json.loads(summary)
+    # What the command line notes on standard error (a named term no chosen order could use).
+    for note in summary.get("notes", []):
+        warnings.warn(f"ctsid: {note}")
+    return Model(inner, summary)
 
 
 def simulate(model: Model, data: Any, **kwargs: Any):

@@ -284,6 +284,7 @@ fn identify(
         "test_nrmse": id.test_nrmse(),
         "engines": id.outputs.iter().map(|o| o.engine.clone()).collect::<Vec<_>>(),
         "refinement": id.refinement.as_ref().map(|r| r.message.clone()),
+        "notes": id.notes,
     });
     Ok((PyModel { inner: id.model }, summary.to_string()))
 }

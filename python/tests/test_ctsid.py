@@ -228,3 +228,10 @@ def test_findings_of_the_tenth_reading(fitted):
     with pytest.raises(TypeError, match="outputs: give a list"):
         ctsid.identify(data, outputs=None, inputs=["u"], tau=TAU, run_column="run",
                        degree=1, order=3)
+    # A named term over a state only order 4 has, where the search takes a lower order: the term
+    # was dropped without a word; the command line notes it.
+    with pytest.warns(UserWarning, match="'sign\\(y_d3\\)' was a candidate at no chosen order"):
+        m = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run",
+                           train="0-7", validation="8-9", degree=2, orders=[2, 3, 4],
+                           terms=["sign(y_d3)"])
+    assert m.orders[0] < 4

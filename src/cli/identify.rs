@@ -128,6 +128,9 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
         &ids,
     )?;
     let id = identify(&rs, &split, &s).map_err(|e| a.segment.explain(e))?;
+    for n in &id.notes {
+        eprintln!("note: {n}");
+    }
 
     let mut text: String = id
         .outputs

@@ -461,6 +461,9 @@ pub struct Identification {
     pub weighting: String,
     /// `None` when refinement was switched off.
     pub refinement: Option<RefinementReport>,
+    /// What the caller should know about the settings on these data (a named term that no
+    /// chosen order could use), one line each.
+    pub notes: Vec<String>,
 }
 
 impl Identification {
@@ -1120,7 +1123,33 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         derivatives: prep.derivs,
         weighting,
         refinement,
+        notes: unused_terms(settings, &ord),
     })
+}
+
+/// The named terms no equation at the chosen orders could take: a term over `y_d2` is a
+/// candidate only where `y` has order 3 or more, and an order search that chose 2 dropped it
+/// without a word (fixed orders that lack its state are refused by [`Settings::validate`]).
+fn unused_terms(settings: &Settings, ord: &[usize]) -> Vec<String> {
+    let names = settings.names_at(ord);
+    let orders: Vec<String> = settings
+        .outputs
+        .iter()
+        .zip(ord)
+        .map(|(o, n)| format!("'{o}' {n}"))
+        .collect();
+    settings
+        .terms
+        .iter()
+        .filter(|t| crate::model::Expr::parse(t, &names).is_err())
+        .map(|t| {
+            format!(
+                "the term '{}' was a candidate at no chosen order (orders {}): it reads a state those orders lack",
+                crate::util::clip(t, 60),
+                orders.join(", ")
+            )
+        })
+        .collect()
 }
 
 /// The coordinate search over candidate orders (see the module docs): every output starts at
@@ -2157,5 +2186,20 @@ mod settings_tests {
         // A search uses the term at the orders that have the state.
         s.orders = super::Orders::Search(vec![1, 2, 3]);
         assert!(s.validate().is_ok());
+    }
+
+    #[test]
+    fn a_named_term_no_chosen_order_can_use_is_noted() {
+        let mut s = Settings::new(vec!["y".into(), "w".into()], vec!["u".into()], 2);
+        s.terms = vec!["sign(y_d2)".into(), "sign(w_d1)*u".into()];
+        let notes = super::unused_terms(&s, &[2, 2]);
+        assert_eq!(notes.len(), 1, "{notes:?}");
+        assert!(
+            notes[0].contains("'sign(y_d2)'") && notes[0].contains("'y' 2, 'w' 2"),
+            "{}",
+            notes[0]
+        );
+        assert!(super::unused_terms(&s, &[3, 2]).is_empty());
+        assert_eq!(super::unused_terms(&s, &[3, 1]).len(), 1);
     }
 }
