@@ -376,13 +376,22 @@ impl Drop for AtomicFile {
 /// exist, and a target that is not a regular file (a device, a pipe, a socket, a folder), which
 /// [`AtomicFile`] would otherwise replace by a file.
 pub fn output_target(path: &std::path::Path) -> crate::Result<std::path::PathBuf> {
+    // A NUL byte is shown escaped: written as it is, it cut the message in a terminal.
     let err = |message: &str| crate::Error::Io {
-        path: path.display().to_string(),
+        path: path.display().to_string().replace('\0', "\\0"),
         message: message.into(),
     };
     let name = path.file_name().ok_or_else(|| err("not a file name"))?;
     if path.as_os_str().as_encoded_bytes().contains(&0) {
         return Err(err("has a NUL byte, which no file name can hold"));
+    }
+    // `file_name` reads `out/` as `out`: the write then failed with the system's bare "Not a
+    // directory".
+    let text = path.as_os_str().as_encoded_bytes();
+    if text.ends_with(b"/") || text.ends_with(std::path::MAIN_SEPARATOR_STR.as_bytes()) {
+        return Err(err(
+            "names a folder (it ends in a separator); give a file name",
+        ));
     }
     #[cfg(windows)]
     let units = {
@@ -421,13 +430,25 @@ pub fn output_target(path: &std::path::Path) -> crate::Result<std::path::PathBuf
             }
             _ => {
                 let folder = target.parent().filter(|p| !p.as_os_str().is_empty());
-                if folder.is_some_and(|f| !f.is_dir()) {
-                    return Err(err(&format!(
-                        "is a symbolic link to {}, whose folder does not exist",
-                        target.display()
-                    )));
+                match folder.filter(|f| !f.is_dir()) {
+                    None => return Ok(target),
+                    Some(f) if target != path => {
+                        return Err(err(&format!(
+                            "is a symbolic link to {}, whose folder {} does not exist",
+                            target.display(),
+                            f.display()
+                        )))
+                    }
+                    Some(f) if f.exists() => {
+                        return Err(err(&format!("{} is a file, not a folder", f.display())))
+                    }
+                    Some(f) => {
+                        return Err(err(&format!(
+                            "folder {} does not exist; create it or write elsewhere",
+                            f.display()
+                        )))
+                    }
                 }
-                return Ok(target);
             }
         }
     }
@@ -448,6 +469,41 @@ pub fn write_atomic(path: &std::path::Path, bytes: &[u8]) -> crate::Result<()> {
 mod atomic_tests {
     use super::*;
     use std::io::Write;
+
+    /// Output names that were refused with the wrong reason (the tenth reading): a missing
+    /// folder as "a symbolic link ... whose folder does not exist", a trailing separator as the
+    /// system's bare "Not a directory", a NUL byte written into the message.
+    #[test]
+    fn output_names_are_refused_with_their_reason() {
+        let base = std::env::temp_dir().join(format!("ctsid-targets-{}", std::process::id()));
+        std::fs::create_dir_all(&base).unwrap();
+        let file = base.join("plain.txt");
+        std::fs::write(&file, "x").unwrap();
+        let why = |p: std::path::PathBuf| output_target(&p).unwrap_err().to_string();
+        let e = why(base.join("nodir").join("x.json"));
+        assert!(
+            e.contains("nodir does not exist") && !e.contains("link"),
+            "{e}"
+        );
+        let e = why(file.join("x.json"));
+        assert!(e.contains("plain.txt is a file, not a folder"), "{e}");
+        let e = why(base.join("newdir/"));
+        assert!(e.contains("ends in a separator"), "{e}");
+        let e = why(base.join("a\0b.json"));
+        assert!(e.contains("a\\0b.json") && !e.contains('\0'), "{e}");
+        #[cfg(unix)]
+        {
+            let link = base.join("dangling.json");
+            let _ = std::fs::remove_file(&link);
+            std::os::unix::fs::symlink(base.join("gone").join("t.json"), &link).unwrap();
+            let e = why(link);
+            assert!(
+                e.contains("symbolic link") && e.contains("gone does not exist"),
+                "{e}"
+            );
+        }
+        std::fs::remove_dir_all(&base).ok();
+    }
 
     /// Folders created for a command's outputs go again when it fails, unless something else
     /// was put in them.

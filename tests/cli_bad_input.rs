@@ -1222,3 +1222,27 @@ fn a_run_id_with_a_comma_is_refused() {
         &["run id 'a,b' holds a comma"],
     );
 }
+
+/// One column as both the run column and the time column made every sample a run of its own,
+/// refused as "within run '0.00' times must increase" (the tenth reading).
+#[test]
+fn one_column_cannot_be_both_run_and_time() {
+    let csv = temp_file("run-time", "rt.csv", "t,u,y\n0,1,2\n0.1,1,2\n0.2,1,2\n");
+    fails(
+        &[
+            "identify",
+            &csv,
+            "--run-column",
+            "t",
+            "--time-column",
+            "t",
+            "--output",
+            "y",
+            "--input",
+            "u",
+            "--degree",
+            "1",
+        ],
+        &["'t' is given as both the run column and the time column"],
+    );
+}

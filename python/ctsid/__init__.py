@@ -209,6 +209,11 @@ def _records(
     columns: Optional[Sequence[str]],
 ):
     """The (names, runs) the extension takes: the named channels of every run as float lists."""
+    if run_column is not None and str(run_column) in names:
+        # It was looked up in each run after the split and named by a sample value.
+        raise CtsidError(
+            f"column '{run_column}' is the run column; it cannot also be an input or output channel"
+        )
     runs = []
     for rid, table in _frames(data, run_column, columns):
         missing = [n for n in names if n not in table]
@@ -216,6 +221,9 @@ def _records(
             raise CtsidError(
                 f"column '{missing[0]}' not found in run {rid} (columns: {', '.join(table)})"
             )
+        if all(len(np.asarray(table[n])) == 0 for n in names):
+            # An empty frame was reported as a constant output.
+            raise CtsidError(f"run {rid}: no data rows")
         cols = []
         for n in names:
             v = np.asarray(table[n])

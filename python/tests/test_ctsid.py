@@ -235,3 +235,8 @@ def test_findings_of_the_tenth_reading(fitted):
                            train="0-7", validation="8-9", degree=2, orders=[2, 3, 4],
                            terms=["sign(y_d3)"])
     assert m.orders[0] < 4
+    with pytest.raises(ctsid.CtsidError, match="no data rows"):
+        ctsid.identify(data.iloc[:0], outputs=["y"], inputs=["u"], tau=TAU, degree=1, order=3)
+    with pytest.raises(ctsid.CtsidError, match="'y' is the run column"):
+        ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="y", degree=1,
+                       order=3)

@@ -509,6 +509,15 @@ impl RecordSet {
         if spec.tau.is_none() && spec.time_column.is_none() {
             return Err(Error::MissingTau);
         }
+        // One column cannot both name the runs and time them: every sample became a run of
+        // its own, refused as "within run '0.00' times must increase".
+        if let (Some(r), Some(t)) = (&spec.run_column, &spec.time_column) {
+            if r == t {
+                return Err(Error::InvalidData(format!(
+                    "{label}: column '{r}' is given as both the run column and the time column; give each its own"
+                )));
+            }
+        }
         // A run id or a time stamp is no signal: as a channel it would be fitted as one.
         for (role, col) in [("run", &spec.run_column), ("time", &spec.time_column)] {
             if let Some(c) = col.as_ref().filter(|c| spec.columns.contains(c)) {
