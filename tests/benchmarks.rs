@@ -325,6 +325,7 @@ fn out_files_are_checked_before_the_work() {
             String::from_utf8_lossy(&out.stdout)
         );
     }
+    let before = std::fs::read(&est).unwrap();
     let linked = root.join("linked");
     std::fs::create_dir_all(&linked).unwrap();
     let link = linked.join("tanks_test.csv");
@@ -339,5 +340,9 @@ fn out_files_are_checked_before_the_work() {
         "{}",
         String::from_utf8_lossy(&out.stdout)
     );
-    assert_eq!(std::fs::read(&est).unwrap(), std::fs::read(&link).unwrap());
+    assert_eq!(std::fs::read(&est).unwrap(), before);
+    assert!(std::fs::symlink_metadata(&link)
+        .unwrap()
+        .file_type()
+        .is_symlink());
 }

@@ -409,7 +409,7 @@ def identify(
     summary = json.loads(summary)
     # What the command line notes on standard error (a named term no chosen order could use).
     for note in summary.get("notes", []):
-        warnings.warn(f"ctsid: {note}")
+        warnings.warn(f"ctsid: {note}", stacklevel=2)
     return Model(inner, summary)
 
 

@@ -38,8 +38,17 @@ type SimulatedRun = (String, Vec<Vec<f64>>, Vec<f64>, Vec<f64>);
 type Rows = Vec<Vec<f64>>;
 
 /// The record set of `runs`, checked as the CSV reader checks a file (non-finite values, too few
-/// samples, columns of different lengths). Sample `k` of a run is "row k" in messages.
-fn record_set(tau: f64, names: Vec<String>, runs: Vec<PyRun>) -> ctsid::Result<RecordSet> {
+/// samples, columns of different lengths). Sample `k` of a run is "row k" in messages. Samples
+/// that look like a missing-value code or a glitch (legal values, kept) are warned of as the
+/// command line notes them (a `UserWarning`, "run 'ID': row K, column 'C': ..."): without it a
+/// `-9999` in a run was fitted and the package said nothing. Built with the GIL held, so that a
+/// warning turned into an error (`warnings.simplefilter("error")`) is raised, not lost.
+fn record_set(
+    py: Python<'_>,
+    tau: f64,
+    names: Vec<String>,
+    runs: Vec<PyRun>,
+) -> PyResult<RecordSet> {
     let runs = runs
         .into_iter()
         .map(|(id, channels)| {
@@ -52,25 +61,16 @@ fn record_set(tau: f64, names: Vec<String>, runs: Vec<PyRun>) -> ctsid::Result<R
             }
         })
         .collect();
-    let rs = RecordSet::new(tau, names, runs)?;
-    warn_suspects(&rs);
-    Ok(rs)
-}
-
-/// The command line's note on samples that look like a missing-value code or a glitch (legal
-/// values, kept), as a Python `UserWarning`: without it a `-9999` in a run was fitted and the
-/// package said nothing where the command line notes it.
-fn warn_suspects(rs: &RecordSet) {
+    let rs = RecordSet::new(tau, names, runs).map_err(err)?;
+    let warnings = py.import("warnings")?;
     for s in rs.suspect_samples() {
-        Python::attach(|py| {
-            let warned = py
-                .import("warnings")
-                .and_then(|m| m.call_method1("warn", (format!("ctsid: {}", s.note()),)));
-            if let Err(e) = warned {
-                e.restore(py);
-            }
-        });
+        let text = format!("ctsid: run '{}': {}", s.run, s.note());
+        warnings.call_method1(
+            "warn",
+            (text, py.get_type::<pyo3::exceptions::PyUserWarning>(), 2),
+        )?;
     }
+    Ok(rs)
 }
 
 /// Train, validation and test runs from the run lists the CLI takes (`"0-3"`, `"a,b"`): training
@@ -105,18 +105,20 @@ fn split(
 
 /// The record set of `runs` and its split by the run lists `[train, validation, test]`.
 fn records_and_split(
+    py: Python<'_>,
     tau: f64,
     names: Vec<String>,
     runs: Vec<PyRun>,
     [train, validation, test]: [Option<String>; 3],
-) -> ctsid::Result<(RecordSet, Split)> {
-    let rs = record_set(tau, names, runs)?;
+) -> PyResult<(RecordSet, Split)> {
+    let rs = record_set(py, tau, names, runs)?;
     let sp = split(
         &rs,
         train.as_deref(),
         validation.as_deref(),
         test.as_deref(),
-    )?;
+    )
+    .map_err(err)?;
     Ok((rs, sp))
 }
 
@@ -213,12 +215,8 @@ impl PyModel {
         names: Vec<String>,
         runs: Vec<PyRun>,
     ) -> PyResult<Vec<SimulatedRun>> {
-        let sim = py
-            .detach(|| {
-                let rs = record_set(tau, names, runs)?;
-                self.inner.simulate(&rs)
-            })
-            .map_err(err)?;
+        let rs = record_set(py, tau, names, runs)?;
+        let sim = py.detach(|| self.inner.simulate(&rs)).map_err(err)?;
         Ok(sim
             .runs
             .into_iter()
@@ -272,13 +270,9 @@ fn identify(
     s.terms = terms;
     s.refine = refine;
     s.progress = Some(log_progress);
-    let id = py
-        .detach(|| {
-            s.validate()?;
-            let (rs, sp) = records_and_split(tau, names, runs, [train, validation, test])?;
-            identify_rs(&rs, &sp, &s)
-        })
-        .map_err(err)?;
+    s.validate().map_err(err)?;
+    let (rs, sp) = records_and_split(py, tau, names, runs, [train, validation, test])?;
+    let id = py.detach(|| identify_rs(&rs, &sp, &s)).map_err(err)?;
     let summary = serde_json::json!({
         "orders": id.model.outputs.iter().map(|o| o.order).collect::<Vec<_>>(),
         "test_nrmse": id.test_nrmse(),
@@ -295,7 +289,7 @@ fn identify(
 /// non-finite values: a signal of 1e-160 was smoothed at an arbitrary level without a word.
 #[pyfunction]
 fn derive(py: Python<'_>, y: Vec<f64>, tau: f64, order: usize) -> PyResult<(Rows, Rows)> {
-    let rs = record_set(tau, vec!["y".into()], vec![("0".into(), vec![y])]).map_err(err)?;
+    let rs = record_set(py, tau, vec!["y".into()], vec![("0".into(), vec![y])])?;
     let d = py
         .detach(|| ctsid::derivatives::differentiate(&rs.runs[0].channels[0], tau, order))
         .map_err(err)?;
@@ -319,9 +313,9 @@ fn discover(
     seed: u64,
 ) -> PyResult<(String, String, PyModel, f64, f64)> {
     let nominal = &nominal.inner;
+    let (rs, sp) = records_and_split(py, tau, names, runs, [train, validation, test])?;
     let (d, augmented) = py
         .detach(|| {
-            let (rs, sp) = records_and_split(tau, names, runs, [train, validation, test])?;
             let mut o = Options::new(sp.train, sp.validation.unwrap_or_default(), sp.test);
             o.seed = seed;
             let d = discover_rs(&rs, nominal, &o)?;

@@ -7,6 +7,7 @@ test --release`); without it those tests skip with a notice.
 
 import os
 import subprocess
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -216,8 +217,13 @@ def test_findings_of_the_tenth_reading(fitted):
     # A missing-value code in a run: the command line notes it, the package said nothing.
     coded = run0.copy()
     coded[300, 0] = -1e7
-    with pytest.warns(UserWarning, match="row 300, column 'y'"):
+    with pytest.warns(UserWarning, match="run '0': row 300, column 'y'"):
         ctsid.derive(coded[:, 0], TAU, 1)
+    # Warnings turned into errors are raised as errors, not lost.
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(UserWarning, match="row 300"):
+            ctsid.derive(coded[:, 0], TAU, 1)
     # A run id with a comma cannot be named in a run list.
     with pytest.raises(ctsid.CtsidError, match="comma"):
         ctsid.identify({"a,b": run0, "c": run0}, columns=["y", "u"], outputs=["y"],

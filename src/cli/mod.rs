@@ -156,36 +156,16 @@ pub fn write_stdout(text: &str) -> Result<()> {
 /// is none of `inputs` (writing would truncate a file that is still to be read), and it is a
 /// target [`ctsid::util::output_target`] accepts.
 pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
-    let name = out.display().to_string();
-    let err = |message: String| Error::Io {
-        path: name.clone(),
-        message,
-    };
-    if name.ends_with('/') || name.ends_with(std::path::MAIN_SEPARATOR) {
-        return Err(err(
-            "names a folder (it ends in a separator); give a file name".into(),
-        ));
-    }
-    let parent = out.parent().filter(|p| !p.as_os_str().is_empty());
-    if let Some(p) = parent {
-        if p.exists() && !p.is_dir() {
-            return Err(err(format!("{} is a file, not a folder", p.display())));
-        }
-        if !p.is_dir() {
-            return Err(err(format!(
-                "folder {} does not exist; create it or write elsewhere",
-                p.display()
-            )));
-        }
-    }
+    // A folder, a device, a pipe, a name ending in a separator, a missing folder, a link into
+    // one or an over-long name: refused now, not after the work (`util::output_target`).
+    ctsid::util::output_target(out)?;
     if inputs.iter().any(|i| ctsid::util::same_file(out, i)) {
-        return Err(err(
-            "is also an input file; writing it would destroy the input, so give another output file".into(),
-        ));
+        return Err(Error::Io {
+            path: out.display().to_string(),
+            message: "is also an input file; writing it would destroy the input, so give another output file".into(),
+        });
     }
-    // A folder, a device, a pipe, a link into a missing folder or an over-long name: refused
-    // now, not after the work.
-    ctsid::util::output_target(out).map(|_| ())
+    Ok(())
 }
 
 /// Refuses an output file inside the report folder, or named as the folder: the report's

@@ -137,6 +137,18 @@ fn parse_items(
 /// [`crate::records::RecordSet::segmented`]) names all its pieces. Refuses a name that is neither a
 /// run id (exactly or as a number) nor a run cut into pieces.
 pub fn resolve(names: &[String], ids: &[String], what: &str) -> Result<Vec<usize>> {
+    // Lists separate ids by commas: a run 'a,b' cannot be named, and `--test 'a,b'` tested
+    // runs 'a' and 'b' and trained on it. Refused where a list is given (a file whose ids hold
+    // commas still simulates, derives and identifies without lists).
+    if let Some(id) = ids.iter().find(|id| id.contains(',')) {
+        return Err(Error::param(
+            what,
+            format!(
+                "run id '{}' holds a comma, which separates the ids of a run list, so no list can name it; rename the run",
+                crate::util::clip(id, 40)
+            ),
+        ));
+    }
     // Exact ids, numeric ids and cut runs through tables: a list can name a run per row of a
     // large file (a scan per name took 30 s at 40,000 runs written `0.0`, `1.0`, ...).
     let mut exact = std::collections::HashMap::with_capacity(ids.len());

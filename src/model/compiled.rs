@@ -115,10 +115,11 @@ impl CompiledModel {
             for t in &o.terms {
                 let kind = match &t.expression {
                     Some(text) => {
-                        let tape = Tape::new(&Expr::parse(text, &names)?);
-                        // The programs, within a model-wide budget.
-                        entries = entries.saturating_add(tape.len());
-                        if entries > MAX_TAPE_ENTRIES {
+                        // The programs, within a model-wide budget (checked while building).
+                        let left = MAX_TAPE_ENTRIES.saturating_sub(entries);
+                        let tape = Tape::new(&Expr::parse(text, &names)?, left);
+                        entries = entries.saturating_add(tape.as_ref().map_or(left + 1, Tape::len));
+                        let Some(tape) = tape.filter(|_| entries <= MAX_TAPE_ENTRIES) else {
                             return Err(Error::Model {
                                 path: "<memory>".into(),
                                 message: format!(
@@ -127,7 +128,7 @@ impl CompiledModel {
                                     o.name
                                 ),
                             });
-                        }
+                        };
                         Kind::Expression {
                             text: text.clone(),
                             tape,

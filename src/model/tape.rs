@@ -79,25 +79,30 @@ pub(super) struct Tape {
 }
 
 impl Tape {
-    /// The program of `expr` and its partial derivatives.
-    pub(super) fn new(expr: &Expr) -> Tape {
+    /// The program of `expr` and its partial derivatives; `None` once it has more than `most`
+    /// entries (checked after the value and after each variable's derivative, each of which is
+    /// at most a few times the expression's size).
+    pub(super) fn new(expr: &Expr, most: usize) -> Option<Tape> {
         let mut b = Builder::default();
         let value = b.push(expr.root());
         let value_len = b.ops.len();
         let mut grad = Vec::new();
         for v in expr.variables() {
+            if b.ops.len() > most {
+                return None;
+            }
             let mut memo = HashMap::new();
             let d = b.diff(value, v, &mut memo);
             if b.num_of(d) != Some(0.0) {
                 grad.push((v, d));
             }
         }
-        Tape {
+        (b.ops.len() <= most).then_some(Tape {
             ops: b.ops,
             value,
             value_len,
             grad,
-        }
+        })
     }
 
     /// Entries in all (value and derivatives).
@@ -348,9 +353,15 @@ mod tests {
             "(y+u)*(y+u)*(y+u) - sin(sin(y*u))/(y_d1 + 2)",
             "sqrt(abs(y_d1))*y_d1 + 0*y + 1*u - (-y)",
             "y_d1/sqrt(abs(y) + 0.02) + u/(y_d1 + 0.5*sqrt(abs(y)))",
+            "-0*y + 0*u - (-0)*y_d1 + y*-0",
+            // More entries than the stack buffers hold: the heap path.
+            "sin(sin(sin(sin((y+u)*(y+u)*(y+u)*(y_d1+u)*(y+u)*(y+u)*tanh(y_d1)))))^3/(1+u^2)",
         ] {
             let e = Expr::parse(text, &v).unwrap();
-            let t = Tape::new(&e);
+            let t = Tape::new(&e, usize::MAX).unwrap();
+            if text.starts_with("sin(") {
+                assert!(t.len() > STACK_ENTRIES, "{}", t.len());
+            }
             for z in [[1.3, -0.4, 0.7], [0.0, 0.0, 0.0], [-2.5, 1e-3, -0.2]] {
                 assert_eq!(
                     t.value(&z, &eps).to_bits(),
@@ -378,7 +389,11 @@ mod tests {
             let product = vec!["(y+u)"; 30].join("*");
             format!("{}{product}{}", "sin(".repeat(k), ")".repeat(k))
         };
-        let size = |text: &str| Tape::new(&Expr::parse(text, &v).unwrap()).len();
+        let size = |text: &str| {
+            Tape::new(&Expr::parse(text, &v).unwrap(), usize::MAX)
+                .unwrap()
+                .len()
+        };
         // 30 nested sin over a product of 30 factors: the trees' derivative evaluated the
         // product under every level (two minutes of `simulate` for 1,800 samples).
         let (a, b) = (size(&nested(10)), size(&nested(30)));

@@ -184,8 +184,7 @@ pub struct CsvSpec {
 impl RecordSet {
     /// Builds a record set from in-memory runs (validated like a file). Refuses a tau that
     /// [`check_tau`] refuses, a channel name given twice, a run id used twice, a run with another number of channels
-    /// than names or with channels of different lengths, a run id with a comma (run lists
-    /// separate ids by commas), a NaN, infinite or too large sample
+    /// than names or with channels of different lengths, a NaN, infinite or too large sample
     /// ([`first_unusable`]), a channel whose largest magnitude is below [`MIN_MAGNITUDE`] (all
     /// zeros aside) and a sample [`MAX_OUTLIER`] times further from its channel's median than
     /// nearly all others.
@@ -207,14 +206,6 @@ impl RecordSet {
                 ids[j],
                 i + 1,
                 j + 1
-            )));
-        }
-        // Run lists name runs separated by commas (`--test a,b`): a run 'a,b' could not be
-        // named, and `--test 'a,b'` tested runs 'a' and 'b' and trained on it.
-        if let Some(r) = runs.iter().find(|r| r.id.contains(',')) {
-            return Err(Error::InvalidData(format!(
-                "run id '{}' holds a comma, which separates run ids in run lists; rename the run",
-                crate::util::clip(&r.id, 40)
             )));
         }
         for r in &runs {
