@@ -10,11 +10,13 @@
 //! stick phase. The width `eps` belongs to the variable the argument depends on first (its first
 //! variable), and the model file stores it, so that a model simulates the same everywhere.
 //!
-//! [`Expr::derivative`] differentiates symbolically: the integrator's Newton steps and the
-//! refinement's sensitivities need exact Jacobians of every term. The derivative of a smoothed
-//! `sign` is the slope of the smoothed curve, `eps^2 / (x^2 + eps^2)^(3/2)`, and 0 where it is
-//! exact; those of `abs`, `sat` and `relu` are taken piecewise (their kinks are a set of measure
-//! zero that a Newton step does not need to resolve).
+//! The derivatives are taken symbolically by [`super::tape`], which compiles an expression and
+//! its partial derivatives into one program: the integrator's Newton steps and the refinement's
+//! sensitivities need exact Jacobians of every term. The derivative of a smoothed `sign` is the
+//! slope of the smoothed curve, `eps^2 / (x^2 + eps^2)^(3/2)`, and 0 where it is exact; those of
+//! `abs`, `sat` and `relu` are taken piecewise (their kinks are a set of measure zero that a
+//! Newton step does not need to resolve). The functions of that list that only derivatives use
+//! (`SignSlope`, `SqrtSlope`, `Step`, `Inside`) are evaluated here, by [`apply`].
 
 use crate::error::{Error, Result};
 
@@ -113,29 +115,6 @@ impl Expr {
     /// Panics as [`Expr::eval`] does; a missing or nonpositive `eps[i]` keeps that `sign` exact.
     pub fn eval_smooth(&self, z: &[f64], eps: &[f64]) -> f64 {
         eval(&self.root, z, Some(eps))
-    }
-
-    /// `d expr / d z_v` as an expression (see the module docs for the kinks); its text is
-    /// `d(<expr>)/d<v>`, for messages only.
-    pub fn derivative(&self, v: usize) -> Expr {
-        Expr {
-            text: format!("d({})/dz{v}", self.text),
-            root: diff(&self.root, v),
-        }
-    }
-
-    /// An upper bound on the nodes of any first derivative of the expression (before folding).
-    /// A product of n factors has a derivative of about n^2 / 2 nodes, so a long product that
-    /// parses in microseconds can ask for gigabytes of derivative trees ([`diff`] copies each
-    /// factor into every term of the product rule).
-    pub fn derivative_size(&self) -> u64 {
-        diff_size(&self.root).1
-    }
-
-    /// Whether the expression is the number 0 (a derivative with respect to a variable it does
-    /// not contain).
-    pub fn is_zero(&self) -> bool {
-        num_of(&self.root) == Some(0.0)
     }
 
     /// What makes the expression not finite whatever its variables are: a part without
@@ -375,142 +354,6 @@ fn sqrt_slope(x: f64) -> f64 {
         0.5 / f64::MIN_POSITIVE.sqrt()
     } else {
         0.5 / x.sqrt()
-    }
-}
-
-// Constructors that fold the zeros and ones a derivative produces, so that `d(3*y)/dy` is `3`
-// and not `0*y + 3*1`.
-fn num_of(n: &Node) -> Option<f64> {
-    match n {
-        Node::Num(v) => Some(*v),
-        _ => None,
-    }
-}
-#[allow(clippy::redundant_guards)] // float literals in patterns read worse
-fn add(a: Node, b: Node) -> Node {
-    match (num_of(&a), num_of(&b)) {
-        (Some(x), Some(y)) => Node::Num(x + y),
-        (Some(x), _) if x == 0.0 => b,
-        (_, Some(y)) if y == 0.0 => a,
-        _ => Node::Add(Box::new(a), Box::new(b)),
-    }
-}
-#[allow(clippy::redundant_guards)] // float literals in patterns read worse
-fn sub(a: Node, b: Node) -> Node {
-    match (num_of(&a), num_of(&b)) {
-        (Some(x), Some(y)) => Node::Num(x - y),
-        (_, Some(y)) if y == 0.0 => a,
-        (Some(x), _) if x == 0.0 => neg(b),
-        _ => Node::Sub(Box::new(a), Box::new(b)),
-    }
-}
-fn neg(a: Node) -> Node {
-    match a {
-        Node::Num(x) => Node::Num(-x),
-        Node::Neg(b) => *b,
-        a => Node::Neg(Box::new(a)),
-    }
-}
-#[allow(clippy::redundant_guards)] // float literals in patterns read worse
-fn mul(a: Node, b: Node) -> Node {
-    match (num_of(&a), num_of(&b)) {
-        (Some(x), Some(y)) => Node::Num(x * y),
-        (Some(x), _) | (_, Some(x)) if x == 0.0 => Node::Num(0.0),
-        (Some(x), _) if x == 1.0 => b,
-        (_, Some(y)) if y == 1.0 => a,
-        _ => Node::Mul(Box::new(a), Box::new(b)),
-    }
-}
-#[allow(clippy::redundant_guards)] // float literals in patterns read worse
-fn div(a: Node, b: Node) -> Node {
-    match (num_of(&a), num_of(&b)) {
-        (Some(x), _) if x == 0.0 => Node::Num(0.0),
-        (_, Some(y)) if y == 1.0 => a,
-        _ => Node::Div(Box::new(a), Box::new(b)),
-    }
-}
-fn fun(f: Fun, a: &Node, var: Option<usize>) -> Node {
-    Node::Fun(f, Box::new(a.clone()), var)
-}
-
-/// The nodes of `n` and a bound on the nodes of [`diff`]`(n, v)` for any `v`, saturating.
-fn diff_size(n: &Node) -> (u64, u64) {
-    match n {
-        Node::Num(_) | Node::Var(_) => (1, 1),
-        Node::Neg(a) => {
-            let (s, d) = diff_size(a);
-            (s + 1, d.saturating_add(1))
-        }
-        Node::Pow(a, _) => {
-            let (s, d) = diff_size(a);
-            (s + 1, d.saturating_add(2 * s + 4))
-        }
-        Node::Fun(_, a, _) => {
-            let (s, d) = diff_size(a);
-            (s + 1, d.saturating_add(2 * s + 4))
-        }
-        Node::Add(a, b) | Node::Sub(a, b) | Node::Mul(a, b) | Node::Div(a, b) => {
-            let ((sa, da), (sb, db)) = (diff_size(a), diff_size(b));
-            let size = sa.saturating_add(sb).saturating_add(1);
-            // The product and quotient rules copy both operands beside both derivatives.
-            let d = da.saturating_add(db).saturating_add(2 * size + 4);
-            (size, d)
-        }
-    }
-}
-
-/// `d n / d z_v`, folded.
-fn diff(n: &Node, v: usize) -> Node {
-    match n {
-        Node::Num(_) => Node::Num(0.0),
-        Node::Var(i) => Node::Num((*i == v) as u8 as f64),
-        Node::Neg(a) => neg(diff(a, v)),
-        Node::Add(a, b) => add(diff(a, v), diff(b, v)),
-        Node::Sub(a, b) => sub(diff(a, v), diff(b, v)),
-        Node::Mul(a, b) => add(
-            mul(diff(a, v), (**b).clone()),
-            mul((**a).clone(), diff(b, v)),
-        ),
-        // (a/b)' = a'/b - a b' / b^2
-        Node::Div(a, b) => sub(
-            div(diff(a, v), (**b).clone()),
-            div(mul((**a).clone(), diff(b, v)), Node::Pow(b.clone(), 2.0)),
-        ),
-        Node::Pow(a, e) => {
-            let da = diff(a, v);
-            let inner = if *e == 1.0 {
-                Node::Num(1.0)
-            } else if *e == 2.0 {
-                (**a).clone()
-            } else {
-                Node::Pow(a.clone(), e - 1.0)
-            };
-            mul(mul(Node::Num(*e), inner), da)
-        }
-        Node::Fun(f, a, var) => {
-            let da = diff(a, v);
-            if num_of(&da) == Some(0.0) {
-                return Node::Num(0.0);
-            }
-            let outer = match f {
-                Fun::Sign => fun(Fun::SignSlope, a, *var),
-                Fun::Abs => fun(Fun::Sign, a, None),
-                Fun::Sqrt => fun(Fun::SqrtSlope, a, *var),
-                Fun::Tanh => sub(
-                    Node::Num(1.0),
-                    Node::Pow(Box::new(fun(Fun::Tanh, a, *var)), 2.0),
-                ),
-                Fun::Sin => fun(Fun::Cos, a, *var),
-                Fun::Cos => neg(fun(Fun::Sin, a, *var)),
-                Fun::Exp => fun(Fun::Exp, a, *var),
-                Fun::Sat => fun(Fun::Inside, a, *var),
-                Fun::Relu => fun(Fun::Step, a, *var),
-                // Piecewise constant away from their jumps; the slope's own slope is not needed
-                // (Jacobians are first derivatives).
-                Fun::SignSlope | Fun::SqrtSlope | Fun::Step | Fun::Inside => Node::Num(0.0),
-            };
-            mul(outer, da)
-        }
     }
 }
 
@@ -785,24 +628,6 @@ mod tests {
     }
 
     #[test]
-    fn a_long_product_has_a_quadratic_derivative_bound() {
-        let vars = vec!["y".to_string()];
-        let size = |n: usize| {
-            Expr::parse(&vec!["y"; n].join("*"), &vars)
-                .unwrap()
-                .derivative_size()
-        };
-        assert!(size(1) >= 1 && size(10) < 1_000);
-        // Quadratic: the bound of 900 factors is about 81 times the bound of 100.
-        let (a, b) = (size(100), size(900));
-        assert!(b > 50 * a && b < 120 * a, "{a} {b}");
-        // The bound holds: the derivative built has no more nodes than it says.
-        let e = Expr::parse(&vec!["y"; 40].join("*"), &vars).unwrap();
-        let d = e.derivative(0);
-        assert!(diff_size(&d.root).0 <= e.derivative_size());
-    }
-
-    #[test]
     fn deep_nesting_is_an_error_not_a_stack_overflow() {
         let vars = vec!["y".to_string()];
         let deep = format!("{}y{}", "(".repeat(500), ")".repeat(500));
@@ -820,58 +645,12 @@ mod tests {
     }
 
     #[test]
-    fn derivatives_match_central_differences() {
+    fn variables_and_sign_variables_are_listed() {
         let v: Vec<String> = ["y", "y_d1", "u"].iter().map(|s| s.to_string()).collect();
-        let eps = [0.0, 0.3, 0.0];
-        for text in [
-            "-0.5*sign(y_d1) + abs(y_d1)*y_d1 - y^3/2 + sqrt(abs(y))",
-            "tanh(2*y_d1)*u - sin(y)*cos(u) + exp(-y^2)",
-            "sat(y/3)*relu(u - 0.1) + y_d1/(1 + y^2) + y^2.5",
-            "sign(y_d1)*u^2 - 3",
-        ] {
-            let e = Expr::parse(text, &v).unwrap();
-            let z = [1.3, -0.4, 0.7];
-            for k in 0..3 {
-                let d = e.derivative(k);
-                let h = 1e-6;
-                let (mut a, mut b) = (z, z);
-                a[k] += h;
-                b[k] -= h;
-                let fd = (e.eval_smooth(&a, &eps) - e.eval_smooth(&b, &eps)) / (2.0 * h);
-                let an = d.eval_smooth(&z, &eps);
-                assert!(
-                    (fd - an).abs() < 1e-6 * (1.0 + fd.abs()),
-                    "{text} d/dz{k}: {an} vs {fd}"
-                );
-            }
-        }
-        let e = Expr::parse("3*y + u", &v).unwrap();
-        assert!(e.derivative(1).is_zero());
-        assert_eq!(e.derivative(0).eval(&[0.0; 3]), 3.0);
-        assert_eq!(e.variables(), vec![0, 2]);
+        assert_eq!(Expr::parse("3*y + u", &v).unwrap().variables(), vec![0, 2]);
         assert_eq!(
             Expr::parse("sign(y_d1)*y", &v).unwrap().sign_variables(),
             vec![1]
-        );
-    }
-
-    #[test]
-    fn the_slope_of_a_square_root_at_zero_is_finite() {
-        let v: Vec<String> = ["y", "y_d1"].iter().map(|s| s.to_string()).collect();
-        // sqrt(|v|) v has slope 1.5 sqrt(|v|): 0 at rest, where the chain rule gave inf * 0.
-        let e = Expr::parse("sqrt(abs(y_d1))*y_d1", &v).unwrap();
-        assert_eq!(e.derivative(1).eval(&[0.0, 0.0]), 0.0);
-        let at = e.derivative(1).eval(&[0.0, 0.25]);
-        assert!((at - 1.5 * 0.5).abs() < 1e-12, "{at}");
-        // An outflow through an orifice at an empty tank: a number (0, as sign(0) = 0), not NaN.
-        let e = Expr::parse("sqrt(abs(y))*sign(y)", &v).unwrap();
-        assert_eq!(e.derivative(0).eval(&[0.0, 0.0]), 0.0);
-        assert!(
-            Expr::parse("sqrt(y)", &v)
-                .unwrap()
-                .derivative(0)
-                .eval(&[0.0, 0.0])
-                > 1e150
         );
     }
 
