@@ -315,15 +315,7 @@ fn out_files_are_checked_before_the_work() {
     let _ = std::fs::remove_file(&fifo);
     let made = std::process::Command::new("mkfifo").arg(&fifo).status();
     if made.is_ok_and(|s| s.success()) {
-        let out = fails(
-            &["benchmark", "tanks", "--out", &piped.display().to_string()],
-            &["tanks.csv", "not a regular file"],
-        );
-        assert!(
-            out.stdout.is_empty(),
-            "{}",
-            String::from_utf8_lossy(&out.stdout)
-        );
+        refused_before_the_work(&piped, &["tanks.csv", "not a regular file"]);
     }
     let before = std::fs::read(&est).unwrap();
     let linked = root.join("linked");
@@ -331,18 +323,23 @@ fn out_files_are_checked_before_the_work() {
     let link = linked.join("tanks_test.csv");
     let _ = std::fs::remove_file(&link);
     std::os::unix::fs::symlink(&est, &link).unwrap();
-    let out = fails(
-        &["benchmark", "tanks", "--out", &linked.display().to_string()],
+    refused_before_the_work(
+        &linked,
         &["tanks_test.csv", "a record this benchmark reads"],
-    );
-    assert!(
-        out.stdout.is_empty(),
-        "{}",
-        String::from_utf8_lossy(&out.stdout)
     );
     assert_eq!(std::fs::read(&est).unwrap(), before);
     assert!(std::fs::symlink_metadata(&link)
         .unwrap()
         .file_type()
         .is_symlink());
+}
+
+/// `ctsid benchmark tanks --out DIR` fails with `needles` before printing anything.
+fn refused_before_the_work(dir: &std::path::Path, needles: &[&str]) {
+    let out = fails(
+        &["benchmark", "tanks", "--out", &dir.display().to_string()],
+        needles,
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.is_empty(), "{stdout}");
 }

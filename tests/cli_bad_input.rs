@@ -1190,7 +1190,7 @@ fn a_diverging_test_run_gives_no_nan_heading() {
 }
 
 /// A run id holding a comma cannot be named in a run list (`--test 'a,b'` tested runs `a` and
-/// `b` and trained on `a,b`): refused where the records are read (the tenth reading).
+/// `b` and trained on `a,b`): refused where a run list is resolved (the tenth reading).
 #[test]
 fn a_run_id_with_a_comma_is_refused() {
     let mut text = String::from("run,t,u,y\n");
@@ -1201,26 +1201,13 @@ fn a_run_id_with_a_comma_is_refused() {
         }
     }
     let csv = temp_file("comma-runs", "runs.csv", &text);
-    fails(
-        &[
-            "identify",
-            &csv,
-            "--run-column",
-            "run",
-            "--time-column",
-            "t",
-            "--output",
-            "y",
-            "--input",
-            "u",
-            "--degree",
-            "1",
-            "--test",
-            "a,b",
-            "--quiet",
-        ],
-        &["run id 'a,b' holds a comma"],
-    );
+    let args = words(&[
+        "identify",
+        &csv,
+        "--run-column run --time-column t --output y --input u --degree 1 --test a,b --quiet",
+    ]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    fails(&args, &["run id 'a,b' holds a comma"]);
 }
 
 /// One column as both the run column and the time column made every sample a run of its own,
@@ -1228,21 +1215,14 @@ fn a_run_id_with_a_comma_is_refused() {
 #[test]
 fn one_column_cannot_be_both_run_and_time() {
     let csv = temp_file("run-time", "rt.csv", "t,u,y\n0,1,2\n0.1,1,2\n0.2,1,2\n");
+    let args = words(&[
+        "identify",
+        &csv,
+        "--run-column t --time-column t --output y --input u --degree 1",
+    ]);
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
     fails(
-        &[
-            "identify",
-            &csv,
-            "--run-column",
-            "t",
-            "--time-column",
-            "t",
-            "--output",
-            "y",
-            "--input",
-            "u",
-            "--degree",
-            "1",
-        ],
+        &args,
         &["'t' is given as both the run column and the time column"],
     );
 }

@@ -35,7 +35,7 @@ pub(super) enum Node {
     Fun(Fun, Box<Node>, Option<usize>),
 }
 
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub(super) enum Fun {
     Sign,
     Abs,

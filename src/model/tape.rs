@@ -18,23 +18,10 @@
 use super::expr::{apply, num_power, Expr, Fun, Node};
 use std::collections::HashMap;
 
-/// One entry: its operands are earlier entries.
-#[derive(Debug, Clone, Copy, PartialEq)]
-enum Op {
-    Num(f64),
-    Var(usize),
-    Neg(u32),
-    Add(u32, u32),
-    Sub(u32, u32),
-    Mul(u32, u32),
-    Div(u32, u32),
-    Pow(u32, f64),
-    Fun(Fun, u32, Option<usize>),
-}
-
-/// The hash-consing key of an entry (numbers by their bits).
+/// One entry: its operands are earlier entries. Numbers are kept as their bits, so that an
+/// entry is its own hash-consing key (`-0` and `0` apart, a NaN equal to itself).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-enum Key {
+enum Op {
     Num(u64),
     Var(usize),
     Neg(u32),
@@ -43,21 +30,7 @@ enum Key {
     Mul(u32, u32),
     Div(u32, u32),
     Pow(u32, u64),
-    Fun(u8, u32, Option<usize>),
-}
-
-fn key(op: &Op) -> Key {
-    match *op {
-        Op::Num(v) => Key::Num(v.to_bits()),
-        Op::Var(i) => Key::Var(i),
-        Op::Neg(a) => Key::Neg(a),
-        Op::Add(a, b) => Key::Add(a, b),
-        Op::Sub(a, b) => Key::Sub(a, b),
-        Op::Mul(a, b) => Key::Mul(a, b),
-        Op::Div(a, b) => Key::Div(a, b),
-        Op::Pow(a, e) => Key::Pow(a, e.to_bits()),
-        Op::Fun(f, a, v) => Key::Fun(f as u8, a, v),
-    }
+    Fun(Fun, u32, Option<usize>),
 }
 
 /// Entries on the stack when a tape is this short (most named terms: `sign(q_d1)` and its
@@ -145,14 +118,14 @@ impl Tape {
         for k in 0..vals.len() {
             let x = |i: u32| vals[i as usize];
             vals[k] = match self.ops[k] {
-                Op::Num(v) => v,
+                Op::Num(v) => f64::from_bits(v),
                 Op::Var(i) => z[i],
                 Op::Neg(a) => -x(a),
                 Op::Add(a, b) => x(a) + x(b),
                 Op::Sub(a, b) => x(a) - x(b),
                 Op::Mul(a, b) => x(a) * x(b),
                 Op::Div(a, b) => x(a) / x(b),
-                Op::Pow(a, e) => num_power(x(a), e),
+                Op::Pow(a, e) => num_power(x(a), f64::from_bits(e)),
                 Op::Fun(f, a, var) => {
                     let width = var.and_then(|i| eps.get(i).copied()).filter(|w| *w > 0.0);
                     apply(f, x(a), width)
@@ -166,14 +139,14 @@ impl Tape {
 #[derive(Default)]
 struct Builder {
     ops: Vec<Op>,
-    index: HashMap<Key, u32>,
+    index: HashMap<Op, u32>,
 }
 
 #[allow(clippy::redundant_guards)] // float literals in patterns read worse (as in `expr`)
 impl Builder {
     fn op(&mut self, op: Op) -> u32 {
         let next = self.ops.len() as u32;
-        let k = *self.index.entry(key(&op)).or_insert(next);
+        let k = *self.index.entry(op).or_insert(next);
         if k == next {
             self.ops.push(op);
         }
@@ -183,14 +156,14 @@ impl Builder {
     /// The entries of a tree, as they are (no folding: the value is the tree's).
     fn push(&mut self, n: &Node) -> u32 {
         let op = match n {
-            Node::Num(v) => Op::Num(*v),
+            Node::Num(v) => Op::Num(v.to_bits()),
             Node::Var(i) => Op::Var(*i),
             Node::Neg(a) => Op::Neg(self.push(a)),
             Node::Add(a, b) => Op::Add(self.push(a), self.push(b)),
             Node::Sub(a, b) => Op::Sub(self.push(a), self.push(b)),
             Node::Mul(a, b) => Op::Mul(self.push(a), self.push(b)),
             Node::Div(a, b) => Op::Div(self.push(a), self.push(b)),
-            Node::Pow(a, e) => Op::Pow(self.push(a), *e),
+            Node::Pow(a, e) => Op::Pow(self.push(a), e.to_bits()),
             Node::Fun(f, a, var) => Op::Fun(*f, self.push(a), *var),
         };
         self.op(op)
@@ -198,14 +171,14 @@ impl Builder {
 
     fn num_of(&self, k: u32) -> Option<f64> {
         match self.ops[k as usize] {
-            Op::Num(v) => Some(v),
+            Op::Num(v) => Some(f64::from_bits(v)),
             _ => None,
         }
     }
 
     // Constructors that fold the zeros and ones a derivative produces.
     fn num(&mut self, v: f64) -> u32 {
-        self.op(Op::Num(v))
+        self.op(Op::Num(v.to_bits()))
     }
     fn add(&mut self, a: u32, b: u32) -> u32 {
         match (self.num_of(a), self.num_of(b)) {
@@ -225,7 +198,7 @@ impl Builder {
     }
     fn neg(&mut self, a: u32) -> u32 {
         match self.ops[a as usize] {
-            Op::Num(x) => self.num(-x),
+            Op::Num(x) => self.num(-f64::from_bits(x)),
             Op::Neg(b) => b,
             _ => self.op(Op::Neg(a)),
         }
@@ -278,18 +251,19 @@ impl Builder {
                 let (da, db) = (self.diff(a, v, memo), self.diff(b, v, memo));
                 let l = self.div(da, b);
                 let adb = self.mul(a, db);
-                let b2 = self.op(Op::Pow(b, 2.0));
+                let b2 = self.op(Op::Pow(b, 2f64.to_bits()));
                 let r = self.div(adb, b2);
                 self.sub(l, r)
             }
             Op::Pow(a, e) => {
+                let e = f64::from_bits(e);
                 let da = self.diff(a, v, memo);
                 let inner = if e == 1.0 {
                     self.num(1.0)
                 } else if e == 2.0 {
                     a
                 } else {
-                    self.op(Op::Pow(a, e - 1.0))
+                    self.op(Op::Pow(a, (e - 1.0).to_bits()))
                 };
                 let ne = self.num(e);
                 let c = self.mul(ne, inner);
@@ -318,7 +292,7 @@ impl Builder {
             Fun::Tanh => {
                 let one = self.num(1.0);
                 let t = self.op(Op::Fun(Fun::Tanh, a, var));
-                let t2 = self.op(Op::Pow(t, 2.0));
+                let t2 = self.op(Op::Pow(t, 2f64.to_bits()));
                 self.sub(one, t2)
             }
             Fun::Sin => self.op(Op::Fun(Fun::Cos, a, var)),
