@@ -470,13 +470,20 @@ mod atomic_tests {
     use super::*;
     use std::io::Write;
 
+    /// A fresh folder of this test process under the system's temporary folder.
+    fn scratch(tag: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("ctsid-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
     /// Output names that were refused with the wrong reason (the tenth reading): a missing
     /// folder as "a symbolic link ... whose folder does not exist", a trailing separator as the
     /// system's bare "Not a directory", a NUL byte written into the message.
     #[test]
     fn output_names_are_refused_with_their_reason() {
-        let base = std::env::temp_dir().join(format!("ctsid-targets-{}", std::process::id()));
-        std::fs::create_dir_all(&base).unwrap();
+        let base = scratch("targets");
         let file = base.join("plain.txt");
         std::fs::write(&file, "x").unwrap();
         let why = |p: std::path::PathBuf| output_target(&p).unwrap_err().to_string();
@@ -509,9 +516,7 @@ mod atomic_tests {
     /// was put in them.
     #[test]
     fn folders_of_a_failed_command_are_removed() {
-        let base = std::env::temp_dir().join(format!("ctsid-folders-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&base);
-        std::fs::create_dir_all(&base).unwrap();
+        let base = scratch("folders");
         {
             let _outputs = Outputs::begin();
             Outputs::create_folder(&base.join("a").join("b")).unwrap();
@@ -534,8 +539,7 @@ mod atomic_tests {
 
     #[test]
     fn a_file_is_replaced_whole_or_left_as_it_was() {
-        let dir = std::env::temp_dir().join(format!("ctsid-atomic-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = scratch("atomic");
         let p = dir.join("out.csv");
         std::fs::write(&p, "old").unwrap();
         // An error half way (the writer dropped without commit): the old content stays, no
@@ -559,9 +563,7 @@ mod atomic_tests {
     #[test]
     fn links_permissions_devices_and_long_names() {
         use std::os::unix::fs::{symlink, PermissionsExt};
-        let dir = std::env::temp_dir().join(format!("ctsid-atomic-kinds-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
+        let dir = scratch("atomic-kinds");
         let file = dir.join("target.csv");
         std::fs::write(&file, "old").unwrap();
         // A mode with an execute bit, which no new file gets from any umask.

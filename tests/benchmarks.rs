@@ -198,20 +198,9 @@ fn a_record_out_of_order_or_at_another_rate_is_refused() {
     let Some(est) = shared_data("cascaded_tanks/cascaded_tanks_estimation.csv") else {
         return;
     };
-    let test = shared_data("cascaded_tanks/cascaded_tanks_test.csv").unwrap();
     let text = std::fs::read_to_string(&est).unwrap();
     let mut lines: Vec<&str> = text.lines().collect();
-    let root = std::path::Path::new(&temp_file("bench-order", "x", ""))
-        .parent()
-        .unwrap()
-        .to_path_buf();
-    let write = |name: &str, lines: &[&str]| {
-        let dir = root.join(name).join("cascaded_tanks");
-        std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(dir.join("cascaded_tanks_estimation.csv"), lines.join("\n")).unwrap();
-        std::fs::copy(&test, dir.join("cascaded_tanks_test.csv")).unwrap();
-        root.join(name).display().to_string()
-    };
+    let write = |name: &str, lines: &[&str]| tanks_copy("bench-order", name, lines);
     // Rows 101 and 102 of the file (samples 99 and 100) swapped.
     lines.swap(100, 101);
     let swapped = write("swapped", &lines);
@@ -251,20 +240,9 @@ fn a_cut_extended_or_coded_record_is_refused() {
     let Some(est) = shared_data("cascaded_tanks/cascaded_tanks_estimation.csv") else {
         return;
     };
-    let test = shared_data("cascaded_tanks/cascaded_tanks_test.csv").unwrap();
     let text = std::fs::read_to_string(&est).unwrap();
     let lines: Vec<String> = text.lines().map(String::from).collect();
-    let root = std::path::Path::new(&temp_file("bench-whole", "x", ""))
-        .parent()
-        .unwrap()
-        .to_path_buf();
-    let write = |name: &str, lines: &[String]| {
-        let dir = root.join(name).join("cascaded_tanks");
-        std::fs::create_dir_all(&dir).unwrap();
-        std::fs::write(dir.join("cascaded_tanks_estimation.csv"), lines.join("\n")).unwrap();
-        std::fs::copy(&test, dir.join("cascaded_tanks_test.csv")).unwrap();
-        root.join(name).display().to_string()
-    };
+    let write = |name: &str, lines: &[String]| tanks_copy("bench-whole", name, lines);
     // Row 301 (sample 299): its level replaced by a missing-value code.
     let mut coded = lines.clone();
     let mut cells: Vec<String> = coded[300].split(',').map(String::from).collect();
@@ -342,4 +320,20 @@ fn refused_before_the_work(dir: &std::path::Path, needles: &[&str]) {
     );
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.is_empty(), "{stdout}");
+}
+
+/// A data folder `TAG/NAME` holding the tanks' test record and `lines` as the estimation record
+/// (a damaged copy); its path for `--data`.
+fn tanks_copy<S: AsRef<str>>(tag: &str, name: &str, lines: &[S]) -> String {
+    let root = std::path::Path::new(&temp_file(tag, "x", ""))
+        .parent()
+        .unwrap()
+        .join(name);
+    let dir = root.join("cascaded_tanks");
+    std::fs::create_dir_all(&dir).unwrap();
+    let text: Vec<&str> = lines.iter().map(AsRef::as_ref).collect();
+    std::fs::write(dir.join("cascaded_tanks_estimation.csv"), text.join("\n")).unwrap();
+    let test = shared_data("cascaded_tanks/cascaded_tanks_test.csv").unwrap();
+    std::fs::copy(test, dir.join("cascaded_tanks_test.csv")).unwrap();
+    root.display().to_string()
 }

@@ -142,12 +142,7 @@ fn check_output_files(dir: &std::path::Path, name: &str) -> Result<()> {
     if !dir.is_dir() {
         return Ok(());
     }
-    for file in [
-        format!("{name}.model.json"),
-        format!("{name}.csv"),
-        format!("{name}_test.csv"),
-        format!("{name}_test.svg"),
-    ] {
+    for file in output_names(name) {
         let path = dir.join(file);
         let target = ctsid::util::output_target(&path)?;
         if ctsid::util::Outputs::was_read(&target) {
@@ -160,11 +155,22 @@ fn check_output_files(dir: &std::path::Path, name: &str) -> Result<()> {
     Ok(())
 }
 
+/// The files `--out` gets: the model, the scores, the test run and its plot.
+fn output_names(name: &str) -> [String; 4] {
+    [
+        format!("{name}.model.json"),
+        format!("{name}.csv"),
+        format!("{name}_test.csv"),
+        format!("{name}_test.svg"),
+    ]
+}
+
 fn write_outputs(dir: &std::path::Path, b: &Benchmark, o: &Outcome) -> Result<()> {
     use ctsid::report::{svg, write_file};
     ctsid::util::Outputs::create_folder(dir)
         .map_err(|e| Error::file(dir.display().to_string(), e))?;
-    let model_path = dir.join(format!("{}.model.json", b.name));
+    let [model_name, scores_name, test_name, plot_name] = output_names(b.name);
+    let model_path = dir.join(model_name);
     // Written through the path itself: a folder whose name is not UTF-8 went through a lossy
     // string and the model landed elsewhere.
     o.model.write(&model_path)?;
@@ -182,7 +188,7 @@ fn write_outputs(dir: &std::path::Path, b: &Benchmark, o: &Outcome) -> Result<()
             p.best
         );
     }
-    write_file(dir, &format!("{}.csv", b.name), &csv)?;
+    write_file(dir, &scores_name, &csv)?;
     // The test run as its own record, so that `ctsid simulate` can check the printed RMS.
     let mut test = format!("t_s,{},{}\n", b.output, b.input);
     let run = &b.records.runs[b.split.test[0]];
@@ -198,7 +204,7 @@ fn write_outputs(dir: &std::path::Path, b: &Benchmark, o: &Outcome) -> Result<()
             run.channels[ui][k]
         );
     }
-    write_file(dir, &format!("{}_test.csv", b.name), &test)?;
+    write_file(dir, &test_name, &test)?;
     let series = |label, y, color| svg::Series {
         label,
         x: &o.test_t,
@@ -232,9 +238,5 @@ fn write_outputs(dir: &std::path::Path, b: &Benchmark, o: &Outcome) -> Result<()
         .height(200.0),
     ];
     let title = format!("{}: test run, final model", b.title);
-    write_file(
-        dir,
-        &format!("{}_test.svg", b.name),
-        &svg::figure(&title, &panels),
-    )
+    write_file(dir, &plot_name, &svg::figure(&title, &panels))
 }

@@ -116,10 +116,8 @@ impl CompiledModel {
                 let kind = match &t.expression {
                     Some(text) => {
                         // The programs, within a model-wide budget (checked while building).
-                        let left = MAX_TAPE_ENTRIES.saturating_sub(entries);
-                        let tape = Tape::new(&Expr::parse(text, &names)?, left);
-                        entries = entries.saturating_add(tape.as_ref().map_or(left + 1, Tape::len));
-                        let Some(tape) = tape.filter(|_| entries <= MAX_TAPE_ENTRIES) else {
+                        let left = MAX_TAPE_ENTRIES - entries;
+                        let Some(tape) = Tape::new(&Expr::parse(text, &names)?, left) else {
                             return Err(Error::Model {
                                 path: "<memory>".into(),
                                 message: format!(
@@ -129,6 +127,7 @@ impl CompiledModel {
                                 ),
                             });
                         };
+                        entries += tape.len();
                         Kind::Expression {
                             text: text.clone(),
                             tape,
