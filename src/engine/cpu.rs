@@ -52,6 +52,7 @@
 
 mod dense;
 mod kernel;
+mod tiles;
 
 pub use dense::DenseEngine;
 
@@ -62,6 +63,7 @@ pub use kernel::simd_level;
 use kernel::{Elem, Plan};
 use rayon::prelude::*;
 use std::sync::Mutex;
+use tiles::{TilePlan, TileScratch};
 
 /// Settings of the CPU engine.
 #[derive(Debug, Clone, Copy)]
@@ -94,17 +96,21 @@ pub struct CpuEngine {
     /// Powers of two of the f32 sweeps (see "The f32 range" in the module docs).
     scale32: F32Scale,
     dense: Option<DenseEngine>,
+    /// The f32 sweeps' matrix-product kernel (module `tiles`), where the CPU has AVX-512 and
+    /// the basis suits it; the family kernel otherwise.
+    tiles: Option<TilePlan>,
     /// Each sweep task's accumulator and scratch, kept from one sweep to the next.
-    work32: Mutex<Vec<Work<f32>>>,
-    work64: Mutex<Vec<Work<f64>>>,
+    work32: Mutex<Vec<Work<kernel::Scratch<f32>>>>,
+    work64: Mutex<Vec<Work<kernel::Scratch<f64>>>>,
+    work_tiles: Mutex<Vec<Work<TileScratch>>>,
 }
 
 /// One sweep task's accumulator (plan order) and scratch. Kept by the engine: a LARS path asks
 /// for hundreds of sweeps with other work between them, and fresh buffers each time (a few
 /// hundred KiB per task at 12,376 candidates, 4 MB at 497,420) cost page faults on every sweep.
-struct Work<T> {
+struct Work<S> {
     acc: Vec<f64>,
-    scratch: kernel::Scratch<T>,
+    scratch: S,
 }
 
 /// Exponent of the largest f32 product a sweep forms (see the module docs).
@@ -115,7 +121,7 @@ const F32_TOP: i32 = 110;
 struct F32Scale {
     /// Variable k is multiplied by `2^var_exp[k]` in the f32 blocks.
     var_exp: Vec<i32>,
-    /// `2^-(sum of the exponents of its variables)` for each accumulator position (plan order).
+    /// `2^-(sum of the exponents of its variables)` for each candidate (basis order).
     unscale: Vec<f64>,
     /// The exponent v's largest value is scaled to.
     v_top: i32,
@@ -131,7 +137,7 @@ fn exponent_above(x: f64) -> i32 {
 }
 
 impl F32Scale {
-    fn new(basis: &Basis, plan: &Plan, features: &Features) -> F32Scale {
+    fn new(basis: &Basis, features: &Features) -> F32Scale {
         let d = basis.degree().max(1) as i32;
         let z_top = 96 / d;
         // Clamped so that the powers of a degree-d product stay well inside f64's range.
@@ -144,13 +150,10 @@ impl F32Scale {
                 (z_top - exponent_above(m)).clamp(-60, 60)
             })
             .collect();
-        let unscale = plan
-            .order()
+        let unscale = basis
+            .codes()
             .iter()
-            .map(|&j| {
-                let e: i32 = basis.code(j as usize).vars().map(|k| var_exp[k]).sum();
-                2f64.powi(-e)
-            })
+            .map(|c| 2f64.powi(-c.vars().map(|k| var_exp[k]).sum::<i32>()))
             .collect();
         F32Scale {
             var_exp,
@@ -221,7 +224,7 @@ impl CpuEngine {
         let plan = Plan::new(basis);
         let z_blocks64 = kernel::block_layout::<f64>(features, B64);
         let (z_blocks32, scale32) = if options.precision == Precision::F32 && dense.is_none() {
-            let scale = F32Scale::new(basis, &plan, features);
+            let scale = F32Scale::new(basis, features);
             (
                 kernel::block_layout::<f32>(&scale.apply(features), B32),
                 scale,
@@ -229,6 +232,10 @@ impl CpuEngine {
         } else {
             (Vec::new(), F32Scale::default())
         };
+        let use_tiles = options.precision == Precision::F32
+            && dense.is_none()
+            && kernel::simd_level() == "avx512"
+            && tiles::available();
         Ok(CpuEngine {
             basis: basis.clone(),
             n_samples: n,
@@ -239,8 +246,10 @@ impl CpuEngine {
             z_blocks32,
             scale32,
             dense,
+            tiles: use_tiles.then(|| TilePlan::new(basis)).flatten(),
             work32: Mutex::new(Vec::new()),
             work64: Mutex::new(Vec::new()),
+            work_tiles: Mutex::new(Vec::new()),
         })
     }
 
@@ -253,11 +262,12 @@ impl CpuEngine {
         self.dense.is_some()
     }
 
-    /// `out = X^T v` over `blocks` (Z laid out in blocks of `bsz`); with `scale`, the blocks are
-    /// the scaled f32 ones and v is scaled as they need (see "The f32 range" in the module docs).
+    /// `out = X^T v` over `blocks` (Z laid out in blocks of `bsz`) with the family kernel; with
+    /// `scale`, the blocks are the scaled f32 ones and v is scaled as they need (see "The f32
+    /// range" in the module docs).
     fn raw_sweep<T: Elem>(
         &self,
-        work: &Mutex<Vec<Work<T>>>,
+        work: &Mutex<Vec<Work<kernel::Scratch<T>>>>,
         blocks: &[T],
         bsz: usize,
         v: &[f64],
@@ -268,37 +278,51 @@ impl CpuEngine {
         let v_exp = scale.map_or(0, |s| s.v_exp(v));
         let v_scale = 2f64.powi(v_exp);
         let nz = self.basis.n_vars();
+        let (degree, plan) = (self.plan.degree(), &self.plan);
+        let scratch = kernel::Scratch::<T>::elements(degree, nz, bsz) * std::mem::size_of::<T>();
+        let new = || kernel::Scratch::<T>::new(degree, nz, bsz);
         let mut work = work.lock().unwrap_or_else(|e| e.into_inner());
-        let total = self.on_blocks(&mut work, bsz, |b, wk| {
+        let total = self.on_blocks(&mut work, bsz, plan.order().len(), scratch, new, |b, wk| {
             let zb = &blocks[b * nz * bsz..(b + 1) * nz * bsz];
             let s0 = b * bsz;
             let len = bsz.min(n - s0);
             wk.scratch.load_v(&v[s0..s0 + len], v_scale);
-            kernel::sweep_block(&self.plan, zb, bsz, &mut wk.scratch, &mut wk.acc);
+            kernel::sweep_block(plan, zb, bsz, &mut wk.scratch, &mut wk.acc);
         });
-        match scale {
-            Some(s) => {
-                let v_unscale = 2f64.powi(-v_exp);
-                for ((o, t), u) in self.plan.order().iter().zip(total).zip(&s.unscale) {
-                    out[*o as usize] = t * u * v_unscale;
-                }
-            }
-            None => {
-                for (o, t) in self.plan.order().iter().zip(total) {
-                    out[*o as usize] = *t;
-                }
-            }
-        }
+        scatter(plan.order(), total, scale.map(|s| (s, v_exp)), out);
+    }
+
+    /// [`CpuEngine::raw_sweep`] of the scaled f32 blocks with the tile kernel.
+    fn tile_sweep(&self, plan: &TilePlan, v: &[f64], out: &mut [f64]) {
+        let n = self.n_samples;
+        let v_exp = self.scale32.v_exp(v);
+        let v_scale = 2f64.powi(v_exp);
+        let nz = self.basis.n_vars();
+        let bsz = tiles::B;
+        let new = || TileScratch::new(plan);
+        let mut work = self.work_tiles.lock().unwrap_or_else(|e| e.into_inner());
+        let slots = plan.order().len();
+        let total = self.on_blocks(&mut work, bsz, slots, plan.scratch_bytes(), new, |b, wk| {
+            let zb = &self.z_blocks32[b * nz * bsz..(b + 1) * nz * bsz];
+            let s0 = b * bsz;
+            let len = bsz.min(n - s0);
+            wk.scratch.load_v(&v[s0..s0 + len], v_scale);
+            tiles::sweep_block(plan, zb, &mut wk.scratch, &mut wk.acc);
+        });
+        scatter(plan.order(), total, Some((&self.scale32, v_exp)), out);
     }
 
     /// Runs `block(b, work)` for every block `b` of `bsz` samples in a few tasks per thread
     /// (enough for load balance, few enough that their accumulators stay cheap), each on one
     /// kept [`Work`] whose accumulator it zeroes first; the tasks' accumulators summed.
-    fn on_blocks<'w, T: Elem>(
+    fn on_blocks<'w, S: Send>(
         &self,
-        work: &'w mut Vec<Work<T>>,
+        work: &'w mut Vec<Work<S>>,
         bsz: usize,
-        block: impl Fn(usize, &mut Work<T>) + Sync,
+        slots: usize,
+        scratch_bytes: usize,
+        new_scratch: impl Fn() -> S,
+        block: impl Fn(usize, &mut Work<S>) + Sync,
     ) -> &'w [f64] {
         let n_blocks = self.n_samples.div_ceil(bsz);
         let threads = rayon::current_num_threads().max(1);
@@ -307,8 +331,7 @@ impl CpuEngine {
         // the other core take its share (25,000 x 12,376 on 2 cores: 5-6 % faster sweeps in
         // LARS paths, docs/method/regression.md); two per thread at 497,420 candidates, where
         // sixteen accumulators would be 64 MiB to zero and sum.
-        let scratch = kernel::Scratch::<T>::elements(self.plan.degree(), self.basis.n_vars(), bsz);
-        let task_bytes = 8 * self.basis.len() + std::mem::size_of::<T>() * scratch;
+        let task_bytes = 8 * slots + scratch_bytes;
         let by_memory = (16 << 20) / task_bytes.max(1);
         let tasks = (threads * 8).min(by_memory).max(threads * 2);
         let per_task = n_blocks.div_ceil(tasks).max(1);
@@ -316,12 +339,8 @@ impl CpuEngine {
         if work.len() != n_tasks {
             *work = (0..n_tasks)
                 .map(|_| Work {
-                    acc: vec![0.0; self.basis.len()],
-                    scratch: kernel::Scratch::<T>::new(
-                        self.plan.degree(),
-                        self.basis.n_vars(),
-                        bsz,
-                    ),
+                    acc: vec![0.0; slots],
+                    scratch: new_scratch(),
                 })
                 .collect();
         }
@@ -350,8 +369,10 @@ impl CpuEngine {
                 &ones
             }
         };
+        let scratch = kernel::Scratch::<f64>::elements(self.plan.degree(), nz, bsz) * 8;
+        let new = || kernel::Scratch::<f64>::new(self.plan.degree(), nz, bsz);
         let mut work = self.work64.lock().unwrap_or_else(|e| e.into_inner());
-        self.on_blocks(&mut work, bsz, |b, wk| {
+        self.on_blocks(&mut work, bsz, self.basis.len(), scratch, new, |b, wk| {
             let zb = &self.z_blocks64[b * nz * bsz..(b + 1) * nz * bsz];
             let s0 = b * bsz;
             let len = bsz.min(n - s0);
@@ -359,6 +380,21 @@ impl CpuEngine {
             kernel::centred_block(&self.plan, zb, bsz, &mut wk.scratch, mean, &mut wk.acc);
         })
         .to_vec()
+    }
+}
+
+/// `out[order[p]] = total[p]` for every used slot p, with the f32 sweeps' powers of two divided
+/// out where `scale` gives them (with the exponent v was scaled by).
+fn scatter(order: &[u32], total: &[f64], scale: Option<(&F32Scale, i32)>, out: &mut [f64]) {
+    let used = order.iter().zip(total).filter(|(o, _)| **o != u32::MAX);
+    match scale {
+        Some((s, v_exp)) => {
+            let v_unscale = 2f64.powi(-v_exp);
+            for (&o, t) in used {
+                out[o as usize] = t * s.unscale[o as usize] * v_unscale;
+            }
+        }
+        None => used.for_each(|(&o, t)| out[o as usize] = *t),
     }
 }
 
@@ -400,6 +436,7 @@ impl SweepEngine for CpuEngine {
             // f64 sweeps have no AVX-512 instance: they run AVX2 there.
             let simd = match (self.precision, kernel::simd_level()) {
                 (Precision::F64, "avx512") => "avx2",
+                (Precision::F32, "avx512") if self.tiles.is_some() => "avx512 tiles",
                 (_, level) => level,
             };
             format!("on-the-fly {:?}, {simd}", self.precision).to_lowercase()
@@ -452,8 +489,9 @@ impl SweepEngine for CpuEngine {
         if let Some(d) = self.dense.as_mut() {
             return d.sweep(v, out);
         }
-        match self.precision {
-            Precision::F32 => self.raw_sweep::<f32>(
+        match (self.precision, &self.tiles) {
+            (Precision::F32, Some(plan)) => self.tile_sweep(plan, v, out),
+            (Precision::F32, None) => self.raw_sweep::<f32>(
                 &self.work32,
                 &self.z_blocks32,
                 B32,
@@ -461,7 +499,7 @@ impl SweepEngine for CpuEngine {
                 out,
                 Some(&self.scale32),
             ),
-            Precision::F64 => {
+            (Precision::F64, _) => {
                 self.raw_sweep::<f64>(&self.work64, &self.z_blocks64, B64, v, out, None)
             }
         }

@@ -79,7 +79,7 @@ pub struct Plan {
 }
 
 /// Start, in vectors of one block, of `w_a = z_a * vz_b` for b >= a in the pair table.
-fn pair_offset(a: usize, n: usize) -> usize {
+pub(super) fn pair_offset(a: usize, n: usize) -> usize {
     a * n - a * a.saturating_sub(1) / 2
 }
 
