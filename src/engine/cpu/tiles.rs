@@ -72,8 +72,11 @@ fn product(a: Code, b: Code) -> Code {
 }
 
 /// The plan under construction: the walk's ops, the buffers' waiting nodes and the slots.
-struct Builder<'a> {
-    basis: &'a Basis,
+struct Builder {
+    /// Basis index of every code (a map: `Basis::index_of` searches, once per slot).
+    index: std::collections::HashMap<Code, u32>,
+    degree: usize,
+    n_vars: usize,
     triple_codes: Vec<Code>,
     first_triple: Vec<u32>,
     ops: Vec<Op>,
@@ -81,12 +84,12 @@ struct Builder<'a> {
     order: Vec<u32>,
 }
 
-impl Builder<'_> {
+impl Builder {
     /// Node `code` (degree k, values from stack slot `parent` times `var`) and its subtree.
     fn walk(&mut self, code: Code, parent: usize, var: Option<usize>) {
         let k = code.degree();
         let f = var.unwrap_or(0);
-        let has_children = k + 3 < self.basis.degree();
+        let has_children = k + 3 < self.degree;
         let pos = self.waiting[f].len();
         self.ops.push(Op::Node {
             parent: parent as u8,
@@ -100,7 +103,7 @@ impl Builder<'_> {
             self.flush(f);
         }
         if has_children {
-            for g in f..self.basis.n_vars() {
+            for g in f..self.n_vars {
                 self.walk(code.times(g), k, Some(g));
             }
         }
@@ -122,9 +125,7 @@ impl Builder<'_> {
                 let (r, t) = (lane % 4, lane / 4);
                 let j = (r < nodes.len() && t0 + t < end).then(|| {
                     let code = product(nodes[r], self.triple_codes[t0 + t]);
-                    self.basis
-                        .index_of(code)
-                        .expect("every product is a candidate") as u32
+                    self.index[&code]
                 });
                 self.order.push(j.unwrap_or(u32::MAX));
             }
@@ -159,8 +160,14 @@ impl TilePlan {
         if vectors * B * 4 > MAX_SCRATCH_BYTES {
             return None;
         }
+        let index: std::collections::HashMap<Code, u32> = (basis.codes().iter())
+            .enumerate()
+            .map(|(j, c)| (*c, j as u32))
+            .collect();
         let mut builder = Builder {
-            basis,
+            index,
+            degree: d,
+            n_vars: nv,
             triple_codes,
             first_triple,
             ops: Vec::new(),
@@ -171,8 +178,8 @@ impl TilePlan {
         for f in 0..nv {
             builder.flush(f);
         }
-        let index = |c: Code| basis.index_of(c).expect("low degrees are candidates") as u32;
-        let mut order = builder.order;
+        let index = |c: Code| builder.index[&c];
+        let mut order = std::mem::take(&mut builder.order);
         order.push(index(Code::ONE));
         order.extend((0..nv).map(|k| index(Code::ONE.times(k))));
         order.extend(
