@@ -19,7 +19,7 @@
 //! block are kept in the working precision and added to f64 totals, so the accumulation across
 //! the whole sweep is f64.
 //!
-//! Where the CPU has AVX-512F, f32 sweeps of degree >= 3 run another kernel (module `tiles`):
+//! Where the CPU has AVX2 and FMA, f32 sweeps of degree >= 3 run another kernel (module `tiles`):
 //! each candidate of degree >= 3 as a node (degree <= d-3) times a triple `z_a z_b z_c`, the
 //! nodes of one last variable four at a time against all the triples they meet in 4 x 4
 //! register tiles (25,000 x 12,376 and 497,420: about 2x faster than the family walk below,
@@ -239,10 +239,8 @@ impl CpuEngine {
         } else {
             (Vec::new(), F32Scale::default())
         };
-        let use_tiles = options.precision == Precision::F32
-            && dense.is_none()
-            && kernel::simd_level() == "avx512"
-            && tiles::available();
+        let tile_isa =
+            tiles::Isa::of_cpu().filter(|_| options.precision == Precision::F32 && dense.is_none());
         Ok(CpuEngine {
             basis: basis.clone(),
             n_samples: n,
@@ -253,7 +251,7 @@ impl CpuEngine {
             z_blocks32,
             scale32,
             dense,
-            tiles: use_tiles.then(|| TilePlan::new(basis)).flatten(),
+            tiles: tile_isa.and_then(|isa| TilePlan::new(basis, isa)),
             work32: Mutex::new(Vec::new()),
             work64: Mutex::new(Vec::new()),
             work_tiles: Mutex::new(Vec::new()),
@@ -444,6 +442,7 @@ impl SweepEngine for CpuEngine {
             let simd = match (self.precision, kernel::simd_level()) {
                 (Precision::F64, "avx512") => "avx2",
                 (Precision::F32, "avx512") if self.tiles.is_some() => "avx512 tiles",
+                (Precision::F32, "avx2") if self.tiles.is_some() => "avx2 tiles",
                 (_, level) => level,
             };
             format!("on-the-fly {:?}, {simd}", self.precision).to_lowercase()

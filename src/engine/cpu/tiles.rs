@@ -1,4 +1,5 @@
-//! The f32 sweep as small matrix products: nodes times triples, in register tiles (AVX-512).
+//! The f32 sweep as small matrix products: nodes times triples, in register tiles (AVX-512 or
+//! AVX2 + FMA).
 //!
 //! Every monomial of degree 3 or more is, in exactly one way, a *node* (its first variables in
 //! sorted order, degree 0..=d-3) times a *triple* `z_a z_b z_c` (its last three, a <= b <= c)
@@ -9,10 +10,11 @@
 //! each node's values go into a buffer for its last variable, and when four nodes of last
 //! variable `f` are waiting they meet the suffix of triples for `f` as one dense product in
 //! register tiles of 4 nodes x 4 triples (8 vector loads per 16 multiply-adds, the nodes from
-//! L1, the triples from L2), whereas the family kernel (module `kernel`), where a node meets
-//! only its own children's pairs, loads one vector per one to three multiply-adds. The 16
-//! accumulators of a tile (16 lanes each) are reduced together by one transposed tree into one
-//! vector of 16 sums, added to 16 consecutive f64 slots. Candidates of degree 0, 1 and 2 are
+//! L1, the triples from L2; with AVX2's 16 registers, two tiles of 2 nodes x 4 triples),
+//! whereas the family kernel (module `kernel`), where a node meets only its own children's
+//! pairs, loads one vector per one to three multiply-adds. A tile's accumulators (16 or 8 lanes
+//! each) are reduced together by one transposed tree into one vector of sums, added to
+//! consecutive f64 slots. Candidates of degree 0, 1 and 2 are
 //! plain sums of `v`, `v z_k` and `v z_a z_b`. The order of the nodes, the buffers' flushes and
 //! so the slot of every candidate are fixed when the plan is built.
 //!
@@ -48,9 +50,38 @@ enum Op {
     Flush { buf: u8, count: u8 },
 }
 
+/// The instruction set a plan runs on; it decides where a tile puts each sum.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Isa {
+    /// One 4 x 4 tile of 16-lane vectors: node r against triple t in slot `4 t + r`.
+    Avx512,
+    /// Two 2 x 4 tiles of 8-lane vectors: node r against triple t in slot `4 r + t`.
+    Avx2,
+}
+
+impl Isa {
+    /// The instruction set of this CPU for the kernel, as [`super::kernel::simd_level`] names
+    /// it (so `CTSID_SIMD=avx2` chooses AVX2 here too); `None` without AVX2 and FMA.
+    pub fn of_cpu() -> Option<Isa> {
+        match super::kernel::simd_level() {
+            "avx512" => Some(Isa::Avx512),
+            "avx2" => Some(Isa::Avx2),
+            _ => None,
+        }
+    }
+
+    fn slot(self, r: usize, t: usize) -> usize {
+        match self {
+            Isa::Avx512 => 4 * t + r,
+            Isa::Avx2 => 4 * r + t,
+        }
+    }
+}
+
 /// The walk of one block and which candidate each accumulator slot holds.
 #[derive(Debug, Clone)]
 pub struct TilePlan {
+    isa: Isa,
     n_vars: usize,
     degree: usize,
     /// `(a, b)` of each pair, a <= b, in the order `a` then `b`.
@@ -73,6 +104,7 @@ fn product(a: Code, b: Code) -> Code {
 
 /// The plan under construction: the walk's ops, the buffers' waiting nodes and the slots.
 struct Builder {
+    isa: Isa,
     /// Basis index of every code (a map: `Basis::index_of` searches, once per slot).
     index: std::collections::HashMap<Code, u32>,
     degree: usize,
@@ -120,23 +152,22 @@ impl Builder {
         });
         let end = *self.first_triple.last().expect("n_vars + 1 entries") as usize;
         for t0 in (self.first_triple[f] as usize..end).step_by(4) {
-            // Slot 4 t + r of a tile holds node r against triple t (see `reduce16`).
-            for lane in 0..16 {
-                let (r, t) = (lane % 4, lane / 4);
-                let j = (r < nodes.len() && t0 + t < end).then(|| {
-                    let code = product(nodes[r], self.triple_codes[t0 + t]);
-                    self.index[&code]
-                });
-                self.order.push(j.unwrap_or(u32::MAX));
+            let tile = self.order.len();
+            self.order.extend([u32::MAX; 16]);
+            for (r, node) in nodes.iter().enumerate() {
+                for t in 0..(end - t0).min(4) {
+                    let code = product(*node, self.triple_codes[t0 + t]);
+                    self.order[tile + self.isa.slot(r, t)] = self.index[&code];
+                }
             }
         }
     }
 }
 
 impl TilePlan {
-    /// The plan of `basis`, or `None` below degree 3 or where one task's scratch would exceed
-    /// [`MAX_SCRATCH_BYTES`].
-    pub fn new(basis: &Basis) -> Option<TilePlan> {
+    /// The plan of `basis` for `isa`, or `None` below degree 3 or where one task's scratch
+    /// would exceed [`MAX_SCRATCH_BYTES`].
+    pub fn new(basis: &Basis, isa: Isa) -> Option<TilePlan> {
         let (nv, d) = (basis.n_vars(), basis.degree());
         if d < 3 || nv == 0 || nv > u8::MAX as usize {
             return None;
@@ -165,6 +196,7 @@ impl TilePlan {
             .map(|(j, c)| (*c, j as u32))
             .collect();
         let mut builder = Builder {
+            isa,
             index,
             degree: d,
             n_vars: nv,
@@ -188,6 +220,7 @@ impl TilePlan {
                 .map(|&(a, b)| index(Code::ONE.times(a as usize).times(b as usize))),
         );
         Some(TilePlan {
+            isa,
             n_vars: nv,
             degree: d,
             pairs,
@@ -269,32 +302,148 @@ impl TileScratch {
     }
 }
 
-/// Whether this CPU runs the kernel (AVX-512F).
-pub fn available() -> bool {
+/// Whether this CPU has the instruction set `isa`.
+pub fn available(isa: Isa) -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::arch::is_x86_feature_detected!("avx512f")
+        match isa {
+            Isa::Avx512 => std::arch::is_x86_feature_detected!("avx512f"),
+            Isa::Avx2 => {
+                std::arch::is_x86_feature_detected!("avx2")
+                    && std::arch::is_x86_feature_detected!("fma")
+            }
+        }
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
+        let _ = isa;
         false
     }
 }
 
 /// Adds one block's `sum_i x_ij v_i` to `acc` in slot order ([`TilePlan::order`]). `zb` holds
 /// the block's `n_vars` vectors of [`B`] samples (zero past the data), `s` the block's v
-/// ([`TileScratch::load_v`]). Panics where the CPU lacks AVX-512F (see [`available`]) or the
-/// slices are shorter than the plan needs.
+/// ([`TileScratch::load_v`]). Panics where the CPU lacks the plan's instruction set (see
+/// [`available`]) or the slices are shorter than the plan needs.
 pub fn sweep_block(plan: &TilePlan, zb: &[f32], s: &mut TileScratch, acc: &mut [f64]) {
-    assert!(available(), "the tile kernel needs AVX-512F");
+    assert!(available(plan.isa), "the CPU lacks {:?}", plan.isa);
     assert!(zb.len() >= plan.n_vars * B && acc.len() >= plan.order.len());
     assert_eq!(s.lines.len(), plan.vectors() * B / 16);
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: the CPU has AVX-512F (asserted), and every pointer the kernel forms stays inside
-    // `zb`, the scratch and `acc`, whose lengths are asserted above.
+    // SAFETY: the CPU has the instruction set (asserted), and every pointer the kernel forms
+    // stays inside `zb`, the scratch and `acc`, whose lengths are asserted above.
     unsafe {
-        avx512::block(plan, zb, s.floats(), acc)
+        match plan.isa {
+            Isa::Avx512 => avx512::block(plan, zb, s.floats(), acc),
+            Isa::Avx2 => avx2::block(plan, zb, s.floats(), acc),
+        }
     }
+}
+
+/// The walk of one block (the same for every instruction set; see the module docs) and its
+/// element-wise helpers, for one vector type; the module that invokes it gives `sum64`, `hsum`
+/// (a vector's lanes to f64) and `chunk` (the tiles of one buffer against four triples).
+#[cfg(target_arch = "x86_64")]
+macro_rules! walk {
+    ($feat:literal, $v:ty, $lanes:literal, $load:ident, $store:ident, $mul:ident, $add:ident, $zero:ident) => {
+        #[target_feature(enable = $feat)]
+        pub unsafe fn block(plan: &TilePlan, zb: &[f32], f: &mut [f32], acc: &mut [f64]) {
+            let nv = plan.n_vars;
+            let base = f.as_mut_ptr();
+            let v = base;
+            let vz = base.add(B);
+            let pw = vz.add(nv * B);
+            let tw = pw.add(plan.pairs.len() * B);
+            let slots = tw.add(plan.triples.len() * B);
+            let bufs = slots.add(TilePlan::slots(plan.degree) * B);
+            let z = zb.as_ptr();
+            let low = plan.order.len() - 1 - nv - plan.pairs.len();
+            // Degrees 0 and 1 summed in f64 (as the family kernel does), degree 2 by lanes.
+            acc[low] += sum64(v);
+            for k in 0..nv {
+                mul(v, z.add(k * B), vz.add(k * B));
+                acc[low + 1 + k] += sum64(vz.add(k * B));
+            }
+            for (p, &(a, b)) in plan.pairs.iter().enumerate() {
+                let sum = mul(vz.add(a as usize * B), z.add(b as usize * B), pw.add(p * B));
+                acc[low + 1 + nv + p] += hsum(sum);
+            }
+            for (t, &(p, c)) in plan.triples.iter().enumerate() {
+                mul(pw.add(p as usize * B), z.add(c as usize * B), tw.add(t * B));
+            }
+            let n_triples = plan.triples.len();
+            let mut out = acc.as_mut_ptr();
+            for op in &plan.ops {
+                match *op {
+                    Op::Node {
+                        parent,
+                        var,
+                        slot,
+                        buf,
+                        pos,
+                    } => {
+                        let x = slots.add(parent as usize * B) as *const f32;
+                        let to = bufs.add((4 * buf as usize + pos as usize) * B);
+                        let keep = (slot != u8::MAX).then(|| slots.add(slot as usize * B));
+                        let zv = (var != u8::MAX).then(|| z.add(var as usize * B));
+                        node(x, zv, to, keep);
+                    }
+                    Op::Flush { buf, count } => {
+                        let x = bufs.add(4 * buf as usize * B) as *const f32;
+                        let mut t0 = plan.first_triple[buf as usize] as usize;
+                        while t0 < n_triples {
+                            let w = tw.add(t0 * B) as *const f32;
+                            chunk(x, w, count as usize, (n_triples - t0).min(4), out);
+                            out = out.add(16);
+                            t0 += 4;
+                        }
+                    }
+                }
+            }
+        }
+
+        /// `to = x * z` (or `x` without z) over one block, and into `keep` as well where given.
+        #[inline]
+        #[target_feature(enable = $feat)]
+        unsafe fn node(x: *const f32, z: Option<*const f32>, to: *mut f32, keep: Option<*mut f32>) {
+            let mut i = 0;
+            while i < B {
+                let mut p = $load(x.add(i));
+                if let Some(z) = z {
+                    p = $mul(p, $load(z.add(i)));
+                }
+                $store(to.add(i), p);
+                if let Some(k) = keep {
+                    $store(k.add(i), p);
+                }
+                i += $lanes;
+            }
+        }
+
+        /// `out = x * y` over one block; returns the lane sums of `out`.
+        #[inline]
+        #[target_feature(enable = $feat)]
+        unsafe fn mul(x: *const f32, y: *const f32, out: *mut f32) -> $v {
+            let mut sum = $zero();
+            let mut i = 0;
+            while i < B {
+                let p = $mul($load(x.add(i)), $load(y.add(i)));
+                $store(out.add(i), p);
+                sum = $add(sum, p);
+                i += $lanes;
+            }
+            sum
+        }
+
+        /// A vector's lanes summed in f64.
+        #[inline]
+        #[target_feature(enable = $feat)]
+        unsafe fn hsum(x: $v) -> f64 {
+            let mut l = [0f32; $lanes];
+            $store(l.as_mut_ptr(), x);
+            l.iter().map(|x| *x as f64).sum()
+        }
+    };
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -302,99 +451,38 @@ mod avx512 {
     use super::{Op, TilePlan, B};
     use std::arch::x86_64::*;
 
-    #[target_feature(enable = "avx512f")]
-    pub unsafe fn block(plan: &TilePlan, zb: &[f32], f: &mut [f32], acc: &mut [f64]) {
-        let nv = plan.n_vars;
-        let base = f.as_mut_ptr();
-        let v = base;
-        let vz = base.add(B);
-        let pw = vz.add(nv * B);
-        let tw = pw.add(plan.pairs.len() * B);
-        let slots = tw.add(plan.triples.len() * B);
-        let bufs = slots.add(TilePlan::slots(plan.degree) * B);
-        let z = zb.as_ptr();
-        let low = plan.order.len() - 1 - nv - plan.pairs.len();
-        // Degrees 0 and 1 summed in f64 (as the family kernel does), degree 2 by lanes.
-        acc[low] += sum64(v);
-        for k in 0..nv {
-            mul(v, z.add(k * B), vz.add(k * B));
-            acc[low + 1 + k] += sum64(vz.add(k * B));
-        }
-        for (p, &(a, b)) in plan.pairs.iter().enumerate() {
-            let sum = mul(vz.add(a as usize * B), z.add(b as usize * B), pw.add(p * B));
-            acc[low + 1 + nv + p] += hsum(sum);
-        }
-        for (t, &(p, c)) in plan.triples.iter().enumerate() {
-            mul(pw.add(p as usize * B), z.add(c as usize * B), tw.add(t * B));
-        }
-        let n_triples = plan.triples.len();
-        let mut out = acc.as_mut_ptr();
-        for op in &plan.ops {
-            match *op {
-                Op::Node {
-                    parent,
-                    var,
-                    slot,
-                    buf,
-                    pos,
-                } => {
-                    let x = slots.add(parent as usize * B) as *const f32;
-                    let to = bufs.add((4 * buf as usize + pos as usize) * B);
-                    let keep = (slot != u8::MAX).then(|| slots.add(slot as usize * B));
-                    node(
-                        x,
-                        (var != u8::MAX).then(|| z.add(var as usize * B)),
-                        to,
-                        keep,
-                    );
-                }
-                Op::Flush { buf, count } => {
-                    let x = bufs.add(4 * buf as usize * B) as *const f32;
-                    let mut t0 = plan.first_triple[buf as usize] as usize;
-                    while t0 < n_triples {
-                        let w = tw.add(t0 * B) as *const f32;
-                        let nr = (n_triples - t0).min(4);
-                        match (count, nr) {
-                            (4, 4) => tile::<4, 4>(x, w, out),
-                            (4, 3) => tile::<4, 3>(x, w, out),
-                            (4, 2) => tile::<4, 2>(x, w, out),
-                            (4, 1) => tile::<4, 1>(x, w, out),
-                            (3, 4) => tile::<3, 4>(x, w, out),
-                            (3, 3) => tile::<3, 3>(x, w, out),
-                            (3, 2) => tile::<3, 2>(x, w, out),
-                            (3, 1) => tile::<3, 1>(x, w, out),
-                            (2, 4) => tile::<2, 4>(x, w, out),
-                            (2, 3) => tile::<2, 3>(x, w, out),
-                            (2, 2) => tile::<2, 2>(x, w, out),
-                            (2, 1) => tile::<2, 1>(x, w, out),
-                            (1, 4) => tile::<1, 4>(x, w, out),
-                            (1, 3) => tile::<1, 3>(x, w, out),
-                            (1, 2) => tile::<1, 2>(x, w, out),
-                            _ => tile::<1, 1>(x, w, out),
-                        }
-                        out = out.add(16);
-                        t0 += 4;
-                    }
-                }
-            }
-        }
-    }
+    walk!(
+        "avx512f",
+        __m512,
+        16,
+        _mm512_loadu_ps,
+        _mm512_storeu_ps,
+        _mm512_mul_ps,
+        _mm512_add_ps,
+        _mm512_setzero_ps
+    );
 
-    /// `to = x * z` (or `x` without z) over one block, and into `keep` as well where given.
+    /// The `count` nodes at `x` against the `nr` triples at `w`: one 4 x 4 tile.
     #[inline]
     #[target_feature(enable = "avx512f")]
-    unsafe fn node(x: *const f32, z: Option<*const f32>, to: *mut f32, keep: Option<*mut f32>) {
-        let mut i = 0;
-        while i < B {
-            let mut p = _mm512_loadu_ps(x.add(i));
-            if let Some(z) = z {
-                p = _mm512_mul_ps(p, _mm512_loadu_ps(z.add(i)));
-            }
-            _mm512_storeu_ps(to.add(i), p);
-            if let Some(k) = keep {
-                _mm512_storeu_ps(k.add(i), p);
-            }
-            i += 16;
+    unsafe fn chunk(x: *const f32, w: *const f32, count: usize, nr: usize, out: *mut f64) {
+        match (count, nr) {
+            (4, 4) => tile::<4, 4>(x, w, out),
+            (4, 3) => tile::<4, 3>(x, w, out),
+            (4, 2) => tile::<4, 2>(x, w, out),
+            (4, 1) => tile::<4, 1>(x, w, out),
+            (3, 4) => tile::<3, 4>(x, w, out),
+            (3, 3) => tile::<3, 3>(x, w, out),
+            (3, 2) => tile::<3, 2>(x, w, out),
+            (3, 1) => tile::<3, 1>(x, w, out),
+            (2, 4) => tile::<2, 4>(x, w, out),
+            (2, 3) => tile::<2, 3>(x, w, out),
+            (2, 2) => tile::<2, 2>(x, w, out),
+            (2, 1) => tile::<2, 1>(x, w, out),
+            (1, 4) => tile::<1, 4>(x, w, out),
+            (1, 3) => tile::<1, 3>(x, w, out),
+            (1, 2) => tile::<1, 2>(x, w, out),
+            _ => tile::<1, 1>(x, w, out),
         }
     }
 
@@ -411,29 +499,6 @@ mod avx512 {
         let mut l = [0f64; 8];
         _mm512_storeu_pd(l.as_mut_ptr(), s);
         l.iter().sum()
-    }
-
-    /// `out = x * y` over one block; returns the lane sums of `out`.
-    #[inline]
-    #[target_feature(enable = "avx512f")]
-    unsafe fn mul(x: *const f32, y: *const f32, out: *mut f32) -> __m512 {
-        let mut sum = _mm512_setzero_ps();
-        let mut i = 0;
-        while i < B {
-            let p = _mm512_mul_ps(_mm512_loadu_ps(x.add(i)), _mm512_loadu_ps(y.add(i)));
-            _mm512_storeu_ps(out.add(i), p);
-            sum = _mm512_add_ps(sum, p);
-            i += 16;
-        }
-        sum
-    }
-
-    #[inline]
-    #[target_feature(enable = "avx512f")]
-    unsafe fn hsum(x: __m512) -> f64 {
-        let mut l = [0f32; 16];
-        _mm512_storeu_ps(l.as_mut_ptr(), x);
-        l.iter().map(|x| *x as f64).sum()
     }
 
     /// Node rows `x + r B` (r < MR) against triple rows `w + t B` (t < NR) over one block; the
@@ -496,6 +561,97 @@ mod avx512 {
     }
 }
 
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{Op, TilePlan, B};
+    use std::arch::x86_64::*;
+
+    walk!(
+        "avx2,fma",
+        __m256,
+        8,
+        _mm256_loadu_ps,
+        _mm256_storeu_ps,
+        _mm256_mul_ps,
+        _mm256_add_ps,
+        _mm256_setzero_ps
+    );
+
+    /// The `count` nodes at `x` against the `nr` triples at `w`: nodes 0, 1 in slots 0..8, nodes
+    /// 2, 3 in slots 8..16 (16 registers hold one 2 x 4 tile's accumulators and operands).
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn chunk(x: *const f32, w: *const f32, count: usize, nr: usize, out: *mut f64) {
+        for (half, rows) in [(0, count.min(2)), (1, count.saturating_sub(2))] {
+            let (x, out) = (x.add(2 * half * B), out.add(8 * half));
+            match (rows, nr) {
+                (0, _) => {}
+                (2, 4) => tile::<2, 4>(x, w, out),
+                (2, 3) => tile::<2, 3>(x, w, out),
+                (2, 2) => tile::<2, 2>(x, w, out),
+                (2, 1) => tile::<2, 1>(x, w, out),
+                (1, 4) => tile::<1, 4>(x, w, out),
+                (1, 3) => tile::<1, 3>(x, w, out),
+                (1, 2) => tile::<1, 2>(x, w, out),
+                _ => tile::<1, 1>(x, w, out),
+            }
+        }
+    }
+
+    /// The sum of one block in f64 (each value converted, four partial sums).
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn sum64(x: *const f32) -> f64 {
+        let mut s = _mm256_setzero_pd();
+        let mut i = 0;
+        while i < B {
+            s = _mm256_add_pd(s, _mm256_cvtps_pd(_mm_loadu_ps(x.add(i))));
+            i += 4;
+        }
+        let mut l = [0f64; 4];
+        _mm256_storeu_pd(l.as_mut_ptr(), s);
+        l.iter().sum()
+    }
+
+    /// Node rows `x + r B` (r < MR) against triple rows `w + t B` (t < NR) over one block; the
+    /// sums added to `out[4 r + t]` in f64.
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn tile<const MR: usize, const NR: usize>(x: *const f32, w: *const f32, out: *mut f64) {
+        let mut a = [_mm256_setzero_ps(); 8];
+        let mut i = 0;
+        while i < B {
+            let xs: [__m256; MR] = std::array::from_fn(|r| _mm256_loadu_ps(x.add(r * B + i)));
+            for t in 0..NR {
+                let wt = _mm256_loadu_ps(w.add(t * B + i));
+                for r in 0..MR {
+                    a[4 * r + t] = _mm256_fmadd_ps(xs[r], wt, a[4 * r + t]);
+                }
+            }
+            i += 8;
+        }
+        let s = reduce8(&a);
+        let lo = _mm256_cvtps_pd(_mm256_castps256_ps128(s));
+        let hi = _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(s));
+        _mm256_storeu_pd(out, _mm256_add_pd(_mm256_loadu_pd(out), lo));
+        _mm256_storeu_pd(out.add(4), _mm256_add_pd(_mm256_loadu_pd(out.add(4)), hi));
+    }
+
+    /// The 8 lane sums of 8 vectors in one vector, lane i holding `a[i]`'s (horizontal adds of
+    /// pairs, twice, then the two 128-bit halves).
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn reduce8(a: &[__m256; 8]) -> __m256 {
+        let t: [__m256; 4] = std::array::from_fn(|i| _mm256_hadd_ps(a[2 * i], a[2 * i + 1]));
+        let u0 = _mm256_hadd_ps(t[0], t[1]);
+        let u1 = _mm256_hadd_ps(t[2], t[3]);
+        _mm256_add_ps(
+            _mm256_permute2f128_ps::<0x20>(u0, u1),
+            _mm256_permute2f128_ps::<0x31>(u0, u1),
+        )
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -510,27 +666,82 @@ mod tests {
     fn every_candidate_has_exactly_one_slot() {
         for (nv, d) in [(1, 3), (2, 3), (3, 5), (5, 4), (4, 7), (11, 6), (13, 9)] {
             let b = basis(nv, d);
-            let plan = TilePlan::new(&b).expect("small enough");
+            let plan = TilePlan::new(&b, Isa::Avx512).expect("small enough");
+            let plan2 = TilePlan::new(&b, Isa::Avx2).expect("small enough");
             let mut seen = vec![0; b.len()];
-            for &j in plan.order() {
+            for &j in plan.order().iter().chain(plan2.order()) {
                 if j != u32::MAX {
                     seen[j as usize] += 1;
                 }
             }
-            assert!(seen.iter().all(|&c| c == 1), "n {nv} d {d}");
+            assert!(seen.iter().all(|&c| c == 2), "n {nv} d {d}");
         }
-        assert!(TilePlan::new(&basis(4, 2)).is_none());
-        let big = TilePlan::new(&basis(13, 9)).expect("497,420 candidates");
+        assert!(TilePlan::new(&basis(4, 2), Isa::Avx2).is_none());
+        let big = TilePlan::new(&basis(13, 9), Isa::Avx512).expect("497,420 candidates");
         assert!(big.scratch_bytes() < 700_000);
         assert!(
-            TilePlan::new(&basis(24, 3)).is_none(),
+            TilePlan::new(&basis(24, 3), Isa::Avx512).is_none(),
             "2,600 triples do not fit"
         );
     }
 
     #[test]
+    fn every_instruction_set_gives_the_exact_sums() {
+        let mut seed = 11u64;
+        let mut u = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        for (nv, d, n) in [(5, 5, 300), (3, 3, 256), (2, 6, 40)] {
+            let b = basis(nv, d);
+            let z: Vec<Vec<f64>> = (0..nv).map(|_| (0..n).map(|_| u()).collect()).collect();
+            let v: Vec<f64> = (0..n).map(|_| u()).collect();
+            for isa in [Isa::Avx512, Isa::Avx2] {
+                if !available(isa) {
+                    eprintln!("skipped {isa:?}: not on this CPU");
+                    continue;
+                }
+                let plan = TilePlan::new(&b, isa).expect("small");
+                let mut scratch = TileScratch::new(&plan);
+                let mut acc = vec![0.0; plan.order().len()];
+                for s0 in (0..n).step_by(B) {
+                    let len = B.min(n - s0);
+                    let mut zb = vec![0f32; nv * B];
+                    for k in 0..nv {
+                        for i in 0..len {
+                            zb[k * B + i] = z[k][s0 + i] as f32;
+                        }
+                    }
+                    scratch.load_v(&v[s0..s0 + len], 1.0);
+                    sweep_block(&plan, &zb, &mut scratch, &mut acc);
+                }
+                let mut got = vec![f64::NAN; b.len()];
+                for (slot, &j) in plan.order().iter().enumerate() {
+                    if j != u32::MAX {
+                        got[j as usize] = acc[slot];
+                    }
+                }
+                for (j, g) in got.iter().enumerate() {
+                    let terms = (0..n).map(|i| {
+                        let zi: Vec<f64> = (0..nv).map(|k| z[k][i]).collect();
+                        v[i] * b.code(j).eval(&zi)
+                    });
+                    let (exact, scale) = terms.fold((0.0, 0.0), |(s, a), t| (s + t, a + t.abs()));
+                    assert!(
+                        (g - exact).abs() <= 1e-5 * scale,
+                        "{isa:?} n {nv} d {d}: {} {g} against {exact}",
+                        b.name(j)
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
     fn the_reduction_puts_sum_4e_plus_j_in_lane_4j_plus_e() {
-        if !available() {
+        if !available(Isa::Avx512) {
             eprintln!("skipped: no AVX-512F");
             return;
         }
