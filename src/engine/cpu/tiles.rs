@@ -345,7 +345,7 @@ pub fn sweep_block(plan: &TilePlan, zb: &[f32], s: &mut TileScratch, acc: &mut [
 /// (a vector's lanes to f64) and `chunk` (the tiles of one buffer against four triples).
 #[cfg(target_arch = "x86_64")]
 macro_rules! walk {
-    ($feat:literal, $v:ty, $lanes:literal, $load:ident, $store:ident, $mul:ident, $add:ident, $zero:ident) => {
+    ($feat:literal, $v:ty, $lanes:literal, $acc:literal, $load:ident, $store:ident, $mul:ident, $add:ident, $fma:ident, $zero:ident) => {
         #[target_feature(enable = $feat)]
         pub unsafe fn block(plan: &TilePlan, zb: &[f32], f: &mut [f32], acc: &mut [f64]) {
             let nv = plan.n_vars;
@@ -443,6 +443,26 @@ macro_rules! walk {
             $store(l.as_mut_ptr(), x);
             l.iter().map(|x| *x as f64).sum()
         }
+
+        /// Node rows `x + r B` (r < MR) against triple rows `w + t B` (t < NR) over one block,
+        /// in accumulator `4 r + t`; `finish` adds their sums to `out`.
+        #[inline]
+        #[target_feature(enable = $feat)]
+        unsafe fn tile<const MR: usize, const NR: usize>(x: *const f32, w: *const f32, out: *mut f64) {
+            let mut a = [$zero(); $acc];
+            let mut i = 0;
+            while i < B {
+                let xs: [$v; MR] = std::array::from_fn(|r| $load(x.add(r * B + i)));
+                for t in 0..NR {
+                    let wt = $load(w.add(t * B + i));
+                    for r in 0..MR {
+                        a[4 * r + t] = $fma(xs[r], wt, a[4 * r + t]);
+                    }
+                }
+                i += $lanes;
+            }
+            finish(&a, out);
+        }
     };
 }
 
@@ -455,10 +475,12 @@ mod avx512 {
         "avx512f",
         __m512,
         16,
+        16,
         _mm512_loadu_ps,
         _mm512_storeu_ps,
         _mm512_mul_ps,
         _mm512_add_ps,
+        _mm512_fmadd_ps,
         _mm512_setzero_ps
     );
 
@@ -501,24 +523,11 @@ mod avx512 {
         l.iter().sum()
     }
 
-    /// Node rows `x + r B` (r < MR) against triple rows `w + t B` (t < NR) over one block; the
-    /// sums added to `out[4 t + r]` in f64.
+    /// A tile's 16 sums added to `out` in f64: accumulator `4 r + t` to slot `4 t + r`.
     #[inline]
     #[target_feature(enable = "avx512f")]
-    unsafe fn tile<const MR: usize, const NR: usize>(x: *const f32, w: *const f32, out: *mut f64) {
-        let mut a = [_mm512_setzero_ps(); 16];
-        let mut i = 0;
-        while i < B {
-            let xs: [__m512; MR] = std::array::from_fn(|r| _mm512_loadu_ps(x.add(r * B + i)));
-            for t in 0..NR {
-                let wt = _mm512_loadu_ps(w.add(t * B + i));
-                for r in 0..MR {
-                    a[4 * r + t] = _mm512_fmadd_ps(xs[r], wt, a[4 * r + t]);
-                }
-            }
-            i += 16;
-        }
-        let s = reduce16(&a);
+    unsafe fn finish(a: &[__m512; 16], out: *mut f64) {
+        let s = reduce16(a);
         let lo = _mm512_cvtps_pd(_mm512_castps512_ps256(s));
         let hi = _mm512_cvtps_pd(_mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(
             _mm512_castps_pd(s),
@@ -570,10 +579,12 @@ mod avx2 {
         "avx2,fma",
         __m256,
         8,
+        8,
         _mm256_loadu_ps,
         _mm256_storeu_ps,
         _mm256_mul_ps,
         _mm256_add_ps,
+        _mm256_fmadd_ps,
         _mm256_setzero_ps
     );
 
@@ -613,24 +624,11 @@ mod avx2 {
         l.iter().sum()
     }
 
-    /// Node rows `x + r B` (r < MR) against triple rows `w + t B` (t < NR) over one block; the
-    /// sums added to `out[4 r + t]` in f64.
+    /// A tile's 8 sums added to `out` in f64, accumulator i to slot i.
     #[inline]
     #[target_feature(enable = "avx2,fma")]
-    unsafe fn tile<const MR: usize, const NR: usize>(x: *const f32, w: *const f32, out: *mut f64) {
-        let mut a = [_mm256_setzero_ps(); 8];
-        let mut i = 0;
-        while i < B {
-            let xs: [__m256; MR] = std::array::from_fn(|r| _mm256_loadu_ps(x.add(r * B + i)));
-            for t in 0..NR {
-                let wt = _mm256_loadu_ps(w.add(t * B + i));
-                for r in 0..MR {
-                    a[4 * r + t] = _mm256_fmadd_ps(xs[r], wt, a[4 * r + t]);
-                }
-            }
-            i += 8;
-        }
-        let s = reduce8(&a);
+    unsafe fn finish(a: &[__m256; 8], out: *mut f64) {
+        let s = reduce8(a);
         let lo = _mm256_cvtps_pd(_mm256_castps256_ps128(s));
         let hi = _mm256_cvtps_pd(_mm256_extractf128_ps::<1>(s));
         _mm256_storeu_pd(out, _mm256_add_pd(_mm256_loadu_pd(out), lo));
