@@ -19,12 +19,14 @@
 //! block are kept in the working precision and added to f64 totals, so the accumulation across
 //! the whole sweep is f64.
 //!
-//! Where the CPU has AVX2 and FMA, f32 sweeps of degree >= 3 run another kernel (module `tiles`):
-//! each candidate of degree >= 3 as a node (degree <= d-3) times a triple `z_a z_b z_c`, the
-//! nodes of one last variable four at a time against all the triples they meet in 4 x 4
-//! register tiles (25,000 x 12,376 and 497,420: about 2x faster than the family walk below,
-//! docs/method/regression.md). The family walk serves f64 sweeps, the column statistics and
-//! AVX2 hosts.
+//! Where the CPU has AVX2 and FMA, f32 sweeps of degree >= 3 that are not materialised run
+//! another kernel (module `tiles`) wherever one task's scratch stays within
+//! `tiles::MAX_SCRATCH_BYTES` (the triples must fit L2: n_z up to 15): each candidate of degree
+//! >= 3 as a node (degree <= d-3) times a triple `z_a z_b z_c`, the nodes of one last variable
+//! four at a time against all the triples they meet in register tiles, 4 x 4 with AVX-512, two
+//! of 2 x 4 with AVX2 (25,000 x 12,376 and 497,420 with AVX-512: about 2x faster than the
+//! family walk, docs/method/regression.md). The family walk serves f64 sweeps, the column
+//! statistics, larger n_z and CPUs without AVX2.
 //!
 //! B = 256 was measured best on this machine (2.2-2.8x the f32 multiply-add limit on 497,420
 //! candidates, against 2.9x at 128 and 512 and 3.7x at 64): longer blocks amortise the
@@ -43,9 +45,11 @@
 //! subnormals.
 //!
 //! Memory: Z twice (f64 and f32 copies, O(n_s x n_z)), and per sweep task (eight per thread
-//! where the tasks' workspaces stay within 16 MiB, else two) one f64 accumulator of length
-//! n_candidates and about 100 KiB of scratch, kept from one sweep to the next (for f32 sweeps and
-//! for the f64 statistics separately: 32 MB in all at 497,420 candidates on two threads).
+//! where the tasks' workspaces stay within 16 MiB, else two) one f64 accumulator and a scratch,
+//! kept from one sweep to the next (for f32 sweeps and for the f64 statistics separately). The
+//! family walk's accumulator has one slot per candidate and about 100 KiB of scratch; the tile
+//! kernel's has 16 slots per tile, some unused (about 1.2 slots per candidate), and 411 KiB of
+//! scratch at n_z = 11, d = 6, 618 KiB at n_z = 13, d = 9.
 //!
 //! # Materialised mode
 //! When `n_samples x n_candidates x 8 bytes` is at most [`CpuOptions::materialize_limit_bytes`]
@@ -103,8 +107,8 @@ pub struct CpuEngine {
     /// Powers of two of the f32 sweeps (see "The f32 range" in the module docs).
     scale32: F32Scale,
     dense: Option<DenseEngine>,
-    /// The f32 sweeps' matrix-product kernel (module `tiles`), where the CPU has AVX-512 and
-    /// the basis suits it; the family kernel otherwise.
+    /// The f32 sweeps' matrix-product kernel (module `tiles`), where the CPU has AVX-512 or
+    /// AVX2 + FMA and the basis suits it; the family kernel otherwise.
     tiles: Option<TilePlan>,
     /// Each sweep task's accumulator and scratch, kept from one sweep to the next.
     work32: Mutex<Vec<Work<kernel::Scratch<f32>>>>,
@@ -576,6 +580,9 @@ mod tests {
             (4, 2, 140),
             (1, 5, 300),
             (2, 3, 257),
+            // Too many triples for the tile kernel: f32 sweeps of degree 3 in the family walk,
+            // whose plan order differs from the basis order.
+            (16, 3, 300),
         ] {
             let (b, f) = problem(nz, d, n);
             let mut dense = CpuEngine::new(

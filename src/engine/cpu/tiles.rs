@@ -21,8 +21,8 @@
 //! Measured (25,000 x 12,376 and 25,000 x 497,420, this host's AVX-512): see
 //! `docs/method/regression.md`, "Nodes times triples".
 //!
-//! Memory: one task's scratch holds `1 + n_z + pairs + triples + (d - 3) + 4 n_z` vectors of
-//! [`B`] f32: 412 KB at n_z = 11, d = 6, 640 KB at n_z = 13, d = 9. The engine uses this kernel
+//! Memory: one task's scratch holds `1 + n_z + pairs + triples + max(d - 3, 1) + 4 n_z`
+//! vectors of [`B`] f32: 411 KiB at n_z = 11, d = 6, 618 KiB at n_z = 13, d = 9. The engine uses this kernel
 //! where that is at most [`MAX_SCRATCH_BYTES`] (the triples must stay in one core's L2), else
 //! the family kernel.
 
