@@ -22,7 +22,7 @@
 //! Where the CPU has AVX2 and FMA, f32 sweeps of degree >= 3 that are not materialised run
 //! another kernel (module `tiles`) wherever one task's scratch stays within
 //! `tiles::MAX_SCRATCH_BYTES` (the triples must fit L2: n_z up to 15): each candidate of degree
-//! >= 3 as a node (degree <= d-3) times a triple `z_a z_b z_c`, the nodes of one last variable
+//! 3 or more as a node (degree <= d-3) times a triple `z_a z_b z_c`, the nodes of one last variable
 //! four at a time against all the triples they meet in register tiles, 4 x 4 with AVX-512, two
 //! of 2 x 4 with AVX2 (25,000 x 12,376 and 497,420 with AVX-512: about 2x faster than the
 //! family walk, docs/method/regression.md). The family walk serves f64 sweeps, the column
