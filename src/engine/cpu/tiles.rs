@@ -463,6 +463,18 @@ macro_rules! walk {
             }
             finish(&a, out);
         }
+
+        /// [`tile`] of MR nodes against `nr` (1 to 4) triples.
+        #[inline]
+        #[target_feature(enable = $feat)]
+        unsafe fn tile_nr<const MR: usize>(x: *const f32, w: *const f32, nr: usize, out: *mut f64) {
+            match nr {
+                4 => tile::<MR, 4>(x, w, out),
+                3 => tile::<MR, 3>(x, w, out),
+                2 => tile::<MR, 2>(x, w, out),
+                _ => tile::<MR, 1>(x, w, out),
+            }
+        }
     };
 }
 
@@ -488,23 +500,11 @@ mod avx512 {
     #[inline]
     #[target_feature(enable = "avx512f")]
     unsafe fn chunk(x: *const f32, w: *const f32, count: usize, nr: usize, out: *mut f64) {
-        match (count, nr) {
-            (4, 4) => tile::<4, 4>(x, w, out),
-            (4, 3) => tile::<4, 3>(x, w, out),
-            (4, 2) => tile::<4, 2>(x, w, out),
-            (4, 1) => tile::<4, 1>(x, w, out),
-            (3, 4) => tile::<3, 4>(x, w, out),
-            (3, 3) => tile::<3, 3>(x, w, out),
-            (3, 2) => tile::<3, 2>(x, w, out),
-            (3, 1) => tile::<3, 1>(x, w, out),
-            (2, 4) => tile::<2, 4>(x, w, out),
-            (2, 3) => tile::<2, 3>(x, w, out),
-            (2, 2) => tile::<2, 2>(x, w, out),
-            (2, 1) => tile::<2, 1>(x, w, out),
-            (1, 4) => tile::<1, 4>(x, w, out),
-            (1, 3) => tile::<1, 3>(x, w, out),
-            (1, 2) => tile::<1, 2>(x, w, out),
-            _ => tile::<1, 1>(x, w, out),
+        match count {
+            4 => tile_nr::<4>(x, w, nr, out),
+            3 => tile_nr::<3>(x, w, nr, out),
+            2 => tile_nr::<2>(x, w, nr, out),
+            _ => tile_nr::<1>(x, w, nr, out),
         }
     }
 
@@ -595,16 +595,10 @@ mod avx2 {
     unsafe fn chunk(x: *const f32, w: *const f32, count: usize, nr: usize, out: *mut f64) {
         for (half, rows) in [(0, count.min(2)), (1, count.saturating_sub(2))] {
             let (x, out) = (x.add(2 * half * B), out.add(8 * half));
-            match (rows, nr) {
-                (0, _) => {}
-                (2, 4) => tile::<2, 4>(x, w, out),
-                (2, 3) => tile::<2, 3>(x, w, out),
-                (2, 2) => tile::<2, 2>(x, w, out),
-                (2, 1) => tile::<2, 1>(x, w, out),
-                (1, 4) => tile::<1, 4>(x, w, out),
-                (1, 3) => tile::<1, 3>(x, w, out),
-                (1, 2) => tile::<1, 2>(x, w, out),
-                _ => tile::<1, 1>(x, w, out),
+            match rows {
+                0 => {}
+                2 => tile_nr::<2>(x, w, nr, out),
+                _ => tile_nr::<1>(x, w, nr, out),
             }
         }
     }
