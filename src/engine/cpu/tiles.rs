@@ -243,6 +243,11 @@ impl TilePlan {
         1 + nv + pairs + triples + Self::slots(d) + 4 * nv
     }
 
+    /// The scratch's first stack slot, in vectors (after v, `v z_k`, the pairs, the triples).
+    fn first_slot(&self) -> usize {
+        1 + self.n_vars + self.pairs.len() + self.triples.len()
+    }
+
     fn slots(d: usize) -> usize {
         (d - 3).max(1)
     }
@@ -277,7 +282,7 @@ impl TileScratch {
         let mut s = TileScratch {
             lines: vec![Line::default(); plan.vectors() * B / 16],
         };
-        let slots = (1 + plan.n_vars + plan.pairs.len() + plan.triples.len()) * B;
+        let slots = plan.first_slot() * B;
         s.floats()[slots..slots + B].fill(1.0);
         s
     }
@@ -354,7 +359,7 @@ macro_rules! walk {
             let vz = base.add(B);
             let pw = vz.add(nv * B);
             let tw = pw.add(plan.pairs.len() * B);
-            let slots = tw.add(plan.triples.len() * B);
+            let slots = base.add(plan.first_slot() * B);
             let bufs = slots.add(TilePlan::slots(plan.degree) * B);
             let z = zb.as_ptr();
             let low = plan.order.len() - 1 - nv - plan.pairs.len();
