@@ -4,7 +4,7 @@
 // triples"). Build and run with benches/research/tile_model.sh. Switches: -DNRM=6 (4 x 6 tiles),
 // -DB=512 (blocks of 512 samples); environment LATE=1 (each tile chunk's triples formed into an
 // L1 buffer instead of all stored), NOTILES=1 (forming the vectors only).
-#include <immintrin.h>
+#include "fma_peak.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -16,20 +16,10 @@
 #ifndef NRM
 #define NRM 4
 #endif
-static double now(){struct timespec t;clock_gettime(CLOCK_MONOTONIC,&t);return t.tv_sec+1e-9*t.tv_nsec;}
 // nodes: deg 0..3, ordered by last var (constant first)
 int nn=0; int npar[1000], nvar[1000], nlast[1000], ndeg[1000]; int Q[NV]; // Q[a] = #nodes with last var <= a (incl const)
 int ntr=0; int ta[400],tb[400],tc[400], toff[NV+1]; // triples sorted by a
 float *nodes, *tri, *vz, *pw; double *acc;
-__attribute__((noinline)) void peak(long n, float*out){
-  __m512 a_[24]; for(int i=0;i<24;i++) a_[i]=_mm512_set1_ps(0.f);
-  __m512 a=_mm512_set1_ps(1.0000001f), b=_mm512_set1_ps(0.999999f);
-  for(long i=0;i<n;i++){
-#pragma GCC unroll 24
-    for(int j=0;j<24;j++) a_[j]=_mm512_fmadd_ps(a,a_[j],b);
-  }
-  __m512 s=a_[0]; for(int i=1;i<24;i++) s=_mm512_add_ps(s,a_[i]); _mm512_storeu_ps(out,s);
-}
 static inline __m512 comb1(__m512 x, __m512 y){ // 128-bit quarters: [x02, x13, y02, y13]
   return _mm512_add_ps(_mm512_shuffle_f32x4(x,y,0x44),_mm512_shuffle_f32x4(x,y,0xEE));}
 static inline __m512 comb2(__m512 x, __m512 y){ // x=[A0,A1,B0,B1] -> [A0+A1? ...]

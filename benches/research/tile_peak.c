@@ -2,21 +2,10 @@
 // accumulators, one thread: the fraction of this CPU's multiply-add rate a GEMM-like tile reaches
 // with its data in L1 or L2 (docs/method/regression.md, "Nodes times triples"). Arguments:
 // K (samples per tile), tiles, repetitions. Build and run with benches/research/tile_model.sh.
-#include <immintrin.h>
+#include "fma_peak.h"
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
-static double now(){struct timespec t;clock_gettime(CLOCK_MONOTONIC,&t);return t.tv_sec+1e-9*t.tv_nsec;}
-// peak: 24 independent accumulators
-__attribute__((noinline)) void peak(long n, float*out){
-  __m512 acc[24]; for(int i=0;i<24;i++) acc[i]=_mm512_set1_ps(0.f);
-  __m512 a=_mm512_set1_ps(1.0000001f), b=_mm512_set1_ps(0.999999f);
-  for(long i=0;i<n;i++){
-#pragma GCC unroll 24
-    for(int j=0;j<24;j++) acc[j]=_mm512_fmadd_ps(a,acc[j],b);
-  }
-  __m512 s=acc[0]; for(int i=1;i<24;i++) s=_mm512_add_ps(s,acc[i]); _mm512_storeu_ps(out,s);
-}
 // tile: A packed [K][32], B packed [K][12]; C 32x12
 __attribute__((noinline)) void tile(int K, const float*A, const float*B, float*C){
   __m512 c[24]; for(int i=0;i<24;i++) c[i]=_mm512_setzero_ps();
