@@ -54,6 +54,26 @@ pub fn reads_as_number(name: &str) -> bool {
         && t.parse::<f64>().is_ok()
 }
 
+/// Why a channel name cannot stand in printed equations and term expressions, if it cannot:
+/// it reads as a number ([`reads_as_number`]), as a non-finite value (`nan`, `inf`, `infinity`
+/// in any case: `0.12*nan` reads as a broken coefficient), or it is not one name to the
+/// expression parser (letters, digits and `_`, not a digit first: `y^2` printed as `0.3*y^2`
+/// reads as a power, `force [N]` cannot be named in a term).
+pub fn name_fault(name: &str) -> Option<&'static str> {
+    if reads_as_number(name) {
+        return Some("reads as a number, which terms and expressions cannot tell from a constant");
+    }
+    if ["nan", "inf", "infinity"].contains(&name.to_ascii_lowercase().as_str()) {
+        return Some("reads as a non-finite number in the printed equations");
+    }
+    let mut chars = name.chars();
+    let first_ok = chars.next().is_some_and(|c| c.is_alphabetic() || c == '_');
+    if !first_ok || !chars.all(|c| c.is_alphanumeric() || c == '_') {
+        return Some("is not one name to the expression parser (letters, digits and '_', not a digit first): it would print ambiguously in equations and could not be named in a term");
+    }
+    None
+}
+
 /// A file written whole or not at all: the bytes go to a temporary file in the target's folder
 /// (`.ctsid-PID-N.tmp`, short whatever the target's name), renamed over the target by
 /// [`AtomicFile::commit`]. Dropped without a commit (an error on the way), the temporary file is

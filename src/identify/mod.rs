@@ -281,15 +281,19 @@ impl Settings {
             ));
         }
         crate::basis::check_degree(self.degree)?;
-        // A channel named like a number cannot be told from a constant in a term; refused here
-        // by the option that names it (the basis refused it later as a 'features' setting,
-        // which identify does not have).
+        // A channel named like a number cannot be told from a constant in a term, and one that
+        // is not one name to the expression parser prints ambiguously (`0.3*y^2`); refused here
+        // by the option that names it (the basis refused numbers later as a 'features'
+        // setting, which identify does not have).
         for (list, what) in [(&self.outputs, "output"), (&self.inputs, "input")] {
-            if let Some(v) = list.iter().find(|v| crate::util::reads_as_number(v)) {
-                return Err(Error::param(
-                    what,
-                    format!("'{v}' reads as a number, which terms and expressions cannot tell from a constant; rename the channel"),
-                ));
+            for v in list.iter() {
+                if let Some(why) = crate::util::name_fault(v) {
+                    let v = crate::util::clip(v, 40);
+                    return Err(Error::param(
+                        what,
+                        format!("'{v}' {why}; rename the channel"),
+                    ));
+                }
             }
         }
         // A channel named like an output's derivative (`y_d1` beside output `y`) would be taken

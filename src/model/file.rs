@@ -944,15 +944,6 @@ impl Model {
                 return Err(format!("the variable name '{lhs}' is used twice: it is the left-hand side of output '{}' of order {} (outputs, their derivatives and inputs must have distinct names)", o.name, o.order));
             }
         }
-        // A name that reads as a number cannot be told from a constant: an input `2` showed as
-        // `3*2` and a term `{"expression": "2"}` read the number, not the input.
-        let names = self.outputs.iter().map(|o| &o.name).chain(&self.inputs);
-        if let Some(n) = names.into_iter().find(|n| crate::util::reads_as_number(n)) {
-            return Err(format!(
-                "the name '{}' reads as a number, which terms and expressions cannot tell from a constant; rename it",
-                crate::util::clip(n, 40)
-            ));
-        }
         // A line break or another control character in a name splits the printed equations
         // and the written tables' lines.
         let names = self.outputs.iter().map(|o| &o.name).chain(&self.inputs);
@@ -961,6 +952,18 @@ impl Model {
                 "the name {:?} holds a control character (a line break, a tab); rename it",
                 crate::util::clip(n, 40)
             ));
+        }
+        // A name that reads as a number cannot be told from a constant (an input `2` showed as
+        // `3*2` and a term `{"expression": "2"}` read the number, not the input), and one that
+        // is not one name to the expression parser prints ambiguously (`0.3*y^2`).
+        let names = self.outputs.iter().map(|o| &o.name).chain(&self.inputs);
+        for n in names {
+            if let Some(why) = crate::util::name_fault(n) {
+                return Err(format!(
+                    "the name '{}' {why}; rename it",
+                    crate::util::clip(n, 40)
+                ));
+            }
         }
         Ok(table)
     }
