@@ -287,7 +287,7 @@ impl Settings {
         // setting, which identify does not have).
         for (list, what) in [(&self.outputs, "output"), (&self.inputs, "input")] {
             for v in list.iter() {
-                if let Some(why) = crate::util::name_fault(v) {
+                if let Some(why) = crate::util::channel_name_fault(v) {
                     let v = crate::util::clip(v, 40);
                     return Err(Error::param(
                         what,

@@ -954,8 +954,9 @@ impl Model {
             ));
         }
         // A name that reads as a number cannot be told from a constant (an input `2` showed as
-        // `3*2` and a term `{"expression": "2"}` read the number, not the input), and one that
-        // is not one name to the expression parser prints ambiguously (`0.3*y^2`).
+        // `3*2` and a term `{"expression": "2"}` read the number, not the input), and `nan`
+        // printed as `0.12*nan` reads as a broken coefficient. (Names the expression parser
+        // cannot read as one name, refused by identify, still load: files written before.)
         let names = self.outputs.iter().map(|o| &o.name).chain(&self.inputs);
         for n in names {
             if let Some(why) = crate::util::name_fault(n) {
