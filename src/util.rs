@@ -54,12 +54,16 @@ pub fn reads_as_number(name: &str) -> bool {
         && t.parse::<f64>().is_ok()
 }
 
+/// Why a name that [`reads_as_number`] is refused (the basis, identify and model files say it).
+pub const READS_AS_NUMBER: &str =
+    "reads as a number, which terms and expressions cannot tell from a constant";
+
 /// Why a name cannot stand for a variable in a model, if it cannot: it reads as a number
 /// ([`reads_as_number`]) or as a non-finite value (`nan`, `inf`, `infinity` in any case:
 /// `0.12*nan` reads as a broken coefficient). Model files are held to this.
 pub fn name_fault(name: &str) -> Option<&'static str> {
     if reads_as_number(name) {
-        return Some("reads as a number, which terms and expressions cannot tell from a constant");
+        return Some(READS_AS_NUMBER);
     }
     if ["nan", "inf", "infinity"].contains(&name.to_ascii_lowercase().as_str()) {
         return Some("reads as a non-finite number in the printed equations");

@@ -211,7 +211,7 @@ impl Basis {
         if let Some(v) = names.iter().find(|v| crate::util::reads_as_number(v)) {
             return Err(Error::param(
                 "features",
-                format!("'{v}' reads as a number, which terms and expressions cannot tell from a constant; rename the channel"),
+                format!("'{v}' {}; rename the channel", crate::util::READS_AS_NUMBER),
             ));
         }
         let total = count(n, degree).unwrap_or(u64::MAX);

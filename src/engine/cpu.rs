@@ -48,8 +48,9 @@
 //! where the tasks' workspaces stay within 16 MiB, else two) one f64 accumulator and a scratch,
 //! kept from one sweep to the next (for f32 sweeps and for the f64 statistics separately). The
 //! family walk's accumulator has one slot per candidate and about 100 KiB of scratch; the tile
-//! kernel's has 16 slots per tile, some unused (about 1.2 slots per candidate), and 411 KiB of
-//! scratch at n_z = 11, d = 6, 618 KiB at n_z = 13, d = 9.
+//! kernel's has 16 slots per tile, some unused (1.13 slots per candidate at n_z = 11, d = 6,
+//! 1.08 at n_z = 13, d = 9), and 411 KiB of scratch at n_z = 11, d = 6, 618 KiB at n_z = 13,
+//! d = 9.
 //!
 //! # Materialised mode
 //! When `n_samples x n_candidates x 8 bytes` is at most [`CpuOptions::materialize_limit_bytes`]
@@ -122,6 +123,33 @@ pub struct CpuEngine {
 struct Work<S> {
     acc: Vec<f64>,
     scratch: S,
+}
+
+/// One pass over the blocks: Z laid out in blocks of `bsz` samples and the vector each block's
+/// scratch loads (times `v_scale`).
+struct Pass<'a, T> {
+    blocks: &'a [T],
+    bsz: usize,
+    v: &'a [f64],
+    v_scale: f64,
+}
+
+/// A kernel's scratch, which holds one block of the swept vector.
+trait BlockScratch {
+    /// Loads one block of v times `scale` (shorter than the block at the end: the rest zero).
+    fn load_v(&mut self, v: &[f64], scale: f64);
+}
+
+impl<T: Elem> BlockScratch for kernel::Scratch<T> {
+    fn load_v(&mut self, v: &[f64], scale: f64) {
+        kernel::Scratch::load_v(self, v, scale)
+    }
+}
+
+impl BlockScratch for TileScratch {
+    fn load_v(&mut self, v: &[f64], scale: f64) {
+        TileScratch::load_v(self, v, scale)
+    }
 }
 
 /// Exponent of the largest f32 product a sweep forms (see the module docs).
@@ -283,57 +311,63 @@ impl CpuEngine {
         out: &mut [f64],
         scale: Option<&F32Scale>,
     ) {
-        let n = self.n_samples;
         let v_exp = scale.map_or(0, |s| s.v_exp(v));
-        let v_scale = 2f64.powi(v_exp);
         let nz = self.basis.n_vars();
         let (degree, plan) = (self.plan.degree(), &self.plan);
         let scratch = kernel::Scratch::<T>::elements(degree, nz, bsz) * std::mem::size_of::<T>();
         let new = || kernel::Scratch::<T>::new(degree, nz, bsz);
+        let pass = Pass {
+            blocks,
+            bsz,
+            v,
+            v_scale: 2f64.powi(v_exp),
+        };
         let mut work = work.lock().unwrap_or_else(|e| e.into_inner());
-        let total = self.on_blocks(&mut work, bsz, plan.order().len(), scratch, new, |b, wk| {
-            let zb = &blocks[b * nz * bsz..(b + 1) * nz * bsz];
-            let s0 = b * bsz;
-            let len = bsz.min(n - s0);
-            wk.scratch.load_v(&v[s0..s0 + len], v_scale);
-            kernel::sweep_block(plan, zb, bsz, &mut wk.scratch, &mut wk.acc);
-        });
+        let total = self.on_blocks(
+            &mut work,
+            pass,
+            plan.order().len(),
+            scratch,
+            new,
+            |zb, s, acc| kernel::sweep_block(plan, zb, bsz, s, acc),
+        );
         scatter(plan.order(), total, scale.map(|s| (s, v_exp)), out);
     }
 
     /// [`CpuEngine::raw_sweep`] of the scaled f32 blocks with the tile kernel.
     fn tile_sweep(&self, plan: &TilePlan, v: &[f64], out: &mut [f64]) {
-        let n = self.n_samples;
         let v_exp = self.scale32.v_exp(v);
-        let v_scale = 2f64.powi(v_exp);
-        let nz = self.basis.n_vars();
-        let bsz = tiles::B;
         let new = || TileScratch::new(plan);
+        let pass = Pass {
+            blocks: &self.z_blocks32,
+            bsz: tiles::B,
+            v,
+            v_scale: 2f64.powi(v_exp),
+        };
         let mut work = self.work_tiles.lock().unwrap_or_else(|e| e.into_inner());
-        let slots = plan.order().len();
-        let total = self.on_blocks(&mut work, bsz, slots, plan.scratch_bytes(), new, |b, wk| {
-            let zb = &self.z_blocks32[b * nz * bsz..(b + 1) * nz * bsz];
-            let s0 = b * bsz;
-            let len = bsz.min(n - s0);
-            wk.scratch.load_v(&v[s0..s0 + len], v_scale);
-            tiles::sweep_block(plan, zb, &mut wk.scratch, &mut wk.acc);
+        let (slots, bytes) = (plan.order().len(), plan.scratch_bytes());
+        let total = self.on_blocks(&mut work, pass, slots, bytes, new, |zb, s, acc| {
+            tiles::sweep_block(plan, zb, s, acc)
         });
         scatter(plan.order(), total, Some((&self.scale32, v_exp)), out);
     }
 
-    /// Runs `block(b, work)` for every block `b` of `bsz` samples in a few tasks per thread
-    /// (enough for load balance, few enough that their accumulators stay cheap), each on one
-    /// kept [`Work`] whose accumulator it zeroes first; the tasks' accumulators summed.
-    fn on_blocks<'w, S: Send>(
+    /// Runs `kernel(zb, scratch, acc)` for every block of `pass` (its Z and, loaded into the
+    /// scratch, its part of v) in a few tasks per thread (enough for load balance, few enough
+    /// that their accumulators stay cheap), each on one kept [`Work`] of `slots` accumulators
+    /// (zeroed first; a fresh one from `new_scratch`, of `scratch_bytes`, where the task count
+    /// changed); the tasks' accumulators summed.
+    fn on_blocks<'w, T: Sync, S: BlockScratch + Send>(
         &self,
         work: &'w mut Vec<Work<S>>,
-        bsz: usize,
+        pass: Pass<'_, T>,
         slots: usize,
         scratch_bytes: usize,
         new_scratch: impl Fn() -> S,
-        block: impl Fn(usize, &mut Work<S>) + Sync,
+        kernel: impl Fn(&[T], &mut S, &mut [f64]) + Sync,
     ) -> &'w [f64] {
-        let n_blocks = self.n_samples.div_ceil(bsz);
+        let (n, bsz, nz) = (self.n_samples, pass.bsz, self.basis.n_vars());
+        let n_blocks = n.div_ceil(bsz);
         let threads = rayon::current_num_threads().max(1);
         // Eight tasks per thread where their workspaces stay small (16 MiB per pool): on a
         // shared host a core slowed for a moment holds up the sweep's end, and finer tasks let
@@ -356,7 +390,14 @@ impl CpuEngine {
         work.par_iter_mut().enumerate().for_each(|(t, wk)| {
             wk.acc.fill(0.0);
             for b in t * per_task..((t + 1) * per_task).min(n_blocks) {
-                block(b, wk);
+                let s0 = b * bsz;
+                let len = bsz.min(n - s0);
+                wk.scratch.load_v(&pass.v[s0..s0 + len], pass.v_scale);
+                kernel(
+                    &pass.blocks[b * nz * bsz..(b + 1) * nz * bsz],
+                    &mut wk.scratch,
+                    &mut wk.acc,
+                );
             }
         });
         let (first, rest) = work.split_first_mut().expect("at least one task");
@@ -371,7 +412,7 @@ impl CpuEngine {
         let nz = self.basis.n_vars();
         let bsz = B64;
         let ones;
-        let w = match w {
+        let v = match w {
             Some(w) => w,
             None => {
                 ones = vec![1.0; n];
@@ -380,13 +421,16 @@ impl CpuEngine {
         };
         let scratch = kernel::Scratch::<f64>::elements(self.plan.degree(), nz, bsz) * 8;
         let new = || kernel::Scratch::<f64>::new(self.plan.degree(), nz, bsz);
+        let pass = Pass {
+            blocks: &self.z_blocks64,
+            bsz,
+            v,
+            v_scale: 1.0,
+        };
         let mut work = self.work64.lock().unwrap_or_else(|e| e.into_inner());
-        self.on_blocks(&mut work, bsz, self.basis.len(), scratch, new, |b, wk| {
-            let zb = &self.z_blocks64[b * nz * bsz..(b + 1) * nz * bsz];
-            let s0 = b * bsz;
-            let len = bsz.min(n - s0);
-            wk.scratch.load_v(&w[s0..s0 + len], 1.0);
-            kernel::centred_block(&self.plan, zb, bsz, &mut wk.scratch, mean, &mut wk.acc);
+        let slots = self.basis.len();
+        self.on_blocks(&mut work, pass, slots, scratch, new, |zb, s, acc| {
+            kernel::centred_block(&self.plan, zb, bsz, s, mean, acc)
         })
         .to_vec()
     }

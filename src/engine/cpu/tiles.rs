@@ -37,12 +37,12 @@ pub const MAX_SCRATCH_BYTES: usize = 1_000_000;
 /// One step of a block's walk.
 #[derive(Debug, Clone, Copy)]
 enum Op {
-    /// `x = slot[parent] * z_var` (the constant: `var` = `u8::MAX`, x = slot 0, all ones) goes to
+    /// `x = slot[parent] * z_var` (the constant: no `var`, x = slot 0, all ones) goes to
     /// position `pos` of buffer `buf`, and to stack slot `slot` when the node has children.
     Node {
         parent: u8,
-        var: u8,
-        slot: u8,
+        var: Option<u8>,
+        slot: Option<u8>,
         buf: u8,
         pos: u8,
     },
@@ -125,8 +125,8 @@ impl Builder {
         let pos = self.waiting[f].len();
         self.ops.push(Op::Node {
             parent: parent as u8,
-            var: var.map_or(u8::MAX, |v| v as u8),
-            slot: if has_children { k as u8 } else { u8::MAX },
+            var: var.map(|v| v as u8),
+            slot: has_children.then_some(k as u8),
             buf: f as u8,
             pos: pos as u8,
         });
@@ -389,8 +389,8 @@ macro_rules! walk {
                     } => {
                         let x = slots.add(parent as usize * B) as *const f32;
                         let to = bufs.add((4 * buf as usize + pos as usize) * B);
-                        let keep = (slot != u8::MAX).then(|| slots.add(slot as usize * B));
-                        let zv = (var != u8::MAX).then(|| z.add(var as usize * B));
+                        let keep = slot.map(|k| slots.add(k as usize * B));
+                        let zv = var.map(|v| z.add(v as usize * B));
                         node(x, zv, to, keep);
                     }
                     Op::Flush { buf, count } => {
