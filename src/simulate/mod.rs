@@ -1121,8 +1121,8 @@ pub fn initial_state(
         x0.extend(estimate_initial_derivatives(t, y, order, &opts.run, &what)?);
     }
     let first = initial_window(model.orders().iter().copied().max().unwrap_or(1));
-    // A window beyond the run is the whole run (each doubling would repeat the same fit; a
-    // window near usize::MAX wrapped the doubling below to zero and never ended).
+    // A window beyond the run is the whole run (a window near usize::MAX once wrapped a
+    // doubling to zero and never ended).
     let window = window.min(t.len()).max(first);
     // By continuation: over a short horizon the outputs are nearly linear in the initial state
     // whatever the model, so the fit finds the right basin there, and each doubling of the
@@ -1130,16 +1130,49 @@ pub fn initial_state(
     // local fit's guess, a quadratic-drag oscillator at 3 % noise (velocity guess -3.3, truth
     // about 0) went to a wrong minimum (-0.35, 3.5) and scored NRMSE 0.53 against its own
     // truth; by continuation 0.004.
-    let mut w = (2 * first).min(window);
+    let windows = continuation_windows(first, window);
     let mut x = x0;
+    for (k, &w) in windows.iter().enumerate() {
+        let tol = if k + 1 < windows.len() {
+            STAGE_TOL
+        } else {
+            FINAL_TOL
+        };
+        x = fit_state(model, t, ys, us, &x, w, opts, tol);
+    }
+    Ok(x)
+}
+
+/// The windows of [`initial_state`]'s continuation: from twice the local fit's `first`
+/// samples, doubling, and the whole `window` once a doubling would reach four fifths of it.
+/// Doubling to the end left a last stage of 1.04 to 1.25 times the one before (192 then 200,
+/// 160 then 200 samples for orders 4 and 3), a whole fit that moved the state by little; the
+/// last stage is now up to 2.5 times the one before. Halving down from the window instead
+/// (25, 50, 100, 200 for order 3: a shorter first stage) changed which of two near-equal
+/// orders the MIMO search took on a case at 3 % noise (docs/method/simulation.md).
+fn continuation_windows(first: usize, window: usize) -> Vec<usize> {
+    let mut ws = Vec::new();
+    let mut w = first.saturating_mul(2).min(window);
     loop {
-        x = fit_initial_state(model, t, ys, us, &x, w, opts);
+        ws.push(w);
         if w >= window {
-            return Ok(x);
+            return ws;
         }
-        w = w.saturating_mul(2).min(window);
+        w = w.saturating_mul(2);
+        if w >= window - window / 5 {
+            w = window;
+        }
     }
 }
+
+/// Relative cost gain at which a stage of the continuation before the last stops: those
+/// stages only lead the last into its basin (a second iteration rarely gains more).
+const STAGE_TOL: f64 = 1e-2;
+
+/// Relative cost gain at which an initial-state fit on the whole window stops: the RMS then
+/// moves by less than a millionth, far below any printed figure (1e-10 before: a third
+/// Jacobian per fit for the same four digits; docs/method/simulation.md).
+const FINAL_TOL: f64 = 1e-6;
 
 /// The free run of `model` on a measured run from its [`initial_state`] on the first `window`
 /// samples: the simulated outputs, `[output][sample]`.
@@ -1530,6 +1563,21 @@ pub fn fit_initial_state(
     window: usize,
     opts: &SimOptions,
 ) -> Vec<f64> {
+    fit_state(model, t, ys, us, guess, window, opts, FINAL_TOL)
+}
+
+/// [`fit_initial_state`] stopping at a relative cost gain of `tol`.
+#[allow(clippy::too_many_arguments)]
+fn fit_state(
+    model: &CompiledModel,
+    t: &[f64],
+    ys: &[Vec<f64>],
+    us: &[Vec<f64>],
+    guess: &[f64],
+    window: usize,
+    opts: &SimOptions,
+    tol: f64,
+) -> Vec<f64> {
     let w = window.min(t.len());
     let n = model.n_state();
     let shaped = ys.len() == model.n_outputs()
@@ -1562,7 +1610,7 @@ pub fn fit_initial_state(
         lambda_min: 1e-12,
         max_tries: 6,
         lambda_max: f64::MAX,
-        tol: 1e-10,
+        tol,
         // Residuals are in units of each output's spread: an RMS of 1e-7 of it is far below
         // any measurement's resolution, and noise-free records otherwise ran all 8 iterations.
         cost_floor: 1e-14 * (w * ys.len()) as f64,
@@ -1628,6 +1676,29 @@ impl crate::lm::LeastSquares for InitialState<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_continuation_doubles_up_to_the_window() {
+        assert_eq!(continuation_windows(20, 200), vec![40, 80, 200]);
+        assert_eq!(continuation_windows(24, 200), vec![48, 96, 200]);
+        assert_eq!(continuation_windows(16, 200), vec![32, 64, 128, 200]);
+        assert_eq!(continuation_windows(15, 200), vec![30, 60, 120, 200]);
+        assert_eq!(continuation_windows(20, 39), vec![39]);
+        assert_eq!(
+            continuation_windows(15, usize::MAX).last(),
+            Some(&usize::MAX)
+        );
+        for first in [15, 20, 28] {
+            for window in [first, 41, 200, 1_000, 12_345] {
+                let ws = continuation_windows(first, window);
+                assert_eq!(*ws.last().unwrap(), window);
+                assert_eq!(ws[0], (2 * first).min(window));
+                for p in ws.windows(2) {
+                    assert!(p[1] > p[0] && 2 * p[1] <= 5 * p[0], "{ws:?}");
+                }
+            }
+        }
+    }
 
     #[test]
     fn closed_form_growth_rates_match_the_schur_eigenvalues() {
