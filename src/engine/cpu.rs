@@ -57,8 +57,10 @@
 //! (default 8 MiB), the engine builds the f64 design once and sweeps it as a dense matrix
 //! ([`DenseEngine`]); that avoids the tree walk overhead on tiny problems and is exact f64.
 //!
-//! Column statistics are always computed in f64 with two passes (mean, then centred squares),
-//! so nearly constant monomials get an accurate norm; `columns` evaluates exact f64 values.
+//! Column statistics are always computed in f64, in one pass about a shift near each column's
+//! mean (its weighted mean over 64 spread samples), with a second pass about the exact means for the
+//! columns where that would lose more than six digits, so nearly constant monomials get an
+//! accurate norm; `columns` evaluates exact f64 values.
 
 #![allow(clippy::needless_range_loop)]
 
@@ -222,6 +224,14 @@ impl F32Scale {
 const B32: usize = kernel::SIMD_B;
 const B64: usize = kernel::SIMD_B;
 
+/// Column statistics sum the squares about a shift and subtract the shift's share; a column
+/// whose sum of squares about the shift is more than this times its variance (six of f64's
+/// sixteen digits lost) is summed again about its exact mean.
+const CANCELLATION_LIMIT: f64 = 1e6;
+
+/// Samples whose weighted mean is each column's shift in the column statistics.
+const SHIFT_SAMPLES: usize = 64;
+
 impl CpuEngine {
     /// Builds the engine for `basis` over the feature rows `features` (names must match). Refuses
     /// features that fail [`Features::check`], a number of variables other than the basis's, no
@@ -379,7 +389,8 @@ impl CpuEngine {
         let tasks = (threads * 8).min(by_memory).max(threads * 2);
         let per_task = n_blocks.div_ceil(tasks).max(1);
         let n_tasks = n_blocks.div_ceil(per_task);
-        if work.len() != n_tasks {
+        // The f64 sweeps and the column statistics share one pool with different slot counts.
+        if work.len() != n_tasks || work.iter().any(|w| w.acc.len() != slots) {
             *work = (0..n_tasks)
                 .map(|_| Work {
                     acc: vec![0.0; slots],
@@ -407,18 +418,42 @@ impl CpuEngine {
         &first.acc
     }
 
-    fn centred_squares(&self, w: Option<&[f64]>, mean: &[f64]) -> Vec<f64> {
+    /// Each candidate's weighted mean over `SHIFT_SAMPLES` samples spread over the record: a
+    /// shift near its weighted mean for [`CpuEngine::shifted_sums`] (the plain mean where those
+    /// samples have no weight).
+    fn shifts(&self, w: &[f64]) -> Vec<f64> {
         let n = self.n_samples;
-        let nz = self.basis.n_vars();
-        let bsz = B64;
-        let ones;
-        let v = match w {
-            Some(w) => w,
-            None => {
-                ones = vec![1.0; n];
-                &ones
+        let at: Vec<usize> = (0..SHIFT_SAMPLES).map(|k| k * n / SHIFT_SAMPLES).collect();
+        let sw: f64 = at.iter().map(|&i| w[i]).sum();
+        let weight = |i: usize| {
+            if sw > 0.0 {
+                w[i] / sw
+            } else {
+                1.0 / at.len() as f64
             }
         };
+        (0..self.basis.len())
+            .map(|j| {
+                let code = self.basis.code(j);
+                let x = |i: usize| code.vars().fold(1.0, |p, v| p * self.z64[v * n + i]);
+                let first = x(at[0]);
+                let mean = at.iter().map(|&i| weight(i) * x(i)).sum::<f64>();
+                // A column constant on these samples (the constant monomial) gets its value
+                // itself: a mean rounded off it would make its zero variance a cancellation.
+                if at.iter().all(|&i| x(i) == first) {
+                    first
+                } else {
+                    mean
+                }
+            })
+            .collect()
+    }
+
+    /// Per candidate j, `sum_i v_i (x_ij - k_j)` (slot j) and `sum_i v_i (x_ij - k_j)^2` (slot
+    /// len + j) about the shifts `k`, in one f64 pass.
+    fn shifted_sums(&self, v: &[f64], shift: &[f64]) -> Vec<f64> {
+        let nz = self.basis.n_vars();
+        let bsz = B64;
         let scratch = kernel::Scratch::<f64>::elements(self.plan.degree(), nz, bsz) * 8;
         let new = || kernel::Scratch::<f64>::new(self.plan.degree(), nz, bsz);
         let pass = Pass {
@@ -428,11 +463,18 @@ impl CpuEngine {
             v_scale: 1.0,
         };
         let mut work = self.work64.lock().unwrap_or_else(|e| e.into_inner());
-        let slots = self.basis.len();
+        let slots = 2 * self.basis.len();
         self.on_blocks(&mut work, pass, slots, scratch, new, |zb, s, acc| {
-            kernel::centred_block(&self.plan, zb, bsz, s, mean, acc)
+            kernel::shifted_block(&self.plan, zb, bsz, s, shift, acc)
         })
         .to_vec()
+    }
+
+    /// Per candidate, `sum_i v_i (x_ij - m_j)^2` about the exact means `m` (a second pass, for
+    /// the columns where the shifted sums cancel).
+    fn centred_squares(&self, v: &[f64], mean: &[f64]) -> Vec<f64> {
+        let sums = self.shifted_sums(v, mean);
+        sums[mean.len()..].to_vec()
     }
 }
 
@@ -519,10 +561,26 @@ impl SweepEngine for CpuEngine {
         let n = self.n_samples;
         let w: Vec<f64> = weights.map(<[f64]>::to_vec).unwrap_or_else(|| vec![1.0; n]);
         let sw: f64 = w.iter().sum();
-        let mut sums = vec![0.0; self.basis.len()];
-        self.raw_sweep::<f64>(&self.work64, &self.z_blocks64, B64, &w, &mut sums, None);
-        let mean: Vec<f64> = sums.iter().map(|s| s / sw).collect();
-        let sq = self.centred_squares(weights, &mean);
+        let len = self.basis.len();
+        // One pass about shifts near each mean: `S2 - S1^2 / sw` cancels by a factor of
+        // `S2 / var`, about 1 + ((m - k) / sd)^2, so it keeps nearly all of f64's digits; where
+        // it would lose more than six (weights that put the mean far from the shift), the
+        // columns' squares are summed again about their exact means.
+        let shift = self.shifts(&w);
+        let sums = self.shifted_sums(&w, &shift);
+        let (s1, s2) = sums.split_at(len);
+        let mean: Vec<f64> = (0..len).map(|j| shift[j] + s1[j] / sw).collect();
+        let mut sq: Vec<f64> = (0..len).map(|j| s2[j] - s1[j] * s1[j] / sw).collect();
+        // (Not `sq * limit < s2`: a NaN would pass that.)
+        let kept = |sq: f64, s2: f64| sq * CANCELLATION_LIMIT >= s2;
+        if (0..len).any(|j| !kept(sq[j], s2[j])) {
+            let exact = self.centred_squares(&w, &mean);
+            for j in 0..len {
+                if !kept(sq[j], s2[j]) {
+                    sq[j] = exact[j];
+                }
+            }
+        }
         let norm = sq.iter().map(|s| s.max(0.0).sqrt()).collect();
         Ok(ColumnStats { mean, norm })
     }
@@ -682,6 +740,42 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// Column statistics sum about a shift near each column's weighted mean on 64 spread
+    /// samples; a weight that puts nearly all the mass on a sample outside them (17 of 300)
+    /// moves the mean far from it, and those columns are summed again about their exact means:
+    /// the dense engine's exact two-pass statistics.
+    #[test]
+    fn column_statistics_hold_where_the_weights_move_the_mean_off_the_shift() {
+        let n = 300;
+        let (b, mut f) = problem(3, 3, n);
+        f.data[..n].iter_mut().for_each(|x| *x += 1e3);
+        let mut s = 9u64;
+        let mut w: Vec<f64> = (0..n).map(|_| lcg(&mut s).abs()).collect();
+        w[17] = 1e12;
+        let options = |limit| CpuOptions {
+            precision: Precision::F64,
+            materialize_limit_bytes: limit,
+        };
+        let rs = CpuEngine::new(&b, &f, options(usize::MAX))
+            .unwrap()
+            .column_stats(Some(&w))
+            .unwrap();
+        let st = CpuEngine::new(&b, &f, options(0))
+            .unwrap()
+            .column_stats(Some(&w))
+            .unwrap();
+        for j in 0..b.len() {
+            assert!((st.mean[j] - rs.mean[j]).abs() <= 1e-12 * (1.0 + rs.mean[j].abs()));
+            assert!(
+                (st.norm[j] - rs.norm[j]).abs() <= 1e-7 * rs.norm[j],
+                "{} norm {} vs {}",
+                b.name(j),
+                st.norm[j],
+                rs.norm[j]
+            );
         }
     }
 

@@ -625,41 +625,85 @@ macro_rules! simd_families {
 mod simd {
     use std::arch::x86_64::*;
 
-    /// [`super::centred_child`] with AVX2: the same eight lane sums (two vectors), the same
-    /// operations in the same order (no fused multiply-add), so the same bits; written out
-    /// because the compiler's version of the portable loop ran at a quarter of this speed
-    /// (column statistics at 25,000 x 12,376: 0.14 s, the centred squares 81 % of it).
+    /// [`super::shifted_child`] with AVX2: the same eight lane sums of each, the same bits.
     #[inline]
     #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn centred_child_avx2(x: &[f64], z: &[f64], w: &[f64], m: f64) -> f64 {
+    pub unsafe fn shifted_child_avx2(x: &[f64], z: &[f64], w: &[f64], k: f64) -> (f64, f64) {
         let n = x.len();
         assert!(n.is_multiple_of(8) && z.len() >= n && w.len() >= n);
         let (xp, zp, wp) = (x.as_ptr(), z.as_ptr(), w.as_ptr());
-        let mv = _mm256_set1_pd(m);
-        let (mut a0, mut a1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+        let kv = _mm256_set1_pd(k);
+        let (mut s0, mut s1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+        let (mut q0, mut q1) = (_mm256_setzero_pd(), _mm256_setzero_pd());
         let mut c = 0;
         while c < n {
             let d0 = _mm256_sub_pd(
                 _mm256_mul_pd(_mm256_loadu_pd(xp.add(c)), _mm256_loadu_pd(zp.add(c))),
-                mv,
+                kv,
             );
             let d1 = _mm256_sub_pd(
                 _mm256_mul_pd(
                     _mm256_loadu_pd(xp.add(c + 4)),
                     _mm256_loadu_pd(zp.add(c + 4)),
                 ),
-                mv,
+                kv,
             );
-            let t0 = _mm256_mul_pd(_mm256_mul_pd(_mm256_loadu_pd(wp.add(c)), d0), d0);
-            let t1 = _mm256_mul_pd(_mm256_mul_pd(_mm256_loadu_pd(wp.add(c + 4)), d1), d1);
-            a0 = _mm256_add_pd(a0, t0);
-            a1 = _mm256_add_pd(a1, t1);
+            let t0 = _mm256_mul_pd(_mm256_loadu_pd(wp.add(c)), d0);
+            let t1 = _mm256_mul_pd(_mm256_loadu_pd(wp.add(c + 4)), d1);
+            s0 = _mm256_add_pd(s0, t0);
+            s1 = _mm256_add_pd(s1, t1);
+            q0 = _mm256_add_pd(q0, _mm256_mul_pd(t0, d0));
+            q1 = _mm256_add_pd(q1, _mm256_mul_pd(t1, d1));
             c += 8;
         }
-        let mut part = [0.0f64; 8];
-        _mm256_storeu_pd(part.as_mut_ptr(), a0);
-        _mm256_storeu_pd(part.as_mut_ptr().add(4), a1);
-        part.iter().sum::<f64>()
+        let (mut ps, mut pq) = ([0.0f64; 8], [0.0f64; 8]);
+        _mm256_storeu_pd(ps.as_mut_ptr(), s0);
+        _mm256_storeu_pd(ps.as_mut_ptr().add(4), s1);
+        _mm256_storeu_pd(pq.as_mut_ptr(), q0);
+        _mm256_storeu_pd(pq.as_mut_ptr().add(4), q1);
+        (ps.iter().sum::<f64>(), pq.iter().sum::<f64>())
+    }
+
+    /// [`super::shifted_child`] for `NC` children `x z_v` of one node at once with AVX-512: one
+    /// 8-lane vector per sum holds the portable loop's eight lane sums (lane l, samples l mod 8),
+    /// so the bits are the same; the node's values and the weights are loaded once for all
+    /// `NC` (a third of the loads of one child at a time). `z` holds the children's variables,
+    /// `bsz` samples each from `z[0]`, the child c's at `z[vars[c] * bsz..]`.
+    #[inline]
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn shifted_children_avx512<const NC: usize>(
+        x: &[f64],
+        z: &[f64],
+        vars: [usize; NC],
+        w: &[f64],
+        k: [f64; NC],
+        out: &mut [(f64, f64); NC],
+    ) {
+        let n = x.len();
+        assert!(n.is_multiple_of(8) && w.len() >= n);
+        assert!(vars.iter().all(|&v| z.len() >= (v + 1) * n));
+        let (xp, wp) = (x.as_ptr(), w.as_ptr());
+        let kv = k.map(|k| _mm512_set1_pd(k));
+        let (mut s, mut q) = ([_mm512_setzero_pd(); NC], [_mm512_setzero_pd(); NC]);
+        let mut c = 0;
+        while c < n {
+            let xv = _mm512_loadu_pd(xp.add(c));
+            let wv = _mm512_loadu_pd(wp.add(c));
+            for i in 0..NC {
+                let zv = _mm512_loadu_pd(z.as_ptr().add(vars[i] * n + c));
+                let d = _mm512_sub_pd(_mm512_mul_pd(xv, zv), kv[i]);
+                let t = _mm512_mul_pd(wv, d);
+                s[i] = _mm512_add_pd(s[i], t);
+                q[i] = _mm512_add_pd(q[i], _mm512_mul_pd(t, d));
+            }
+            c += 8;
+        }
+        for i in 0..NC {
+            let (mut ps, mut pq) = ([0.0f64; 8], [0.0f64; 8]);
+            _mm512_storeu_pd(ps.as_mut_ptr(), s[i]);
+            _mm512_storeu_pd(pq.as_mut_ptr(), q[i]);
+            out[i] = (ps.iter().sum::<f64>(), pq.iter().sum::<f64>());
+        }
     }
 
     /// Adds the lane sums of up to 8 f32 accumulators to `out` with one horizontal-add tree
@@ -777,101 +821,196 @@ pub fn simd_level() -> &'static str {
     })
 }
 
-/// Adds one block's `sum_i w_i (x_ij - mean_j)^2` to `acc[j]` (f64; for column statistics).
+/// Adds one block's `sum_i w_i (x_ij - k_j)` to `acc[j]` and `sum_i w_i (x_ij - k_j)^2` to
+/// `acc[len + j]` (f64, `len` candidates; for column statistics in one pass).
 ///
-/// The centring is exact (no `sum w x^2 - sw m^2`, which cancels for columns far from zero); the
-/// sums run over eight partial sums so that the loop vectorises, with AVX2 where the CPU has it
-/// (column statistics at 25,000 x 12,376: 259 ms with the scalar loop, 150 ms now,
-/// `benches/cpu_report.sh`).
-pub fn centred_block(
+/// With a shift `k_j` within a few standard deviations of the column's mean, the variance
+/// `S2 - S1^2 / sw` keeps nearly all of f64's digits (the cancellation is `1 + (m - k)^2 / var`),
+/// and the caller checks that it does.
+pub fn shifted_block(
     plan: &Plan,
     zb: &[f64],
     bsz: usize,
     s: &mut Scratch<f64>,
-    mean: &[f64],
+    shift: &[f64],
+    acc: &mut [f64],
+) {
+    shifted_block_at(simd_level(), plan, zb, bsz, s, shift, acc)
+}
+
+/// [`shifted_block`] with the instruction set `level` (one [`simd_level`] can give on this CPU).
+fn shifted_block_at(
+    level: &str,
+    plan: &Plan,
+    zb: &[f64],
+    bsz: usize,
+    s: &mut Scratch<f64>,
+    shift: &[f64],
     acc: &mut [f64],
 ) {
     #[cfg(target_arch = "x86_64")]
     {
-        if simd_level() != "none" && bsz.is_multiple_of(8) {
+        if level == "avx512" && bsz.is_multiple_of(8) {
+            #[target_feature(enable = "avx512f")]
+            unsafe fn avx512(
+                plan: &Plan,
+                zb: &[f64],
+                bsz: usize,
+                s: &mut Scratch<f64>,
+                shift: &[f64],
+                acc: &mut [f64],
+            ) {
+                shifted_block_avx512(plan, zb, bsz, s, shift, acc)
+            }
+            // SAFETY: the CPU has AVX-512F (simd_level checked it).
+            unsafe { avx512(plan, zb, bsz, s, shift, acc) };
+            return;
+        }
+        if level != "none" && bsz.is_multiple_of(8) {
             #[target_feature(enable = "avx2,fma")]
             unsafe fn avx2(
                 plan: &Plan,
                 zb: &[f64],
                 bsz: usize,
                 s: &mut Scratch<f64>,
-                mean: &[f64],
+                shift: &[f64],
                 acc: &mut [f64],
             ) {
-                centred_block_impl(plan, zb, bsz, s, mean, acc, |x, z, w, m| {
+                shifted_block_impl(plan, zb, bsz, s, shift, acc, |x, z, w, k| {
                     // SAFETY: called only here, where the CPU has AVX2 + FMA.
-                    unsafe { simd::centred_child_avx2(x, z, w, m) }
+                    unsafe { simd::shifted_child_avx2(x, z, w, k) }
                 })
             }
             // SAFETY: the CPU has AVX2 + FMA (simd_level checked it).
-            unsafe { avx2(plan, zb, bsz, s, mean, acc) };
+            unsafe { avx2(plan, zb, bsz, s, shift, acc) };
             return;
         }
     }
-    centred_block_impl(plan, zb, bsz, s, mean, acc, centred_child)
+    shifted_block_impl(plan, zb, bsz, s, shift, acc, shifted_child)
 }
 
-/// `sum_i w_i (x_i z_i - m)^2` over a block whose length is a multiple of 8, as eight lane sums
-/// added in order at the end (the AVX2 version, [`simd::centred_child_avx2`], gives the same
-/// bits).
-fn centred_child(x: &[f64], z: &[f64], w: &[f64], m: f64) -> f64 {
-    let mut part = [0.0f64; 8];
+/// [`shifted_block_impl`] with the children of each node four at a time
+/// ([`simd::shifted_children_avx512`]; the same bits).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn shifted_block_avx512(
+    plan: &Plan,
+    zb: &[f64],
+    bsz: usize,
+    s: &mut Scratch<f64>,
+    shift: &[f64],
+    acc: &mut [f64],
+) {
+    let nv = plan.n_vars;
+    let (sums, squares) = acc.split_at_mut(shift.len());
+    constant_column(&s.vb, shift[0], sums, squares);
+    for f in &plan.families {
+        let lvl = f.level as usize;
+        node_values(s, zb, bsz, f);
+        let me = &s.vals[lvl * bsz..(lvl + 1) * bsz];
+        let w = &s.vb;
+        let j0 = f.child_start as usize;
+        let v0 = f.first_var as usize;
+        let mut v = v0;
+        macro_rules! group {
+            ($nc:literal) => {{
+                let vars: [usize; $nc] = std::array::from_fn(|i| v + i);
+                let k: [f64; $nc] = std::array::from_fn(|i| shift[j0 + v - v0 + i]);
+                let mut out = [(0.0, 0.0); $nc];
+                // SAFETY: the caller has AVX-512F; every variable's block is inside zb.
+                unsafe { simd::shifted_children_avx512(me, zb, vars, w, k, &mut out) };
+                for (i, (a, b)) in out.into_iter().enumerate() {
+                    sums[j0 + v - v0 + i] += a;
+                    squares[j0 + v - v0 + i] += b;
+                }
+                v += $nc;
+            }};
+        }
+        while v + 4 <= nv {
+            group!(4);
+        }
+        while v < nv {
+            group!(1);
+        }
+    }
+}
+
+/// The constant candidate (index 0) in a block's shifted sums.
+#[inline(always)]
+fn constant_column(w: &[f64], k: f64, sums: &mut [f64], squares: &mut [f64]) {
+    for wi in w {
+        let d = 1.0 - k;
+        sums[0] += wi * d;
+        squares[0] += wi * d * d;
+    }
+}
+
+/// A family's node values: its parent's times its variable (level 0 is the ones).
+#[inline(always)]
+fn node_values(s: &mut Scratch<f64>, zb: &[f64], bsz: usize, f: &Family) {
+    let lvl = f.level as usize;
+    if lvl > 0 {
+        let (lo, hi) = s.vals.split_at_mut(lvl * bsz);
+        let parent = &lo[(lvl - 1) * bsz..];
+        let zk = &zb[f.var as usize * bsz..(f.var as usize + 1) * bsz];
+        for i in 0..bsz {
+            hi[i] = parent[i] * zk[i];
+        }
+    }
+}
+
+/// `sum_i w_i (x_i z_i - k)` and `sum_i w_i (x_i z_i - k)^2` over a block whose length is a
+/// multiple of 8, as eight lane sums each added in order at the end (the AVX2 version,
+/// [`simd::shifted_child_avx2`], gives the same bits).
+fn shifted_child(x: &[f64], z: &[f64], w: &[f64], k: f64) -> (f64, f64) {
+    let (mut ps, mut pq) = ([0.0f64; 8], [0.0f64; 8]);
     for ((x, z), wc) in x
         .chunks_exact(8)
         .zip(z.chunks_exact(8))
         .zip(w.chunks_exact(8))
     {
         for l in 0..8 {
-            let d = x[l] * z[l] - m;
-            part[l] += wc[l] * d * d;
+            let d = x[l] * z[l] - k;
+            let t = wc[l] * d;
+            ps[l] += t;
+            pq[l] += t * d;
         }
     }
-    part.iter().sum::<f64>()
+    (ps.iter().sum::<f64>(), pq.iter().sum::<f64>())
 }
 
 #[inline(always)]
-fn centred_block_impl(
+fn shifted_block_impl(
     plan: &Plan,
     zb: &[f64],
     bsz: usize,
     s: &mut Scratch<f64>,
-    mean: &[f64],
+    shift: &[f64],
     acc: &mut [f64],
-    child: impl Fn(&[f64], &[f64], &[f64], f64) -> f64,
+    child: impl Fn(&[f64], &[f64], &[f64], f64) -> (f64, f64),
 ) {
     let nv = plan.n_vars;
-    let w = &s.vb;
-    acc[0] += w.iter().map(|wi| wi * (1.0 - mean[0]).powi(2)).sum::<f64>();
+    let (sums, squares) = acc.split_at_mut(shift.len());
+    constant_column(&s.vb, shift[0], sums, squares);
     for f in &plan.families {
         let lvl = f.level as usize;
-        if lvl > 0 {
-            let (lo, hi) = s.vals.split_at_mut(lvl * bsz);
-            let parent = &lo[(lvl - 1) * bsz..];
-            let zk = &zb[f.var as usize * bsz..(f.var as usize + 1) * bsz];
-            for i in 0..bsz {
-                hi[i] = parent[i] * zk[i];
-            }
-        }
+        node_values(s, zb, bsz, f);
         let me = &s.vals[lvl * bsz..(lvl + 1) * bsz];
-        for (t, k) in (f.first_var as usize..nv).enumerate() {
+        let w = &s.vb;
+        for (t, v) in (f.first_var as usize..nv).enumerate() {
             let j = f.child_start as usize + t;
-            let m = mean[j];
-            let zk = &zb[k * bsz..(k + 1) * bsz];
-            acc[j] += if bsz.is_multiple_of(8) {
-                child(me, zk, w, m)
+            let k = shift[j];
+            let zk = &zb[v * bsz..(v + 1) * bsz];
+            let (a, b) = if bsz.is_multiple_of(8) {
+                child(me, zk, w, k)
             } else {
-                (0..bsz)
-                    .map(|i| {
-                        let d = me[i] * zk[i] - m;
-                        w[i] * d * d
-                    })
-                    .sum::<f64>()
+                (0..bsz).fold((0.0, 0.0), |(a, b), i| {
+                    let d = me[i] * zk[i] - k;
+                    (a + w[i] * d, b + w[i] * d * d)
+                })
             };
+            sums[j] += a;
+            squares[j] += b;
         }
     }
 }
@@ -884,6 +1023,62 @@ mod tests {
     /// Every instruction set this CPU has gives the portable loops' block sums (f32, to the
     /// rounding of different summation orders): on a CPU with AVX-512 the engine no longer runs
     /// the AVX2 instance, which only this test then checks.
+    #[test]
+    fn every_simd_instance_gives_the_portable_shifted_sums_to_the_bit() {
+        let mut levels = vec!["none"];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                levels.push("avx2");
+            }
+            if std::arch::is_x86_feature_detected!("avx512f") && levels.contains(&"avx2") {
+                levels.push("avx512");
+            }
+        }
+        let mut seed = 13u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        for (nz, d) in [(4, 6), (7, 3), (11, 4), (3, 2), (6, 1)] {
+            let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
+            let basis = Basis::new(&names, d, BasisLimits::default()).unwrap();
+            let plan = Plan::new(&basis);
+            let zb: Vec<f64> = (0..nz * SIMD_B).map(|_| next()).collect();
+            let w: Vec<f64> = (0..SIMD_B).map(|_| next().abs()).collect();
+            let shift: Vec<f64> = (0..basis.len()).map(|_| 0.1 * next()).collect();
+            let sums = |level: &str| {
+                let mut s = Scratch::<f64>::new(d, nz, SIMD_B);
+                s.load_v(&w, 1.0);
+                let mut acc = vec![0.0; 2 * basis.len()];
+                shifted_block_at(level, &plan, &zb, SIMD_B, &mut s, &shift, &mut acc);
+                acc
+            };
+            let reference = sums("none");
+            // Against sums written out for every candidate (the plan's slots are the basis's).
+            for j in 0..basis.len() {
+                let (mut a, mut b) = (0.0, 0.0);
+                for i in 0..SIMD_B {
+                    let x: f64 = basis.code(j).vars().map(|v| zb[v * SIMD_B + i]).product();
+                    a += w[i] * (x - shift[j]);
+                    b += w[i] * (x - shift[j]).powi(2);
+                }
+                assert!((reference[j] - a).abs() < 1e-12, "n {nz} d {d}, {j}");
+                assert!(
+                    (reference[basis.len() + j] - b).abs() < 1e-12,
+                    "n {nz} d {d}, {j}"
+                );
+            }
+            for level in &levels[1..] {
+                assert_eq!(sums(level), reference, "{level}, n {nz} d {d}");
+            }
+        }
+    }
+
     #[test]
     fn every_simd_instance_gives_the_portable_block_sums() {
         let mut levels = vec!["none"];
