@@ -433,17 +433,18 @@ impl CpuEngine {
             }
         };
         (0..self.basis.len())
+            .into_par_iter()
             .map(|j| {
                 let code = self.basis.code(j);
-                let x = |i: usize| code.vars().fold(1.0, |p, v| p * self.z64[v * n + i]);
-                let first = x(at[0]);
-                let mean = at.iter().map(|&i| weight(i) * x(i)).sum::<f64>();
+                let x: [f64; SHIFT_SAMPLES] = std::array::from_fn(|k| {
+                    code.vars().fold(1.0, |p, v| p * self.z64[v * n + at[k]])
+                });
                 // A column constant on these samples (the constant monomial) gets its value
                 // itself: a mean rounded off it would make its zero variance a cancellation.
-                if at.iter().all(|&i| x(i) == first) {
-                    first
+                if x.iter().all(|&v| v == x[0]) {
+                    x[0]
                 } else {
-                    mean
+                    at.iter().zip(&x).map(|(&i, v)| weight(i) * v).sum()
                 }
             })
             .collect()

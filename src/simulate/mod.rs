@@ -1153,6 +1153,9 @@ pub fn initial_state(
 fn continuation_windows(first: usize, window: usize) -> Vec<usize> {
     let mut ws = Vec::new();
     let mut w = first.saturating_mul(2).min(window);
+    if w >= window - window / 5 {
+        w = window;
+    }
     loop {
         ws.push(w);
         if w >= window {
@@ -1684,6 +1687,7 @@ mod tests {
         assert_eq!(continuation_windows(16, 200), vec![32, 64, 128, 200]);
         assert_eq!(continuation_windows(15, 200), vec![30, 60, 120, 200]);
         assert_eq!(continuation_windows(20, 39), vec![39]);
+        assert_eq!(continuation_windows(20, 41), vec![41]);
         assert_eq!(
             continuation_windows(15, usize::MAX).last(),
             Some(&usize::MAX)
@@ -1692,7 +1696,7 @@ mod tests {
             for window in [first, 41, 200, 1_000, 12_345] {
                 let ws = continuation_windows(first, window);
                 assert_eq!(*ws.last().unwrap(), window);
-                assert_eq!(ws[0], (2 * first).min(window));
+                assert!(ws[0] == 2 * first || ws.len() == 1, "{ws:?}");
                 for p in ws.windows(2) {
                     assert!(p[1] > p[0] && 2 * p[1] <= 5 * p[0], "{ws:?}");
                 }

@@ -1020,9 +1020,9 @@ mod tests {
     use super::*;
     use crate::basis::{Basis, BasisLimits};
 
-    /// Every instruction set this CPU has gives the portable loops' block sums (f32, to the
-    /// rounding of different summation orders): on a CPU with AVX-512 the engine no longer runs
-    /// the AVX2 instance, which only this test then checks.
+    /// Every instruction set this CPU has gives the portable loops' shifted sums of the column
+    /// statistics to the bit (eight lane sums each, added in order), and those are the sums
+    /// written out per candidate.
     #[test]
     fn every_simd_instance_gives_the_portable_shifted_sums_to_the_bit() {
         let mut levels = vec!["none"];
@@ -1079,6 +1079,9 @@ mod tests {
         }
     }
 
+    /// Every instruction set this CPU has gives the portable loops' block sums (f32, to the
+    /// rounding of different summation orders): on a CPU with AVX-512 the engine no longer runs
+    /// the AVX2 instance, which only this test then checks.
     #[test]
     fn every_simd_instance_gives_the_portable_block_sums() {
         let mut levels = vec!["none"];
