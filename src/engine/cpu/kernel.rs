@@ -1020,11 +1020,8 @@ mod tests {
     use super::*;
     use crate::basis::{Basis, BasisLimits};
 
-    /// Every instruction set this CPU has gives the portable loops' shifted sums of the column
-    /// statistics to the bit (eight lane sums each, added in order), and those are the sums
-    /// written out per candidate.
-    #[test]
-    fn every_simd_instance_gives_the_portable_shifted_sums_to_the_bit() {
+    /// The instruction sets [`simd_level`] can give on this CPU, the portable loops first.
+    fn levels_here() -> Vec<&'static str> {
         let mut levels = vec!["none"];
         #[cfg(target_arch = "x86_64")]
         {
@@ -1037,13 +1034,26 @@ mod tests {
                 levels.push("avx512");
             }
         }
-        let mut seed = 13u64;
-        let mut next = || {
+        levels
+    }
+
+    /// Uniform numbers in [-1, 1) from `seed` (a linear congruential generator).
+    fn uniform(mut seed: u64) -> impl FnMut() -> f64 {
+        move || {
             seed = seed
                 .wrapping_mul(6364136223846793005)
                 .wrapping_add(1442695040888963407);
             ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        }
+    }
+
+    /// Every instruction set this CPU has gives the portable loops' shifted sums of the column
+    /// statistics to the bit (eight lane sums each, added in order), and those are the sums
+    /// written out per candidate.
+    #[test]
+    fn every_simd_instance_gives_the_portable_shifted_sums_to_the_bit() {
+        let levels = levels_here();
+        let mut next = uniform(13);
         for (nz, d) in [(4, 6), (7, 3), (11, 4), (3, 2), (6, 1)] {
             let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
             let basis = Basis::new(&names, d, BasisLimits::default()).unwrap();
@@ -1084,25 +1094,8 @@ mod tests {
     /// the AVX2 instance, which only this test then checks.
     #[test]
     fn every_simd_instance_gives_the_portable_block_sums() {
-        let mut levels = vec!["none"];
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                levels.push("avx2");
-            }
-            if std::arch::is_x86_feature_detected!("avx512f") && levels.contains(&"avx2") {
-                levels.push("avx512");
-            }
-        }
-        let mut seed = 11u64;
-        let mut next = || {
-            seed = seed
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-        };
+        let levels = levels_here();
+        let mut next = uniform(11);
         for (nz, d) in [(4, 6), (7, 3), (11, 4), (3, 2)] {
             let names: Vec<String> = (0..nz).map(|k| format!("z{k}")).collect();
             let basis = Basis::new(&names, d, BasisLimits::default()).unwrap();
