@@ -851,19 +851,8 @@ fn shifted_block_at(
     #[cfg(target_arch = "x86_64")]
     {
         if level == "avx512" && bsz.is_multiple_of(8) {
-            #[target_feature(enable = "avx512f")]
-            unsafe fn avx512(
-                plan: &Plan,
-                zb: &[f64],
-                bsz: usize,
-                s: &mut Scratch<f64>,
-                shift: &[f64],
-                acc: &mut [f64],
-            ) {
-                shifted_block_avx512(plan, zb, bsz, s, shift, acc)
-            }
             // SAFETY: the CPU has AVX-512F (simd_level checked it).
-            unsafe { avx512(plan, zb, bsz, s, shift, acc) };
+            unsafe { shifted_block_avx512(plan, zb, bsz, s, shift, acc) };
             return;
         }
         if level != "none" && bsz.is_multiple_of(8) {
