@@ -78,7 +78,9 @@ fn estimation_run() -> RunData {
 /// pulses record's RMS.
 fn report(label: &str, m: &Model, run: &RunData, b: &ctsid::benchmark::Benchmark) {
     let c = m.compile().unwrap();
-    let sim = free_run(&c, run, INIT, &SimOptions::default()).unwrap().remove(0);
+    let sim = free_run(&c, run, INIT, &SimOptions::default())
+        .unwrap()
+        .remove(0);
     let (t, y) = (&run.t[INIT..], &run.y[0][INIT..]);
     let e: Vec<f64> = y.iter().zip(&sim[INIT..]).map(|(a, s)| a - s).collect();
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
@@ -86,8 +88,17 @@ fn report(label: &str, m: &Model, run: &RunData, b: &ctsid::benchmark::Benchmark
     let n = t.len() as f64;
     let (mt, me) = (t.iter().sum::<f64>() / n, e.iter().sum::<f64>() / n);
     let stt: f64 = t.iter().map(|x| (x - mt) * (x - mt)).sum();
-    let slope = t.iter().zip(&e).map(|(x, v)| (x - mt) * (v - me)).sum::<f64>() / stt;
-    let left: Vec<f64> = t.iter().zip(&e).map(|(x, v)| v - me - slope * (x - mt)).collect();
+    let slope = t
+        .iter()
+        .zip(&e)
+        .map(|(x, v)| (x - mt) * (v - me))
+        .sum::<f64>()
+        / stt;
+    let left: Vec<f64> = t
+        .iter()
+        .zip(&e)
+        .map(|(x, v)| v - me - slope * (x - mt))
+        .collect();
     let coefs: Vec<String> = m.outputs[0]
         .terms
         .iter()
