@@ -1240,9 +1240,12 @@ fn search_orders<'p, 'a: 'p>(
 /// How far (a factor on the free-run p95 before refinement) a MIMO candidate may be from the
 /// best of its output's fresh candidates and still be refined for scoring. Refinement improved
 /// a candidate's gate NRMSE by 1.5-3x where it helped (`demo mimo`, d = 6, 1 % noise: 0.080 ->
-/// 0.037, 3.83 -> 1.22); candidates an order of magnitude behind (diverging free runs, NRMSE
-/// 1-1e7 against 0.06) were never chosen, and their refinements were half of the search's.
-pub const REFINE_WITHIN: f64 = 10.0;
+/// 0.037, 3.83 -> 1.22); candidates further behind (diverging free runs, NRMSE 1-1e7 against
+/// 0.06, or order-4 fits crawling to the iteration cap) were never chosen. At 10 (before session
+/// 21) the d = 6, 1 % demo refined 16 candidates; at 4 it refines 10, in 49-62 s against 58-66 s
+/// (alternated runs), with the same orders and models over seeds 1-6 at d 4, 3 % and d 6, 1 % and
+/// 3 % (docs/method/identification.md).
+pub const REFINE_WITHIN: f64 = 4.0;
 
 /// The MIMO candidates of one output, scored unrefined ([`mimo_candidate`]), refined where their
 /// free runs are within [`REFINE_WITHIN`] of the best; the others keep their unrefined free-run
