@@ -4,15 +4,17 @@
 //! of 24.8 s (the benchmark's workflow trains on runs of 4 s), as it is and with a constant force
 //! appended, with multiple-shooting segments of 2 s and without segments; each refit is scored
 //! by a free run of the whole estimation record and of the pulses record (RMS in mm after the 20
-//! samples that set the initial state), beside the free-run error's linear trend in time.
+//! samples that set the initial state), beside the error's least-squares fit in time and
+//! position.
 //!
 //! `cargo bench --bench emps_full_refit -- MODEL.json` (MODEL.json from `ctsid benchmark emps
 //! --out DIR`; about 20 s).
-use ctsid::benchmark::{load, test_scores};
+use ctsid::benchmark::{fit_runs, load, test_scores};
 use ctsid::identify::refine::{refine, RefineOptions, RunData};
 use ctsid::model::Term;
 use ctsid::simulate::{free_run, SimOptions};
 use ctsid::Model;
+use nalgebra::{DMatrix, DVector};
 
 /// Samples that set the initial state (the benchmark's protocol).
 const INIT: usize = 20;
@@ -74,42 +76,36 @@ fn estimation_run() -> RunData {
     }
 }
 
-/// The coefficients, the estimation record's free-run RMS and the trend of its error, and the
-/// pulses record's RMS.
+/// The coefficients, and for the estimation and the pulses record the free-run RMS and the
+/// error's least-squares fit `e = a + b t + c q` (in time and position) with the RMS left.
 fn report(label: &str, m: &Model, run: &RunData, b: &ctsid::benchmark::Benchmark) {
     let c = m.compile().unwrap();
     let sim = free_run(&c, run, INIT, &SimOptions::default())
         .unwrap()
         .remove(0);
-    let (t, y) = (&run.t[INIT..], &run.y[0][INIT..]);
-    let e: Vec<f64> = y.iter().zip(&sim[INIT..]).map(|(a, s)| a - s).collect();
-    let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
-    // Least-squares line e = a + b t.
-    let n = t.len() as f64;
-    let (mt, me) = (t.iter().sum::<f64>() / n, e.iter().sum::<f64>() / n);
-    let stt: f64 = t.iter().map(|x| (x - mt) * (x - mt)).sum();
-    let slope = t
-        .iter()
-        .zip(&e)
-        .map(|(x, v)| (x - mt) * (v - me))
-        .sum::<f64>()
-        / stt;
-    let left: Vec<f64> = t
-        .iter()
-        .zip(&e)
-        .map(|(x, v)| v - me - slope * (x - mt))
-        .collect();
+    let test = fit_runs(b, m, &b.split.test[..1]).unwrap().remove(0);
+    let test_sim = test_scores(b, m).unwrap().1;
     let coefs: Vec<String> = m.outputs[0]
         .terms
         .iter()
         .map(|t| format!("{:.4e}", t.coefficient))
         .collect();
-    println!(
-        "{label}: estimation record {:.2} mm (trend {:.3} mm/s, {:.2} mm about it); pulses record {:.2} mm\n  coefficients {}",
-        rms(&e) * 1e3,
-        slope * 1e3,
-        rms(&left) * 1e3,
-        test_scores(b, m).unwrap().0[0],
-        coefs.join(" ")
-    );
+    println!("{label}: coefficients {}", coefs.join(" "));
+    for (name, r, s) in [("estimation", run, &sim), ("pulses", &test, &test_sim)] {
+        let (t, y) = (&r.t[INIT..], &r.y[0][INIT..]);
+        let e: Vec<f64> = y.iter().zip(&s[INIT..]).map(|(a, s)| a - s).collect();
+        let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
+        let x = DMatrix::from_fn(e.len(), 3, |k, j| [1.0, t[k], y[k]][j]);
+        let ev = DVector::from_column_slice(&e);
+        let fit = x.clone().svd(true, true).solve(&ev, 1e-12).unwrap();
+        let left = &ev - &x * &fit;
+        println!(
+            "  {name} record {:.2} mm; e = {:.2} mm + {:.3} mm/s t + {:.4} q, {:.2} mm left",
+            rms(&e) * 1e3,
+            fit[0] * 1e3,
+            fit[1] * 1e3,
+            fit[2],
+            rms(left.as_slice()) * 1e3
+        );
+    }
 }
