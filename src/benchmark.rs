@@ -24,8 +24,9 @@
 //!    removal kept unless the validation free-run error rises by more than a quarter
 //!    ([`crate::identify::prune`]).
 //! 4. **Score** on the test run by the benchmark's protocol: free run from the initial state
-//!    fitted on the first `init` samples (at least the crate's floor for the order), RMS on the
-//!    rest, per metric (a metric may cover part of the test run).
+//!    fitted on the first `init` samples (no more: the tanks' 5 samples are 5, where the local
+//!    fit's own 16 were used before), RMS on the rest, per metric (a metric may cover part of
+//!    the test run).
 //!
 //! The records are read from `../shared/data` (or a folder given), whose READMEs give the
 //! sources and the published tables.

@@ -129,6 +129,15 @@ pub enum Error {
     #[error("run '{run}': the model has an unstable mode growing at {rate:.3e} /s (e-fold every {:.3e} s) near t = {time:?} s, faster than the simulation's steps; the model is unstable there", 1.0 / rate)]
     UnstableMode { run: String, time: f64, rate: f64 },
 
+    /// A term of the right-hand side went non-finite during a free run (not an instability).
+    #[error("run '{run}': {what} at t = {time:?} s ({state}); the free run cannot go on from there (a root or power of a value that went negative, a division by zero)")]
+    TermNotFinite {
+        run: String,
+        time: f64,
+        what: String,
+        state: String,
+    },
+
     #[error("simulation diverged at t = {time:?} s (run '{run}', state {state}); the model is unstable there or the step is too large")]
     Diverged {
         run: String,

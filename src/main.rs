@@ -10,8 +10,10 @@ fn main() {
         Ok(args) => match cli::run(args) {
             Ok(()) => 0,
             Err(e) => {
-                // One line even when a header or run id from the data carries a line break.
-                let text = e.to_string().replace('\r', "\\r").replace('\n', "\\n");
+                // One line even when a header or run id from the data carries a line break, and
+                // no raw control bytes from the data (a NUL cut the line in a terminal, an ESC
+                // sequence recoloured it): each is shown escaped.
+                let text = one_line(&e.to_string());
                 // Bounded whatever a message carries from the data (names, fields, run ids).
                 let text = ctsid::util::clip(&text, 2000);
                 eprintln!("error: {text}");
@@ -21,6 +23,20 @@ fn main() {
         Err(e) => usage_error(e),
     };
     std::process::exit(code);
+}
+
+/// `text` with every control character escaped (`\n`, `\r`, `\t`, `\0`, `\u{1b}`): a message
+/// quoting data stays one printable line.
+fn one_line(text: &str) -> String {
+    text.chars()
+        .map(|c| match c {
+            '\n' => "\\n".to_string(),
+            '\r' => "\\r".to_string(),
+            '\0' => "\\0".to_string(),
+            c if c.is_control() => c.escape_default().to_string(),
+            c => c.to_string(),
+        })
+        .collect()
 }
 
 /// Help and version go out as clap renders them; a usage error becomes one line: clap's first

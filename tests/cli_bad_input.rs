@@ -885,6 +885,127 @@ fn an_output_inside_the_report_folder_is_refused() {
     );
     assert!(out.stdout.is_empty(), "the work ran before the refusal");
     assert!(!inside.exists());
+    // `control` wrote its plot over its trace, `identify` its report over its model, both
+    // with exit 0 (session 22's fuzzing).
+    let svg = rep.join("step.svg");
+    let svg_s = svg.display().to_string();
+    let rep_s = rep.display().to_string();
+    fails(
+        &[
+            "control",
+            &model,
+            "--setpoint 1 --from 0 --tau 0.01",
+            "-o",
+            &svg_s,
+            "--report",
+            &rep_s,
+        ],
+        &["inside the report folder"],
+    );
+    let csv = file("good-inside-id.csv", &good_csv());
+    fails(
+        &[
+            "identify",
+            &csv,
+            "--output y --input u --time-column t --run-column run",
+            "--degree 1 --order 1 --quiet -o",
+            &inside.display().to_string(),
+            "--report",
+            &rep_s,
+        ],
+        &["inside the report folder"],
+    );
+    assert!(!svg.exists() && !inside.exists());
+}
+
+/// Found by session 22's fuzzing, each exit 0 before: a term of a coefficient alone read as
+/// the constant; an expression that is a monomial beside that monomial; `--init-window 0`
+/// raised to 15 without a word; an input that repeats the output fitted as `y_d1 = 0`; and
+/// `control --noise NaN` refused only after the whole design was printed.
+#[test]
+fn slips_that_passed_before_are_refused() {
+    let text = common::cli::lag_model_text(-1.0, Some(1.0));
+    let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let with_term = |name: &str, term: serde_json::Value| {
+        let mut m = v.clone();
+        m["format"] = "ctsid-model/2".into();
+        m["outputs"][0]["terms"].as_array_mut().unwrap().push(term);
+        file(name, &m.to_string())
+    };
+    let bare = with_term("bare-term.json", serde_json::json!({"coefficient": 2.0}));
+    fails(
+        &["show", &bare],
+        &["neither \"exponents\" nor \"expression\""],
+    );
+    let twice = with_term(
+        "expr-twice.json",
+        serde_json::json!({"expression": "2*y", "coefficient": 0.5}),
+    );
+    fails(&["show", &twice], &["terms 1 and 3 are both"]);
+    // A named term that is no monomial stays a term of its own.
+    let own = with_term(
+        "expr-own.json",
+        serde_json::json!({"expression": "sqrt(abs(y))", "coefficient": 0.5}),
+    );
+    assert!(run(&["show", &own]).status.success());
+
+    let model = lag_model("init-window.json", Some(1.0));
+    let data = file("init-window.csv", &good_csv());
+    let sim = "--run-column run --time-column t --init-window";
+    fails(
+        &["simulate", &model, &data, sim, "0"],
+        &["init-window", "at least 3"],
+    );
+    assert!(run(&["simulate", &model, &data, sim, "3"]).status.success());
+
+    let mut same = String::from("t,u,y\n");
+    for i in 0..400 {
+        let t = i as f64 * 0.01;
+        let y = (t).sin() + 0.3 * (2.7 * t).cos();
+        same += &format!("{t},{},{y}\n", 2.0 * y + 1.0);
+    }
+    let same = file("u-is-y.csv", &same);
+    fails(
+        &[
+            "identify",
+            &same,
+            "--output y --input u --time-column t --degree 1 --order 1",
+        ],
+        &["input 'u' is output 'y' up to scale and offset"],
+    );
+
+    let out = fails(
+        &[
+            "control",
+            &model,
+            "--setpoint 1 --from 0 --tau 0.01 --noise NaN",
+        ],
+        &["noise"],
+    );
+    assert!(
+        out.stdout.is_empty(),
+        "the design was printed before the refusal"
+    );
+}
+
+/// A control byte from the data (NUL, ESC) is shown escaped in the error line: raw, a NUL cut
+/// the line in a terminal and an ESC sequence recoloured it.
+#[test]
+fn control_bytes_from_the_data_are_escaped_in_errors() {
+    let mut s = good_csv();
+    s = s.replacen("0,0.01,", "0,\u{1b}[31m0.01,", 1);
+    let data = file("esc.csv", &s);
+    let model = lag_model("esc.json", Some(1.0));
+    let out = fails(
+        &[
+            "simulate",
+            &model,
+            &data,
+            "--run-column run --time-column t",
+        ],
+        &["\\u{1b}[31m0.01"],
+    );
+    assert!(!out.stderr.contains(&0x1b));
 }
 
 /// Terms near 1e308: the steady-input search summed the terms' magnitudes, which overflowed, and

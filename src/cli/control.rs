@@ -154,7 +154,10 @@ pub fn run(a: ControlArgs) -> Result<()> {
     };
 
     // Before the design is printed: a setting that makes the run meaningless is the answer.
-    control::check_duration(&d, &scenario)?;
+    let law = tracking
+        .as_ref()
+        .map_or(&control::Law::PolePlacement, |tk| &tk.law);
+    control::check_scenario(&d, &scenario, law)?;
     if let Some(tk) = &tracking {
         control::check_block(&d, &scenario, tk)?;
     }
@@ -238,6 +241,9 @@ fn check_args(a: &ControlArgs) -> Result<()> {
     }
     if let Some(d) = &a.report {
         super::check_output_dir(d)?;
+        if let Some(o) = &a.output {
+            super::check_output_outside_report(o.as_ref(), d)?;
+        }
     }
     if !a.from.is_finite() {
         return Err(Error::param(

@@ -107,6 +107,9 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     }
     if let Some(d) = &a.report {
         super::check_output_dir(d)?;
+        if let Some(o) = &a.output_model {
+            super::check_output_outside_report(o.as_ref(), d)?;
+        }
     }
     // Every setting is checked before the data are read.
     let s = settings(&a)?;

@@ -37,8 +37,9 @@ pub struct SimulateArgs {
     pub sampling: super::runs::SamplingArgs,
     #[command(flatten)]
     pub segment: super::runs::SegmentArgs,
-    /// Samples at the start of each run used to estimate its initial state (at least the
-    /// local fit's window; the model-based refinement uses all of them).
+    /// Samples at the start of each run used to estimate its initial state (at least order + 2;
+    /// a local polynomial fit on up to 4 (order + 2) of them, then the model's own free run
+    /// fitted on all of them).
     #[arg(long, default_value_t = INIT_WINDOW)]
     pub init_window: usize,
     /// Score each run from this sample on (the public benchmarks leave the samples that set
@@ -63,6 +64,19 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         }
     }
     let model = Model::read(&args.model)?;
+    // The initial state's local fit needs order + 2 samples: a smaller window was raised to the
+    // local fit's 16 or more without a word (`--init-window 0` scored as 15).
+    let top = model.outputs.iter().map(|o| o.order).max().unwrap_or(1);
+    if args.init_window < top + 2 {
+        return Err(Error::param(
+            "init-window",
+            format!(
+                "{}: an initial state of order {top} needs at least {} samples",
+                args.init_window,
+                top + 2
+            ),
+        ));
+    }
     let sim_names: Vec<String> = model
         .outputs
         .iter()

@@ -306,8 +306,10 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
 }
 
 /// Checks a scenario's duration, noise and input limits (the limits must hold the design's
-/// steady input where the law needs it: the pole placement).
-fn check_scenario(d: &Design, s: &Scenario, law: &Law) -> Result<()> {
+/// steady input where the law needs it: the pole placement). [`track`] checks it too; a caller
+/// that prints the design first checks it before (`--noise NaN` printed the whole design, then
+/// the error).
+pub fn check_scenario(d: &Design, s: &Scenario, law: &Law) -> Result<()> {
     check_duration(d, s)?;
     crate::util::finite_nonneg("noise", s.noise_sd)?;
     if let Some((lo, hi)) = s.u_limits {

@@ -38,8 +38,9 @@ pub mod design;
 pub mod tracking;
 
 pub use closed_loop::{
-    check_block, check_duration, default_duration, designed_response, metrics, model_at_rest,
-    rest_state, run, step_plot, track, Plant, Scenario, StepMetrics, Trace, MAX_SAMPLES,
+    check_block, check_duration, check_scenario, default_duration, designed_response, metrics,
+    model_at_rest, rest_state, run, step_plot, track, Plant, Scenario, StepMetrics, Trace,
+    MAX_SAMPLES,
 };
 pub use design::{design, steady_input, with_chain_observer, DesignOptions};
 pub use tracking::{

@@ -976,6 +976,9 @@ fn checked_channels(
     }
     for &c in &inputs {
         rs.require_varies(c, &split.train, "input")?;
+        for &o in &outputs {
+            rs.require_distinct(c, o, &split.train)?;
+        }
     }
     let max_order = settings.max_order();
     rs.require_derivable(max_order)?;
@@ -993,9 +996,9 @@ fn checked_channels(
 /// Runs the whole workflow on a record set with a checked split. Refuses settings that
 /// [`Settings::validate`] refuses, a split that [`Split::check`] refuses, a channel the record set
 /// lacks, an output or input that is constant over the training runs (an output also within
-/// every one of them), and a run too short for derivatives up to the highest order or for a free
-/// run's initial state; errors of the derivatives, the regression, the refinement
-/// and the simulations on the way are passed on.
+/// every one of them), an input that repeats an output, and a run too short for derivatives up
+/// to the highest order or for a free run's initial state; errors of the derivatives, the
+/// regression, the refinement and the simulations on the way are passed on.
 pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Identification> {
     let (outputs, inputs) = checked_channels(rs, split, settings)?;
     let max_order = settings.max_order();

@@ -420,24 +420,39 @@ pub const MAX_FILE_BYTES: u64 = 256 << 20;
 pub const MAX_ORDER: usize = crate::derivatives::MAX_ORDER;
 
 /// Two terms with one monomial (or one expression) add up, but a file that says so is almost
-/// surely a slip (and a million copies would only slow every evaluation).
+/// surely a slip (and a million copies would only slow every evaluation). An expression that is
+/// a monomial up to a constant factor (`y`, `2*y^2`, `1`) is that monomial's column: beside it
+/// the coefficients are not determined (`show` printed `-2*y + 0.5*y`). `names` are the model's
+/// variables ([`Model::variable_names`]).
 fn check_distinct_terms(
     o: &OutputEquation,
     all: &[OutputEquation],
+    names: &[String],
 ) -> std::result::Result<(), String> {
     let outputs: Vec<String> = all.iter().map(|o| o.name.clone()).collect();
     let mut seen: std::collections::HashMap<(BTreeMap<&str, u32>, String), usize> =
         Default::default();
     for (k, t) in o.terms.iter().enumerate() {
-        let mono = t
-            .exponents
-            .iter()
-            .map(|(v, &e)| (canonical_var(v, &outputs), e))
-            .collect();
-        // Expressions compare as written, without spaces.
+        let as_monomial = t.expression.as_deref().and_then(|e| {
+            let powers = Expr::parse(e, names).ok()?.monomial_up_to_scale()?;
+            Some(
+                powers
+                    .into_iter()
+                    .map(|(v, p)| (canonical_var(&names[v], &outputs), p))
+                    .collect::<BTreeMap<&str, u32>>(),
+            )
+        });
+        let mono = as_monomial.clone().unwrap_or_else(|| {
+            t.exponents
+                .iter()
+                .map(|(v, &e)| (canonical_var(v, &outputs), e))
+                .collect()
+        });
+        // Other expressions compare as written, without spaces.
         let expr: String = t
             .expression
             .iter()
+            .filter(|_| as_monomial.is_none())
             .flat_map(|e| e.chars())
             .filter(|c| !c.is_whitespace())
             .collect();
@@ -536,8 +551,13 @@ fn read_term(
             term.expression = Some(e.trim().to_string());
             Ok((term, Vec::new()))
         }
-        (pairs, None) => {
-            let (exponents, zeros) = read_exponents(pairs.unwrap_or_default(), output_names)?;
+        // A term of a coefficient alone read as the constant (`show` printed `y_d1 = -2 + 3*u` for
+        // a term that had lost its exponents): the constant says `"exponents": {}`.
+        (None, None) => Err(
+            "neither \"exponents\" nor \"expression\": give a monomial's exponents ({} for the constant) or an expression".to_string(),
+        ),
+        (Some(pairs), None) => {
+            let (exponents, zeros) = read_exponents(pairs, output_names)?;
             term.exponents = exponents;
             Ok((term, zeros))
         }
@@ -622,7 +642,7 @@ impl Model {
     /// Parses and validates a model from JSON text; `path` only labels the error messages. Refuses
     /// text that is not JSON or not an object, a missing or unknown `format` (other than [`FORMAT`]
     /// and [`FORMAT_V1`]), an unknown key at any level, a missing or mistyped field, an output
-    /// without a `terms` list, a term with both `exponents` and `expression`, an exponent named
+    /// without a `terms` list, a term with both `exponents` and `expression` or neither, an exponent named
     /// twice or not a non-negative integer, expressions, standard errors, intervals or origins in
     /// a `/1` file, and all that [`Model::validate`] refuses.
     ///
@@ -790,7 +810,7 @@ impl Model {
         let table = self.variable_table().map_err(err)?;
         let names = self.variable_names();
         for o in &self.outputs {
-            check_distinct_terms(o, &self.outputs).map_err(err)?;
+            check_distinct_terms(o, &self.outputs, &names).map_err(err)?;
             for (k, t) in o.terms.iter().enumerate() {
                 self.check_term(t, &table, &names)
                     .map_err(|m| err(format!("output '{}', term {}: {m}", o.name, k + 1)))?;

@@ -342,6 +342,37 @@ impl RecordSet {
         Ok(())
     }
 
+    /// Refuses an input that is an output up to scale and offset over `runs` (correlation 1 to
+    /// nine digits): the input column repeats the output (the same column named twice, a
+    /// copy), so no equation can tell them apart (`identify` returned `y_d1 = 0` with no term).
+    pub fn require_distinct(&self, input: usize, output: usize, runs: &[usize]) -> Result<()> {
+        let pairs = || {
+            runs.iter().flat_map(move |&r| {
+                let run = &self.runs[r];
+                run.channels[input]
+                    .iter()
+                    .zip(&run.channels[output])
+                    .map(|(&a, &b)| (a, b))
+            })
+        };
+        let n = pairs().count().max(1) as f64;
+        let (ma, mb) = pairs().fold((0.0, 0.0), |(x, y), (a, b)| (x + a / n, y + b / n));
+        let (mut saa, mut sbb, mut sab) = (0.0, 0.0, 0.0);
+        for (a, b) in pairs() {
+            saa += (a - ma) * (a - ma);
+            sbb += (b - mb) * (b - mb);
+            sab += (a - ma) * (b - mb);
+        }
+        let r = sab / (saa * sbb).sqrt();
+        if r.abs() >= 1.0 - 1e-9 {
+            return Err(Error::InvalidData(format!(
+                "input '{}' is output '{}' up to scale and offset (correlation {r:.12}) over the training runs: an input must be what drives the machine; check the columns",
+                self.channel_names[input], self.channel_names[output]
+            )));
+        }
+        Ok(())
+    }
+
     /// Refuses a channel that varies over `runs` only from run to run, constant within each of
     /// them (an output held at a different level in every training run): its derivatives are
     /// zero in every one of them, so there is no dynamics to identify and no run to tune the

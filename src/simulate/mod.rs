@@ -67,6 +67,12 @@ pub trait System {
     }
     /// Writes `f(x, u)` into `dx`.
     fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]);
+    /// A term of the right-hand side that is not finite at `(x, u)`, described for an error
+    /// message (`the term 'sqrt(y)' of output 'y' is NaN`); `None` where every term is finite or
+    /// the system has no terms to name.
+    fn nonfinite_term(&self, _x: &[f64], _u: &[f64]) -> Option<String> {
+        None
+    }
     /// The step of the default [`System::jacobian`] in state `k` at `x`: `sqrt(eps)` relative,
     /// the usual balance of truncation and rounding for states of order one. Systems whose
     /// states are far from that scale say so here.
@@ -112,6 +118,14 @@ impl System for CompiledModel {
     }
     fn rhs(&self, x: &[f64], u: &[f64], dx: &mut [f64]) {
         self.rhs_unchecked(x, u, dx)
+    }
+    fn nonfinite_term(&self, x: &[f64], u: &[f64]) -> Option<String> {
+        CompiledModel::nonfinite_term(self, x, u).map(|(i, term, v)| {
+            format!(
+                "the term '{term}' of output '{}' is {v}",
+                self.names()[self.offset(i)]
+            )
+        })
     }
     fn chains(&self) -> Option<Vec<(usize, usize)>> {
         Some(
@@ -1001,8 +1015,27 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
         }
     }
 
-    /// The error of a step size that collapsed to `h` at `(t, x)`.
+    /// The error of a step size that collapsed to `h` at `(t, x)`: where a term of the
+    /// right-hand side is not finite there (at the input of `t` or of the last step tried), that
+    /// term, not stability, is the cause (`sqrt(y)` once y went below zero was reported as an
+    /// unstable model).
     fn collapsed(&self, t: f64, x: &[f64], h: f64) -> Error {
+        let mut u = vec![0.0; self.sys.n_inputs()];
+        let bad = [t, t + 4.0 * h].into_iter().find_map(|at| {
+            self.input.eval(at, &mut u);
+            self.sys.nonfinite_term(x, &u)
+        });
+        if let Some(what) = bad {
+            let state: Vec<String> = (0..self.n.min(8))
+                .map(|k| format!("{} = {:e}", self.sys.state_name(k), x[k]))
+                .collect();
+            return Error::TermNotFinite {
+                run: self.opts.run.clone(),
+                time: t,
+                what,
+                state: state.join(", "),
+            };
+        }
         Error::Diverged {
             run: self.opts.run.clone(),
             time: t,
@@ -1113,17 +1146,22 @@ pub fn initial_state(
             ),
         ));
     }
+    let top = model.orders().iter().copied().max().unwrap_or(1);
+    // A window shorter than the local fit's own is the caller's to give (a benchmark allows the
+    // tanks 5 test samples; 16 were used), down to the fewest samples that fix its polynomial.
+    let asked = window.max(top + 2);
     let mut x0 = Vec::with_capacity(model.n_state());
     for (i, y) in ys.iter().enumerate() {
         let order = model.orders()[i];
         let name = &model.names()[model.offset(i)];
         let what = format!("estimating the initial state of output '{name}' (order {order})");
-        x0.extend(estimate_initial_derivatives(t, y, order, &opts.run, &what)?);
+        let m = initial_window(order).min(asked);
+        x0.extend(local_derivatives(t, y, order, m, &opts.run, &what)?);
     }
-    let first = initial_window(model.orders().iter().copied().max().unwrap_or(1));
+    let first = initial_window(top).min(asked);
     // A window beyond the run is the whole run (a window near usize::MAX once wrapped a
     // doubling to zero and never ended).
-    let window = window.min(t.len()).max(first);
+    let window = asked.min(t.len()).max(first);
     // By continuation: over a short horizon the outputs are nearly linear in the initial state
     // whatever the model, so the fit finds the right basin there, and each doubling of the
     // window starts from the last one's state. Fitted on all 200 samples at once from the
@@ -1506,7 +1544,20 @@ pub fn estimate_initial_derivatives(
     run: &str,
     what: &str,
 ) -> Result<Vec<f64>> {
-    let m = initial_window(order);
+    local_derivatives(t, y, order, initial_window(order), run, what)
+}
+
+/// [`estimate_initial_derivatives`] on the first `m` samples (at least `order + 2`, which fix
+/// the polynomial of degree `order + 1`).
+fn local_derivatives(
+    t: &[f64],
+    y: &[f64],
+    order: usize,
+    m: usize,
+    run: &str,
+    what: &str,
+) -> Result<Vec<f64>> {
+    let m = m.max(order + 2);
     if t.len() < m || y.len() < m {
         return Err(Error::RunTooShort {
             run: run.into(),
@@ -1898,6 +1949,66 @@ mod tests {
             ..run
         };
         assert!(free_run(&model("u"), &none, 5, &SimOptions::default()).is_err());
+    }
+
+    /// A window below the local fit's own (a benchmark's 5 samples for an order-2 model) is
+    /// what the initial state reads: samples after it do not move it (16 were read before).
+    #[test]
+    fn the_initial_state_reads_no_sample_after_its_window() {
+        let text = r#"{"format": "ctsid-model/2", "inputs": ["u"], "outputs": [
+            {"name": "y", "order": 2, "terms": [
+                {"exponents": {"y": 1}, "coefficient": -4.0},
+                {"exponents": {"y_d1": 1}, "coefficient": -0.4},
+                {"exponents": {"u": 1}, "coefficient": 4.0}]}]}"#;
+        let c = crate::model::Model::from_json_str(text, "test")
+            .unwrap()
+            .compile()
+            .unwrap();
+        let t: Vec<f64> = (0..60).map(|k| 0.05 * k as f64).collect();
+        let y: Vec<f64> = t.iter().map(|t| 1.0 - (2.0 * t).cos()).collect();
+        let u = vec![vec![1.0; 60]];
+        let opts = SimOptions::default();
+        let at = |y: &[f64], w: usize| initial_state(&c, &t, &[y.to_vec()], &u, w, &opts).unwrap();
+        let mut spoilt = y.clone();
+        spoilt[5..].iter_mut().for_each(|v| *v += 100.0);
+        assert_eq!(at(&y, 5), at(&spoilt, 5));
+        // The local fit's own window and beyond read the spoilt samples.
+        assert_ne!(at(&y, 16), at(&spoilt, 16));
+        // Below order + 2 samples the polynomial is not determined: order + 2 (0..=3) are read.
+        spoilt = y.clone();
+        spoilt[3..].iter_mut().for_each(|v| *v += 100.0);
+        assert_ne!(at(&y, 1), at(&spoilt, 1));
+        assert_eq!(at(&y, 1), at(&y, 4));
+    }
+
+    /// A term that goes non-finite during a free run (`sqrt(y)` once y crosses zero) is named
+    /// with the time: it was reported as a model unstable there.
+    #[test]
+    fn a_term_going_non_finite_mid_run_is_named() {
+        let text = r#"{"format": "ctsid-model/2", "inputs": ["u"], "outputs": [
+            {"name": "y", "order": 1, "terms": [
+                {"exponents": {}, "coefficient": -1.0},
+                {"expression": "sqrt(y)", "coefficient": 0.1}]}]}"#;
+        let c = crate::model::Model::from_json_str(text, "test")
+            .unwrap()
+            .compile()
+            .unwrap();
+        let t: Vec<f64> = (0..300).map(|k| 0.01 * k as f64).collect();
+        let run = RunData {
+            id: "r".into(),
+            y: vec![t.iter().map(|t| (1.0 - t).max(0.0)).collect()],
+            u: vec![vec![0.0; 300]],
+            t: t.clone(),
+            states: None,
+            x0: Vec::new(),
+        };
+        let e = free_run(&c, &run, 20, &SimOptions::default()).unwrap_err();
+        assert!(matches!(e, Error::TermNotFinite { .. }), "{e}");
+        let text = e.to_string();
+        assert!(
+            text.contains("the term 'sqrt(y)' of output 'y' is NaN"),
+            "{text}"
+        );
     }
 
     #[test]
