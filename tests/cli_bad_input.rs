@@ -942,6 +942,11 @@ fn slips_that_passed_before_are_refused() {
         serde_json::json!({"expression": "2*y", "coefficient": 0.5}),
     );
     fails(&["show", &twice], &["terms 1 and 3 are both"]);
+    let three = with_term(
+        "interval-three.json",
+        serde_json::json!({"exponents": {"u": 2}, "coefficient": 0.5, "interval": [0.1, 0.5, 0.9]}),
+    );
+    fails(&["show", &three], &["interval has 3 numbers"]);
     // A named term that is no monomial stays a term of its own.
     let own = with_term(
         "expr-own.json",

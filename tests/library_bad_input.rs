@@ -452,16 +452,17 @@ fn discover_on_data_near_the_magnitude_limit_is_an_answer_or_a_clear_error() {
 
 #[test]
 fn long_products_compile_in_linear_size_and_only_a_flood_of_them_is_refused() {
-    // 999 factors: each derivative tree had about 500,000 nodes, and twenty such terms took
+    // 995 factors (999 when this was found): each derivative tree had about 500,000 nodes, and twenty such terms took
     // 945 MB, so they were refused; as one program with shared entries each term takes about
-    // 3,000 (`model::tape`), and the model compiles and evaluates.
-    let long = vec!["y"; 999].join("*");
+    // 3,000 (`model::tape`), and the model compiles and evaluates. (Each term has its own factor
+    // `u + k`: a multiple of another term's monomial is refused as the same column.)
+    let long = vec!["y"; 995].join("*");
     let model = |n: usize| {
         let terms: Vec<String> = (0..n)
             .map(|k| {
                 format!(
-                    r#"{{"expression": "{long}*{}", "coefficient": 1e-9}}"#,
-                    k + 2
+                    r#"{{"expression": "{long}*(u+{})", "coefficient": 1e-9}}"#,
+                    k + 1
                 )
             })
             .collect();
@@ -474,7 +475,7 @@ fn long_products_compile_in_linear_size_and_only_a_flood_of_them_is_refused() {
     let c = m.compile().unwrap();
     let mut dx = [0.0];
     c.rhs(&[1.0], &[1.0], &mut dx).unwrap();
-    // 1 + 1e-9 * (2 + 3 + ... + 21) at y = 1.
+    // 1 + 1e-9 * (2 + 3 + ... + 21) at y = 1, u = 1.
     assert!((dx[0] - (1.0 + 1e-9 * 230.0)).abs() < 1e-15, "{dx:?}");
     // Thousands of such terms still exceed the model-wide budget: one line, not the memory.
     let m = ctsid::model::Model::from_json_str(&model(1400), "flood.json").unwrap();

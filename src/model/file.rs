@@ -372,7 +372,9 @@ struct RawTerm {
     expression: Option<String>,
     coefficient: f64,
     std_error: Option<f64>,
-    interval: Option<[f64; 2]>,
+    // A list, checked for its two numbers by `read_term`: as `[f64; 2]` a third number was
+    // reported as serde's "trailing characters".
+    interval: Option<Vec<f64>>,
     origin: Option<Origin>,
     #[serde(flatten)]
     extra: Map<String, Value>,
@@ -391,7 +393,7 @@ impl<'de> Deserialize<'de> for Pairs {
         impl<'de> serde::de::Visitor<'de> for V {
             type Value = Pairs;
             fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("an object of variable names and exponents")
+                f.write_str("an object of variable names and numbers ({\"y\": 2})")
             }
             fn visit_map<A: serde::de::MapAccess<'de>>(
                 self,
@@ -537,9 +539,19 @@ fn read_term(
             "expressions, standard errors, intervals and origins need \"format\": \"{FORMAT}\""
         ));
     }
+    let interval = match t.interval.as_deref() {
+        None => None,
+        Some(&[lo, hi]) => Some([lo, hi]),
+        Some(v) => {
+            return Err(format!(
+                "interval has {} numbers; give [low, high]",
+                v.len()
+            ))
+        }
+    };
     let mut term = Term {
         std_error: t.std_error,
-        interval: t.interval,
+        interval,
         origin: t.origin,
         ..Term::monomial_term(BTreeMap::new(), t.coefficient)
     };
