@@ -367,7 +367,7 @@ fn try_term(
     (fit_runs, gate_runs): (&[RunData], &[RunData]),
     noise: &[f64],
     opts: &RefineOptions,
-    smoothing: &dyn Fn(&mut Model),
+    smoothing: &(dyn Fn(&mut Model) + Sync),
 ) -> (Trial, Option<(Model, Sims)>) {
     let mut trial = Trial {
         output: best.outputs[i].name.clone(),
@@ -593,7 +593,7 @@ fn screen(
     vars: &[String],
     fit_runs: &[RunData],
     noise: &[f64],
-    smoothing: &dyn Fn(&mut Model),
+    smoothing: &(dyn Fn(&mut Model) + Sync),
 ) -> Vec<Option<(f64, f64)>> {
     use nalgebra::{DMatrix, DVector};
     use rayon::prelude::*;
@@ -760,7 +760,7 @@ struct Context<'a> {
     runs: (&'a [RunData], &'a [RunData]),
     noise: &'a [f64],
     opts: &'a RefineOptions,
-    smoothing: &'a dyn Fn(&mut Model),
+    smoothing: &'a (dyn Fn(&mut Model) + Sync),
 }
 
 /// Screens the moves `pending` (output, term, starting coefficient; in place of the output's
@@ -796,8 +796,12 @@ fn best_move(
     for &(k, _) in swaps.iter().skip(SWAP_TRIALS) {
         screened[k] = None;
     }
+    // The round's trials are independent refinements: in parallel (each refines its runs in
+    // parallel too, but its sequential steps between them left the second core idle), gathered
+    // in order, so that the same moves are kept as one by one.
+    use rayon::prelude::*;
     let round: Vec<(Trial, Option<(Model, Sims)>)> = pending
-        .iter()
+        .par_iter()
         .zip(replaces)
         .zip(&screened)
         .map(|(((i, name, c), rep), lin)| {
@@ -1023,7 +1027,7 @@ pub fn complete(
     (fit_runs, gate_runs): (&[RunData], &[RunData]),
     noise: &[f64],
     opts: &RefineOptions,
-    smoothing: &dyn Fn(&mut Model),
+    smoothing: &(dyn Fn(&mut Model) + Sync),
 ) -> Result<(Model, Vec<Trial>)> {
     // A model that already simulates the gate runs to within the refinement's skip level (noise-
     // free data) has nothing a term could show.
