@@ -262,11 +262,14 @@ fn a_time_column_in_milliseconds_is_pointed_out() {
     let d = tmpdir("ms");
     let model = oscillator_file(&d);
     let m = model.to_str().unwrap();
+    // The inverse too: a model identified at 1000 times the data's sampling (its data's times
+    // in ms) is pointed out, by `simulate` and by `discover` (which said nothing).
     for (scale, note) in [
         (1.0, false),
         (1000.0, true),
         (1.0 / 60.0, true),
         (2.0, false),
+        (0.001, true),
     ] {
         let data = d.join(format!("d{scale}.csv"));
         let mut s = String::from("t,u,y\n");
@@ -278,10 +281,22 @@ fn a_time_column_in_milliseconds_is_pointed_out() {
         let (ok, _, err) = ctsid(&["simulate", m, data.to_str().unwrap(), "--time-column", "t"]);
         assert!(ok, "{err}");
         assert_eq!(
-            err.contains("convert it to seconds"),
+            err.contains("convert it to seconds") || err.contains("identify it again"),
             note,
             "x{scale}: {err}"
         );
+        if scale == 0.001 {
+            assert!(err.contains("if its data's times were in ms"), "{err}");
+            let (_, _, err) = ctsid(&[
+                "discover",
+                data.to_str().unwrap(),
+                "--nominal",
+                m,
+                "--time-column",
+                "t",
+            ]);
+            assert!(err.contains("if its data's times were in ms"), "{err}");
+        }
         if scale == 1000.0 {
             assert!(
                 err.contains("(ms?)") && err.contains("about 1000 times"),

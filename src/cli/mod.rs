@@ -168,6 +168,39 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
     Ok(())
 }
 
+/// A note where the data's sampling is a unit's factor from the model's (a continuous-time
+/// model simulates at any sampling, but a ratio of 1e3, 1e6, 1/60 or 1/3600 to the
+/// identification's is mostly a time column in ms, us, min or h; and the inverse, a model
+/// identified on such a column). `simulate` had it; `discover` with a nominal of another unit
+/// said nothing.
+pub fn note_tau_units(data_tau: f64, model_tau: Option<f64>, from_time_column: bool) {
+    let Some(mt) = model_tau else { return };
+    let near = |r: f64, k: f64| (r / k - 1.0).abs() < 0.01;
+    let (data, model) = (ctsid::util::num4(data_tau), ctsid::util::num4(mt));
+    let source = if from_time_column {
+        "the time column"
+    } else {
+        "--tau"
+    };
+    for (k, label, unit) in [
+        (1e3, "1000", "ms"),
+        (1e6, "1e6", "us"),
+        (1.0 / 60.0, "1/60", "min"),
+        (1.0 / 3600.0, "1/3600", "h"),
+    ] {
+        if near(data_tau / mt, k) {
+            eprintln!(
+                "note: the data are sampled every {data} s, the model was identified at {model} s (about {label} times): if {source} is in another unit ({unit}?), convert it to seconds"
+            );
+        }
+        if near(mt / data_tau, k) {
+            eprintln!(
+                "note: the model was identified at {model} s, about {label} times the data's {data} s: if its data's times were in {unit}, identify it again with times in seconds"
+            );
+        }
+    }
+}
+
 /// Refuses an output file inside the report folder, or named as the folder: the report's
 /// files would replace it (`-o rep/report.md --report rep` lost the simulated CSV) or the
 /// folder could not be made. Checked before the work, like the other outputs.

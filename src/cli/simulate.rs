@@ -104,30 +104,7 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         .segment
         .apply(super::load_records(&args.data, &spec)?)?;
     check_score_from(&rs, args.score_from)?;
-    // A continuous-time model simulates at any sampling, but a ratio of 1e3, 1e6, 1/60 or
-    // 1/3600 to the identification's is mostly a time column in ms, us, min or h.
-    if let Some(mt) = model.tau {
-        let ratio = rs.tau / mt;
-        for (k, label, unit) in [
-            (1e3, "1000", "ms"),
-            (1e6, "1e6", "us"),
-            (1.0 / 60.0, "1/60", "min"),
-            (1.0 / 3600.0, "1/3600", "h"),
-        ] {
-            if (ratio / k - 1.0).abs() < 0.01 {
-                let source = if spec.time_column.is_some() {
-                    "the time column"
-                } else {
-                    "--tau"
-                };
-                eprintln!(
-                    "note: the data are sampled every {} s, the model was identified at {} s (about {label} times): if {source} is in another unit ({unit}?), convert it to seconds",
-                    num4(rs.tau),
-                    num4(mt),
-                );
-            }
-        }
-    }
+    super::note_tau_units(rs.tau, model.tau, spec.time_column.is_some());
     let n_out = model.outputs.len();
     let mut simulated: Vec<Vec<Vec<f64>>> = Vec::with_capacity(rs.runs.len());
     let mut pooled_sim: Vec<Vec<f64>> = vec![Vec::new(); n_out];
