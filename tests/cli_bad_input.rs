@@ -978,6 +978,23 @@ fn slips_that_passed_before_are_refused() {
         ],
         &["input 'u' is output 'y' up to scale and offset"],
     );
+    // A constant output with one glitch failed inside the fit ("the chosen terms are linearly
+    // dependent").
+    let mut glitch = String::from("t,u,y\n");
+    for i in 0..400 {
+        let t = i as f64 * 0.01;
+        let y = if i == 200 { 0.7 } else { 0.5 };
+        glitch += &format!("{t},{},{y}\n", (3.0 * t).sin());
+    }
+    let glitch = file("glitch.csv", &glitch);
+    fails(
+        &[
+            "identify",
+            &glitch,
+            "--output y --input u --time-column t --degree 1 --order 1",
+        ],
+        &["output 'y' is constant (0.5) except at 1 of"],
+    );
 
     let out = fails(
         &[

@@ -181,6 +181,10 @@ pub struct CsvSpec {
     pub tau: Option<f64>,
 }
 
+/// Fewest training samples an output must leave its resting value at ([`RecordSet::require_varies`]):
+/// fewer cannot carry a derivative, let alone a dynamics.
+pub const MIN_MOVING: usize = 10;
+
 impl RecordSet {
     /// Builds a record set from in-memory runs (validated like a file). Refuses a tau that
     /// [`check_tau`] refuses, a channel name given twice, a run id used twice, a run with another number of channels
@@ -337,6 +341,34 @@ impl RecordSet {
             };
             return Err(Error::InvalidData(format!(
                 "{role} '{name}' is constant ({lo:?}) over the training runs: {fix}"
+            )));
+        }
+        if role == "output" {
+            self.require_moves(channel, runs)?;
+        }
+        Ok(())
+    }
+
+    /// Refuses an output that stays at one value on all but a handful ([`MIN_MOVING`]) of the
+    /// samples of `runs`: a glitch in a constant column passed the check above and the fit
+    /// failed later with "the chosen terms are linearly dependent".
+    fn require_moves(&self, channel: usize, runs: &[usize]) -> Result<()> {
+        let mut v: Vec<f64> = runs
+            .iter()
+            .flat_map(|&r| self.runs[r].channels[channel].iter().copied())
+            .collect();
+        let n = v.len();
+        if n == 0 {
+            return Ok(());
+        }
+        let mid = n / 2;
+        let median = *v.select_nth_unstable_by(mid, f64::total_cmp).1;
+        let tol = 1e-12 * median.abs().max(f64::MIN_POSITIVE);
+        let moving = v.iter().filter(|x| (*x - median).abs() > tol).count();
+        if moving < MIN_MOVING {
+            return Err(Error::InvalidData(format!(
+                "output '{}' is constant ({median:?}) except at {moving} of {n} training samples: there is nothing to identify; check the column (a glitch?)",
+                self.channel_names[channel]
             )));
         }
         Ok(())
