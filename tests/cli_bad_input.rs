@@ -1008,6 +1008,23 @@ fn slips_that_passed_before_are_refused() {
         out.stdout.is_empty(),
         "the design was printed before the refusal"
     );
+    // The profile law on a model not affine in its input, without limits to search in.
+    let square = with_term(
+        "u-squared.json",
+        serde_json::json!({"exponents": {"u": 2}, "coefficient": 0.3}),
+    );
+    let out = fails(
+        &[
+            "control",
+            &square,
+            "--setpoint 1 --from 0 --tau 0.01 --law profile",
+        ],
+        &["--u-min and --u-max"],
+    );
+    assert!(
+        out.stdout.is_empty(),
+        "the design was printed before the refusal"
+    );
 }
 
 /// A control byte from the data (NUL, ESC) is shown escaped in the error line: raw, a NUL cut

@@ -312,6 +312,17 @@ pub fn run(d: &Design, plant: &Plant, s: &Scenario) -> Result<Trace> {
 pub fn check_scenario(d: &Design, s: &Scenario, law: &Law) -> Result<()> {
     check_duration(d, s)?;
     crate::util::finite_nonneg("noise", s.noise_sd)?;
+    // The profile law solves for the input by a bounded search where the model is not affine in
+    // it: without limits it found no input at the first sample, after the design was printed.
+    if matches!(law, Law::Profile(_))
+        && s.u_limits.is_none()
+        && !super::tracking::affine_in_input(&d.model)
+    {
+        return Err(Error::param(
+            "u-min/u-max",
+            "the exponential-profile law on a model not affine in its input searches the input between limits; give --u-min and --u-max",
+        ));
+    }
     if let Some((lo, hi)) = s.u_limits {
         if !(lo.is_finite() && hi.is_finite() && lo < hi) {
             return Err(Error::param(
@@ -435,12 +446,7 @@ impl Controller<'_> {
                 }
                 p.decide(xh, &refs, u_prev).ok_or_else(|| {
                     Error::InvalidData(format!(
-                        "the exponential-profile law found no input at the estimate {xh:?}: the model does not depend on its input there{}",
-                        if p.limits.is_none() && !p.affine {
-                            "; the model is not affine in its input: give --u-min and --u-max for the search"
-                        } else {
-                            ""
-                        }
+                        "the exponential-profile law found no input at the estimate {xh:?}: the model does not depend on its input there"
                     ))
                 })
             }
