@@ -67,13 +67,13 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     // The initial state's local fit needs order + 2 samples: a smaller window was raised to the
     // local fit's 16 or more without a word (`--init-window 0` scored as 15).
     let top = model.outputs.iter().map(|o| o.order).max().unwrap_or(1);
-    if args.init_window < top + 2 {
+    let least = ctsid::simulate::min_init_window(top);
+    if args.init_window < least {
         return Err(Error::param(
             "init-window",
             format!(
-                "{}: an initial state of order {top} needs at least {} samples",
-                args.init_window,
-                top + 2
+                "{}: an initial state of order {top} needs at least {least} samples",
+                args.init_window
             ),
         ));
     }

@@ -1149,7 +1149,7 @@ pub fn initial_state(
     let top = model.orders().iter().copied().max().unwrap_or(1);
     // A window shorter than the local fit's own is the caller's to give (a benchmark allows the
     // tanks 5 test samples; 16 were used), down to the fewest samples that fix its polynomial.
-    let asked = window.max(top + 2);
+    let asked = window.max(min_init_window(top));
     let mut x0 = Vec::with_capacity(model.n_state());
     for (i, y) in ys.iter().enumerate() {
         let order = model.orders()[i];
@@ -1530,6 +1530,12 @@ pub fn initial_window(order: usize) -> usize {
     (4 * (order + 2)).max(15)
 }
 
+/// The fewest samples an initial state of order `order` can be read from: `order + 2` fix the
+/// local polynomial of degree `order + 1` ([`initial_state`] raises a smaller window to it).
+pub fn min_init_window(order: usize) -> usize {
+    order + 2
+}
+
 /// Estimates `y, y', ..., y^(order-1)` at `t[0]` from the first samples of a run.
 ///
 /// A polynomial of degree `order + 1` is fitted by least squares to the first
@@ -1557,7 +1563,7 @@ fn local_derivatives(
     run: &str,
     what: &str,
 ) -> Result<Vec<f64>> {
-    let m = m.max(order + 2);
+    let m = m.max(min_init_window(order));
     if t.len() < m || y.len() < m {
         return Err(Error::RunTooShort {
             run: run.into(),
