@@ -802,7 +802,8 @@ impl Model {
     /// Checks names, orders, exponents and coefficients; the error names the term at fault. Refuses
     /// a format other than [`FORMAT`], a tau that [`crate::records::check_tau`] refuses, an unknown
     /// section, no outputs, an order of 0 or above [`MAX_ORDER`], an empty name or a variable name
-    /// used twice, two equal terms in one output, a coefficient that is not finite, a `std_error`
+    /// used twice, two equal terms in one output (an expression that is a monomial up to a factor
+    /// counts as that monomial), a coefficient that is not finite, a `std_error`
     /// that is negative or not finite, an `interval` that is not a finite [low, high], a term with
     /// both exponents and an expression, an expression that does not parse or has a part that is
     /// not finite whatever the state is (`0/0`, `y/0`, `exp(800)`), an exponent above
