@@ -29,10 +29,24 @@ fn fixed_orders_fit(
 /// The plant's truth, its runs (`n_runs` of 1000 samples at `noise`, the first `n_train` train,
 /// the rest test) and identify's model at d = 4 with `orders` on the CPU engine.
 fn mimo_fit(
-    (n_runs, n_train): (usize, usize),
+    runs: (usize, usize),
     noise: f64,
     seed: u64,
     orders: Orders,
+) -> (
+    Model,
+    Vec<ctsid::plants::Run>,
+    ctsid::identify::Identification,
+) {
+    mimo_fit_with(runs, noise, seed, |s| s.orders = orders.clone())
+}
+
+/// [`mimo_fit`] with the settings (d = 4, CPU engine) changed by `tweak` before the fit.
+fn mimo_fit_with(
+    (n_runs, n_train): (usize, usize),
+    noise: f64,
+    seed: u64,
+    tweak: impl Fn(&mut Settings),
 ) -> (
     Model,
     Vec<ctsid::plants::Run>,
@@ -52,8 +66,8 @@ fn mimo_fit(
     )
     .unwrap();
     let mut s = Settings::new(outputs, inputs, 4);
-    s.orders = orders;
     s.engine = EngineChoice::Cpu;
+    tweak(&mut s);
     let id = identify(&rs, &split, &s).unwrap();
     (truth, runs, id)
 }
@@ -524,22 +538,18 @@ fn a_mimo_search_on_one_training_run_shows_no_validation_profile() {
 /// docs/method/regression.md.)
 #[test]
 fn the_model_is_the_same_on_one_thread_and_on_three() {
-    let plant = Plant::mimo();
-    let (inputs, outputs) = (plant.input_names(), plant.output_names());
-    let runs = dataset(&plant, 6, 1000, 0.01, 0.01, 3).unwrap();
-    let rs = records(&runs, &inputs, &outputs, 0.01).unwrap();
-    let ids: Vec<String> = (0..6).map(|i| i.to_string()).collect();
-    let split = Split::new((0..5).collect(), None, vec![5], &ids).unwrap();
-    let mut s = Settings::new(outputs, inputs, 3);
-    s.orders = Orders::Fixed(vec![3; 3]);
-    s.engine = EngineChoice::Cpu;
-    s.refine = false;
     let fit = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
-        let id = pool.install(|| identify(&rs, &split, &s)).unwrap();
+        let (_, _, id) = pool.install(|| {
+            mimo_fit_with((6, 5), 0.01, 3, |s| {
+                s.degree = 3;
+                s.orders = Orders::Fixed(vec![3; 3]);
+                s.refine = false;
+            })
+        });
         id.model.to_json_string().unwrap()
     };
     let (one, three) = (fit(1), fit(3));

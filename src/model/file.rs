@@ -435,29 +435,30 @@ fn check_distinct_terms(
     let mut seen: std::collections::HashMap<(BTreeMap<&str, u32>, String), usize> =
         Default::default();
     for (k, t) in o.terms.iter().enumerate() {
-        let as_monomial = t.expression.as_deref().and_then(|e| {
-            let powers = Expr::parse(e, names).ok()?.monomial_up_to_scale()?;
-            Some(
-                powers
-                    .into_iter()
-                    .map(|(v, p)| (canonical_var(&names[v], &outputs), p))
-                    .collect::<BTreeMap<&str, u32>>(),
-            )
+        // The key: the monomial's exponents, with the expression's text (without spaces) for
+        // an expression that is no monomial.
+        let of_expression = t.expression.as_deref().map(|e| {
+            let powers = Expr::parse(e, names)
+                .ok()
+                .and_then(|x| x.monomial_up_to_scale());
+            match powers {
+                Some(p) => (
+                    p.into_iter()
+                        .map(|(v, p)| (canonical_var(&names[v], &outputs), p))
+                        .collect(),
+                    String::new(),
+                ),
+                None => (BTreeMap::new(), e.split_whitespace().collect()),
+            }
         });
-        let mono = as_monomial.clone().unwrap_or_else(|| {
-            t.exponents
+        let (mono, expr) = of_expression.unwrap_or_else(|| {
+            let mono = t
+                .exponents
                 .iter()
                 .map(|(v, &e)| (canonical_var(v, &outputs), e))
-                .collect()
+                .collect();
+            (mono, String::new())
         });
-        // Other expressions compare as written, without spaces.
-        let expr: String = t
-            .expression
-            .iter()
-            .filter(|_| as_monomial.is_none())
-            .flat_map(|e| e.chars())
-            .filter(|c| !c.is_whitespace())
-            .collect();
         if let Some(first) = seen.insert((mono, expr), k) {
             return Err(format!(
                 "output '{}': terms {} and {} are both {}; combine them into one",
