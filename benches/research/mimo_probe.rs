@@ -1,4 +1,6 @@
-//! Diagnostic: the MIMO plant's output equations at a given degree and max terms (noise-free).
+//! Diagnostic: the MIMO plant's output equations at fixed orders 3, 3, 3, a given degree and max
+//! terms: `cargo bench --bench mimo_probe -- D MAX_TERMS [NOISE]` (`SEED=S` as `demo mimo --seed`;
+//! `REFINE`, `NOSAME`, `LABELFILTER`, `NOWEIGHT` set switch the settings of the same names).
 use ctsid::demo::records;
 use ctsid::identify::{identify, Orders, Settings, Split};
 use ctsid::plants::{dataset, Plant};
@@ -9,7 +11,8 @@ fn main() {
     let eta: f64 = a.get(3).map(|s| s.parse().unwrap()).unwrap_or(0.0);
     let plant = Plant::mimo();
     // The configuration of `ctsid demo mimo`: 40 runs, 25 for training, 15 for the test.
-    let runs = dataset(&plant, 40, 1000, 0.01, eta, 1).unwrap();
+    let seed: u64 = std::env::var("SEED").map_or(1, |s| s.parse().unwrap());
+    let runs = dataset(&plant, 40, 1000, 0.01, eta, seed).unwrap();
     let rs = records(&runs, &plant.input_names(), &plant.output_names(), 0.01).unwrap();
     let ids: Vec<String> = (0..40).map(|i| i.to_string()).collect();
     let split = Split::new((0..25).collect(), None, (25..40).collect(), &ids).unwrap();
