@@ -138,7 +138,7 @@ pub enum Error {
         state: String,
     },
 
-    #[error("simulation diverged at t = {time:?} s (run '{run}', state {state}); the model is unstable there or the step is too large")]
+    #[error("simulation diverged at t = {time:?} s into run '{run}' (state {state}); the model's free run is unstable there")]
     Diverged {
         run: String,
         time: f64,

@@ -365,7 +365,7 @@ fn simulate_report_shows_fit_error_and_residual_analysis() {
             let nrmse: f64 = out
                 .lines()
                 .find(|l| l.split_whitespace().next() == Some(id))
-                .and_then(|l| l.split_whitespace().last()?.parse().ok())
+                .and_then(|l| l.split_whitespace().nth(3)?.parse().ok())
                 .unwrap_or_else(|| panic!("no row for run {id}:\n{out}"));
             let fit = format!("{:.1}", 100.0 - nrmse);
             let sim = std::fs::read_to_string(dir.join(format!("sim_{id}_y.svg"))).unwrap();

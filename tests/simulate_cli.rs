@@ -306,3 +306,123 @@ fn a_time_column_in_milliseconds_is_pointed_out() {
     }
     std::fs::remove_dir_all(&d).ok();
 }
+
+#[test]
+fn a_time_column_that_disagrees_with_the_models_tau_is_refused() {
+    let d = tmpdir("tlike");
+    let model = oscillator_file(&d); // tau 0.01 s
+    let m = model.to_str().unwrap();
+    // Without --tau or --time-column the model's tau is the sampling period: a model of 0.25 ms
+    // simulated on its record decimated to 2.5 ms scored 128 % without a word.
+    for (column, step, refused) in [
+        ("t", 0.02, true),
+        ("time_s", 0.005, true),
+        ("t", 0.01, false),
+        ("t", 0.010_05, false),
+    ] {
+        let data = d.join(format!("{column}{step}.csv"));
+        let mut s = format!("{column},u,y\n");
+        for k in 0..200 {
+            let t = k as f64 * step;
+            s += &format!("{t},{},{}\n", (3.0 * t).sin(), 0.1 * (2.0 * t).cos());
+        }
+        std::fs::write(&data, &s).unwrap();
+        let dp = data.to_str().unwrap();
+        let (ok, out, err) = ctsid(&["simulate", m, dp]);
+        assert_eq!(ok, !refused, "{column} {step}: {out}{err}");
+        if refused {
+            assert!(
+                err.contains(&format!("column '{column}'"))
+                    && err.contains(&format!("--time-column '{column}'"))
+                    && err.lines().count() == 1,
+                "{err}"
+            );
+            let (ok, _, err) = ctsid(&["simulate", m, dp, "--time-column", column]);
+            assert!(ok, "{err}");
+            let tau = step.to_string();
+            let (ok, _, err) = ctsid(&["simulate", m, dp, "--tau", &tau]);
+            assert!(ok, "{err}");
+        }
+    }
+    // A column named like time that is not uniform is not taken for time.
+    let data = d.join("jitter.csv");
+    let mut s = String::from("t,u,y\n");
+    for k in 0..200 {
+        let t = k as f64 * 0.02 + if k % 2 == 0 { 0.0 } else { 0.003 };
+        s += &format!("{t},{},0.1\n", (3.0 * t).sin());
+    }
+    std::fs::write(&data, &s).unwrap();
+    let (ok, _, err) = ctsid(&["simulate", m, data.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    std::fs::remove_dir_all(&d).ok();
+}
+
+#[test]
+fn a_run_whose_free_run_fails_is_marked_and_the_others_are_scored() {
+    let d = tmpdir("diverge");
+    // y' = y^2 + u: from y(0) = -1 (u = 0) it decays as -1 / (1 + t); from near 1 it blows up.
+    let model = d.join("m.json");
+    std::fs::write(
+        &model,
+        r#"{"format":"ctsid-model/1","tau":0.01,"inputs":["u"],"outputs":[{"name":"y","order":1,
+        "terms":[{"exponents":{"y":2},"coefficient":1},{"exponents":{"u":1},"coefficient":1}]}]}"#,
+    )
+    .unwrap();
+    let data = d.join("d.csv");
+    let mut s = String::from("run,t,u,y\n");
+    for r in 0..3 {
+        for k in 0..300 {
+            let t = k as f64 * 0.01;
+            let y = if r == 1 { 1.0 } else { -1.0 / (1.0 + t) };
+            s += &format!("{r},{t},0,{y}\n");
+        }
+    }
+    std::fs::write(&data, &s).unwrap();
+    let (m, dp) = (model.to_str().unwrap(), data.to_str().unwrap());
+    let sim = d.join("sim.csv");
+    let rep = d.join("rep");
+    let (ok, out, err) = ctsid(&[
+        "simulate",
+        m,
+        dp,
+        "--run-column",
+        "run",
+        "--time-column",
+        "t",
+        "-o",
+        sim.to_str().unwrap(),
+        "--report",
+        rep.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    // The failed run has its row, the others their scores and 'all' theirs alone.
+    assert!(
+        out.lines()
+            .any(|l| l.split_whitespace().eq(["1", "y", "-", "failed"])),
+        "{out}"
+    );
+    assert!(overall_nrmse(&out, "y") < 1e-3, "{out}");
+    assert!(
+        err.contains("left out of 'all'") && err.contains("run '1'") && err.contains("file row"),
+        "{err}"
+    );
+    // -o: the failed run's simulated cells empty, the others filled; the report covers the others.
+    let text = std::fs::read_to_string(&sim).unwrap();
+    let rows: Vec<&str> = text.lines().skip(1).collect();
+    assert_eq!(rows.len(), 900);
+    assert!(rows.iter().all(|r| r.ends_with(',') == r.starts_with("1,")));
+    assert!(rep.join("sim_0_y.svg").exists() && !rep.join("sim_1_y.svg").exists());
+    // Every run failing is an error: nothing is scored.
+    let only = d.join("only.csv");
+    let one: String = s
+        .lines()
+        .filter(|l| !l.starts_with("0,") && !l.starts_with("2,"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(&only, one).unwrap();
+    fails(
+        &["simulate", m, only.to_str().unwrap(), "--run-column", "run"],
+        &["diverged", "run '1'"],
+    );
+    std::fs::remove_dir_all(&d).ok();
+}

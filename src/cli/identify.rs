@@ -144,7 +144,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     text += &format!("Weighting: {}.\n", id.weighting);
     if let Some(r) = &id.refinement {
         text += &format!("Refinement by free-run simulation error: {}.\n", r.message);
-        text += &completion_text(&r.completion);
+        text += &completion_text(r);
     }
     out!("{text}")?;
 
@@ -168,16 +168,22 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
 }
 
 /// The completion's trials in words ([`ctsid::identify::complete`]): the moves kept, those the
-/// gate runs refused (with their significance), and how many the linearised screen set aside
-/// before any refinement. Empty where nothing was tried (noise-free data, or no held-out run).
-fn completion_text(trials: &[Trial]) -> String {
-    let trials: Vec<&Trial> = trials.iter().filter(|t| !t.term.is_empty()).collect();
+/// gate runs refused (with their significance and the rule they failed), and how many the
+/// linearised screen set aside before any refinement. Empty where nothing was tried (noise-free
+/// data, or no held-out run).
+fn completion_text(r: &ctsid::identify::RefinementReport) -> String {
+    let trials: Vec<&Trial> = r.completion.iter().filter(|t| !t.term.is_empty()).collect();
     if trials.is_empty() {
         return String::new();
     }
     let figures = |t: &Trial| {
+        let why = if t.why.is_empty() {
+            String::new()
+        } else {
+            format!(": {}", t.why)
+        };
         format!(
-            "z {:.1}, gate NRMSE {} -> {}",
+            "z {:.1}, gate NRMSE {} -> {}{why}",
             t.z,
             ctsid::util::num4(t.gate_before),
             ctsid::util::num4(t.gate_after)
@@ -198,6 +204,17 @@ fn completion_text(trials: &[Trial]) -> String {
         ctsid::identify::complete::Z_KEEP,
         100.0 * ctsid::identify::complete::MIN_GAIN
     );
+    // Where the refinement was refused, the trials still start from a refined model (a term
+    // the refinement lacked can be what it needed), so a trial's "before" is that model's gate
+    // NRMSE, not the written one's; the completed model must also beat the written one.
+    let start = tried.first().map(|t| t.gate_before);
+    if let (false, Some(start)) = (r.kept, start) {
+        text += &format!(
+            "(the refinement was refused: the trials start from the model refined anyway, gate NRMSE {}; a completed model is kept only where it also beats the model as fitted, {}) ",
+            ctsid::util::num4(start),
+            ctsid::util::num4(ctsid::identify::refine::overall(&r.validation_before))
+        );
+    }
     text += &if kept.is_empty() {
         "none kept".to_string()
     } else {

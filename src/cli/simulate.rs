@@ -100,13 +100,18 @@ pub fn run(args: SimulateArgs) -> Result<()> {
     let spec = args
         .sampling
         .spec(columns, args.run_column.clone(), model.tau);
+    if spec.time_column.is_none() && args.sampling.tau.is_none() {
+        check_time_like_columns(&args.data, &spec, model.tau)?;
+    }
     let rs = args
         .segment
         .apply(super::load_records(&args.data, &spec)?)?;
     check_score_from(&rs, args.score_from)?;
     super::note_tau_units(rs.tau, model.tau, spec.time_column.is_some());
     let n_out = model.outputs.len();
-    let mut simulated: Vec<Vec<Vec<f64>>> = Vec::with_capacity(rs.runs.len());
+    // `None` for a run whose free run failed (see `failure_time`).
+    let mut simulated: Vec<Option<Vec<Vec<f64>>>> = Vec::with_capacity(rs.runs.len());
+    let mut failed: Vec<String> = Vec::new();
     let mut pooled_sim: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let mut pooled_meas: Vec<Vec<f64>> = vec![Vec::new(); n_out];
     let window = args.init_window;
@@ -119,55 +124,68 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         free_run(&compiled, &data, window, &SimOptions::default())
     };
     let mut constant = false;
+    let time_known = spec.time_column.is_some();
     // In chunks, so that rows appear while a long record is still being simulated.
     let chunk = 2 * rayon::current_num_threads().max(1);
     for runs in rs.runs.chunks(chunk) {
-        // A chunk's first failing run stops the command before its rows are printed.
-        let results: Vec<Vec<Vec<f64>>> = runs
+        // A run whose free run fails is the model's property on that run: the others are
+        // still scored (one diverging run of six stopped the command, with nothing written).
+        // Any other error stops the command before the chunk's rows are printed.
+        let results: Vec<std::result::Result<Vec<Vec<f64>>, String>> = runs
             .par_iter()
-            .map(simulate_run)
+            .map(|run| match simulate_run(run) {
+                Ok(sim) => Ok(Ok(sim)),
+                Err(e) => match failure_time(&e) {
+                    Some(t) => Ok(Err(format!(
+                        "{e}{}",
+                        file_place(run, t, rs.tau, time_known)
+                    ))),
+                    None => Err(e),
+                },
+            })
             .collect::<Result<_>>()
             .map_err(|e| args.segment.explain(e))?;
         // The header once the first runs are simulated: an error in them is the only output.
         if simulated.is_empty() {
             outln!(
-                "{:<12} {:<12} {:>14} {:>10}",
+                "{:<12} {:<12} {:>14} {:>10} {:>8}",
                 "run",
                 "output",
                 "RMS",
-                "NRMSE %"
+                "NRMSE %",
+                "fit %"
             )?;
         }
-        for (run, per_run) in runs.iter().zip(results) {
+        for (run, result) in runs.iter().zip(results) {
+            let per_run = result.map_err(|f| failed.push(f)).ok();
             // Below every run's length: checked after reading the records.
             let from = args.score_from;
             for (i, o) in model.outputs.iter().enumerate() {
+                let Some(per_run) = &per_run else {
+                    outln!("{:<12} {:<12} {:>14} {:>10}", run.id, o.name, "-", "failed")?;
+                    continue;
+                };
                 let (sim, meas) = (&per_run[i][from..], &run.channels[i][from..]);
                 let (rms, nrmse) = rms_nrmse(sim, meas);
                 constant |= nrmse.is_infinite();
-                outln!(
-                    "{:<12} {:<12} {:>14.6e} {:>10}",
-                    run.id,
-                    o.name,
-                    rms,
-                    percent(nrmse)
-                )?;
+                score_row(&run.id, &o.name, rms, nrmse)?;
                 pooled_sim[i].extend_from_slice(sim);
                 pooled_meas[i].extend_from_slice(meas);
             }
             simulated.push(per_run);
         }
     }
+    // Every run failed: nothing to score, and the first failure is the error.
+    if failed.len() == rs.runs.len() {
+        return Err(Error::InvalidData(failed.swap_remove(0)));
+    }
     for (i, o) in model.outputs.iter().enumerate() {
         let (rms, nrmse) = rms_nrmse(&pooled_sim[i], &pooled_meas[i]);
         constant |= nrmse.is_infinite();
-        outln!(
-            "{:<12} {:<12} {:>14.6e} {:>10}",
-            "all",
-            o.name,
-            rms,
-            percent(nrmse)
-        )?;
+        score_row("all", &o.name, rms, nrmse)?;
+    }
+    for f in &failed {
+        eprintln!("note: not scored, and left out of 'all': {f}");
     }
     if constant {
         eprintln!(
@@ -181,7 +199,12 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             Some(out),
             &rs,
             &sim_names,
-            |r, i, k| format!("{}", simulated[r][k][i]),
+            // A failed run's simulated cells are left empty.
+            |r, i, k| {
+                simulated[r]
+                    .as_ref()
+                    .map_or(String::new(), |s| format!("{}", s[k][i]))
+            },
         )?;
         super::written(format!("wrote {path}"));
     }
@@ -198,14 +221,14 @@ fn write_report(
     args: &SimulateArgs,
     model: &Model,
     rs: &ctsid::RecordSet,
-    simulated: &[Vec<Vec<f64>>],
+    simulated: &[Option<Vec<Vec<f64>>>],
 ) -> Result<()> {
     let outputs: Vec<&str> = model.outputs.iter().map(|o| o.name.as_str()).collect();
     let inputs: Vec<&str> = model.inputs.iter().map(String::as_str).collect();
     let runs: Vec<(usize, &[Vec<f64>])> = simulated
         .iter()
         .enumerate()
-        .map(|(r, s)| (r, &s[..]))
+        .filter_map(|(r, s)| s.as_deref().map(|s| (r, s)))
         .collect();
     let table = write_record_report(dir, rs, &outputs, &inputs, "model", &runs, args.score_from)?;
     let scored = if args.score_from > 0 {
@@ -218,6 +241,96 @@ fn write_report(
         args.model, args.data, args.init_window
     );
     write_file(dir, "report.md", &text)
+}
+
+/// One row of the table: RMS, NRMSE and fit (100 (1 - NRMSE), the benchmarks' FIT index).
+fn score_row(run: &str, output: &str, rms: f64, nrmse: f64) -> Result<()> {
+    let fit = if nrmse.is_finite() {
+        num4(100.0 * (1.0 - nrmse))
+    } else {
+        "-".into()
+    };
+    outln!(
+        "{:<12} {:<12} {:>14.6e} {:>10} {:>8}",
+        run,
+        output,
+        rms,
+        percent(nrmse),
+        fit
+    )
+}
+
+/// The time (seconds into its run) at which a run's free run failed, where the error is such a
+/// failure (diverged, a term left its domain, an unstable mode), not bad input.
+fn failure_time(e: &Error) -> Option<f64> {
+    match e {
+        Error::Diverged { time, .. }
+        | Error::TermNotFinite { time, .. }
+        | Error::UnstableMode { time, .. } => Some(*time),
+        _ => None,
+    }
+}
+
+/// Where `t` seconds into `run` is in the file: its CSV row, and its time there when the
+/// times came from a time column (errors give times from the run's start).
+fn file_place(run: &ctsid::records::Run, t: f64, tau: f64, time_known: bool) -> String {
+    let k = ((t / tau).floor().max(0.0) as usize).min(run.len().saturating_sub(1));
+    match (run.rows.get(k), time_known) {
+        (Some(row), true) => format!(" (file row {row}, time {} s)", num4(run.t0 + t)),
+        (Some(row), false) => format!(" (file row {row})"),
+        (None, _) => String::new(),
+    }
+}
+
+/// Without `--tau` or `--time-column` the model's tau is the sampling period. A column named
+/// like time (`t`, `time`, `t_s`, `time_ms`, ...) that is uniform with another step means the
+/// file is sampled otherwise, and the free run would use the wrong step without a word (a model
+/// of 0.25 ms on its record decimated to 2.5 ms scored 128 %). Such a column is read as a time
+/// column only to compare; one that is not uniform is not taken for time.
+fn check_time_like_columns(
+    data: &str,
+    spec: &ctsid::records::CsvSpec,
+    model_tau: Option<f64>,
+) -> Result<()> {
+    let Some(mt) = model_tau else { return Ok(()) };
+    let Ok(mut rdr) = csv::Reader::from_path(data) else {
+        return Ok(()); // reported by the loader
+    };
+    let Ok(header) = rdr.headers() else {
+        return Ok(());
+    };
+    let time_like = |name: &str| {
+        let n = name.trim().to_ascii_lowercase();
+        ["t", "time"].iter().any(|t| {
+            n == *t
+                || n.strip_prefix(t)
+                    .is_some_and(|rest| rest.starts_with(['_', ' ', '[', '(']))
+        })
+    };
+    for name in header.iter().filter(|n| time_like(n)) {
+        if spec.columns.iter().any(|c| c == name) || spec.run_column.as_deref() == Some(name) {
+            continue;
+        }
+        let as_time = ctsid::records::CsvSpec {
+            time_column: Some(name.to_string()),
+            tau: None,
+            ..spec.clone()
+        };
+        let Ok(rs) = ctsid::records::RecordSet::from_csv(data, &as_time) else {
+            continue;
+        };
+        if (rs.tau / mt - 1.0).abs() > 0.01 {
+            return Err(Error::param(
+                "tau",
+                format!(
+                    "the model was identified at tau = {} s, but column '{name}' of {data} steps by {} s: give --time-column '{name}' to simulate at the data's sampling (or --tau)",
+                    num4(mt),
+                    num4(rs.tau)
+                ),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// NRMSE in percent for the table: '-' where it is undefined (a constant measurement that the

@@ -119,6 +119,10 @@ pub struct Trial {
     pub gate_before: f64,
     pub gate_after: f64,
     pub kept: bool,
+    /// Why a refined move was not kept, in words (the rule it failed); empty where kept or
+    /// screened out.
+    #[serde(skip_serializing_if = "String::is_empty", default)]
+    pub why: String,
     /// The linearised screen set the move aside before any refinement (its figures are NaN).
     #[serde(skip_serializing_if = "std::ops::Not::not")]
     pub screened: bool,
@@ -350,6 +354,7 @@ fn screened_out(best: &Model, i: usize, name: &str, replaces: Option<usize>) -> 
         gate_before: f64::NAN,
         gate_after: f64::NAN,
         kept: false,
+        why: String::new(),
         screened: true,
     }
 }
@@ -379,6 +384,7 @@ fn try_term(
         gate_before: gate_nrmse(best_sims, gate_runs),
         gate_after: f64::INFINITY,
         kept: false,
+        why: String::new(),
         screened: false,
     };
     // A near miss with no path coefficient starts small: refinement frees nonzero
@@ -414,12 +420,38 @@ fn try_term(
     // no worse, so that of two terms they cannot tell apart the simpler stays (MIMO plant,
     // d = 6, 1 %, seed 2: `u1*y2*y2_d1` for `u1*y2^2*y2_d1^2`, z 3.4 but a change of 0.07 noise
     // standard deviations, under an addition's MIN_CHANGE).
-    trial.kept = judged.is_some()
-        && if simpler {
-            trial.z >= 0.0 && after <= before
+    // Each condition as the rule states it, so that a NaN z (free runs equal to the model's)
+    // fails it as before.
+    let (z_ok, change_ok) = (trial.z >= Z_KEEP, trial.change >= MIN_CHANGE);
+    let (gain_ok, simpler_ok) = (
+        after <= (1.0 - MIN_GAIN) * before,
+        trial.z >= 0.0 && after <= before,
+    );
+    trial.why = if judged.is_none() {
+        "it could not be refined or simulated".into()
+    } else if simpler {
+        if simpler_ok {
+            String::new()
         } else {
-            trial.z >= Z_KEEP && trial.change >= MIN_CHANGE && after <= (1.0 - MIN_GAIN) * before
-        };
+            "the simpler term fits the gate runs worse".into()
+        }
+    } else if !z_ok {
+        format!("z under {Z_KEEP}")
+    } else if !change_ok {
+        format!(
+            "a change of {} noise standard deviations, under {MIN_CHANGE}",
+            crate::util::num4(trial.change)
+        )
+    } else if !gain_ok {
+        format!(
+            "the error above the noise {:.1} % lower, under {:.0} %",
+            100.0 * (1.0 - after / before),
+            100.0 * MIN_GAIN
+        )
+    } else {
+        String::new()
+    };
+    trial.kept = trial.why.is_empty();
     (trial, judged)
 }
 
@@ -486,13 +518,31 @@ fn try_removal(
         gate_before: gate_nrmse(best_sims, gate_runs),
         gate_after: f64::INFINITY,
         kept: false,
+        why: String::new(),
         screened: false,
     };
     let judged = judge(&mut trial, &m, best_sims, ctx.runs, ctx.noise, ctx.opts);
     let floor = noise_floor(gate_runs, ctx.noise);
-    trial.kept = judged.is_some()
-        && trial.z > -Z_KEEP
-        && excess(trial.gate_after, floor) <= (1.0 + MIN_GAIN) * excess(trial.gate_before, floor);
+    let (before, after) = (
+        excess(trial.gate_before, floor),
+        excess(trial.gate_after, floor),
+    );
+    let z_ok = trial.z > -Z_KEEP;
+    let growth_ok = after <= (1.0 + MIN_GAIN) * before;
+    trial.why = if judged.is_none() {
+        "it could not be refined or simulated".into()
+    } else if !z_ok {
+        format!("the gate runs significantly worse without (z under -{Z_KEEP})")
+    } else if !growth_ok {
+        format!(
+            "the error above the noise {:.1} % higher without, over {:.0} %",
+            100.0 * (after / before - 1.0),
+            100.0 * MIN_GAIN
+        )
+    } else {
+        String::new()
+    };
+    trial.kept = trial.why.is_empty();
     (trial, judged)
 }
 
@@ -1117,7 +1167,14 @@ pub fn complete(
     // does when the completed model, refined without a gate where the given one was not
     // refined on these runs, does not beat the given one on the gate runs.
     if best == start || gate_nrmse(&best_sims, gate_runs) >= gate {
-        trials.iter_mut().for_each(|t| t.kept = false);
+        for t in trials.iter_mut().filter(|t| t.kept) {
+            t.kept = false;
+            t.why = format!(
+                "the completed model's gate NRMSE {} does not beat the given model's {}",
+                crate::util::num4(gate_nrmse(&best_sims, gate_runs)),
+                crate::util::num4(gate)
+            );
+        }
         return Ok((model.clone(), trials));
     }
     Ok((best, trials))

@@ -68,7 +68,8 @@ pub fn overall_nrmse(stdout: &str, output: &str) -> f64 {
         .lines()
         .find(|l| l.split_whitespace().take(2).eq(["all", output]))
         .unwrap_or_else(|| panic!("no 'all {output}' row in:\n{stdout}"));
-    line.split_whitespace().last().unwrap().parse().unwrap()
+    // run, output, RMS, NRMSE %, fit %
+    line.split_whitespace().nth(3).unwrap().parse().unwrap()
 }
 
 /// Model-file text of the first-order lag `y' = pole y [+ gain u]`.
