@@ -1,5 +1,8 @@
 //! The model file: round trip, hand-written files, and the one-line errors for bad files.
 
+mod common;
+
+use common::cli::{ctsid, temp_file};
 use ctsid::model::{Model, Origin, OutputEquation, Term};
 use ctsid::Error;
 
@@ -428,4 +431,33 @@ fn coefficients_round_trip_to_the_last_bit() {
             values[k]
         );
     }
+}
+
+/// `ctsid show` says what an empty interval column means and counts the terms whose standard
+/// error exceeds half their coefficient (both were shown without a word).
+#[test]
+fn show_explains_empty_intervals_and_poorly_determined_terms() {
+    let text = r#"{"format":"ctsid-model/2","tau":0.01,"inputs":["u"],"outputs":[{"name":"y","order":1,"terms":[
+        {"exponents":{"y":1},"coefficient":-2.0,"std_error":0.1},
+        {"exponents":{"u":1},"coefficient":3.0,"std_error":2.0},
+        {"exponents":{"u":2},"coefficient":0.1,"std_error":0.01,"interval":[0.08,0.12]}]}]}"#;
+    let path = temp_file("show_notes", "m.json", text);
+    let (ok, out, err) = ctsid(&["show", &path]);
+    assert!(ok, "{err}");
+    assert!(out.contains("95 % interval '-': intervals are discover's bootstrap"), "{out}");
+    assert!(out.contains("1 term(s) with a standard error above half"), "{out}");
+    // Every term with an interval and a small standard error: neither note.
+    let tight = text.replace("\"std_error\":2.0", "\"std_error\":0.2");
+    let tight = tight.replace(
+        "\"coefficient\":-2.0,\"std_error\":0.1}",
+        "\"coefficient\":-2.0,\"std_error\":0.1,\"interval\":[-2.2,-1.8]}",
+    );
+    let tight = tight.replace(
+        "\"coefficient\":3.0,\"std_error\":0.2}",
+        "\"coefficient\":3.0,\"std_error\":0.2,\"interval\":[2.6,3.4]}",
+    );
+    let path = temp_file("show_notes", "tight.json", &tight);
+    let (ok, out, err) = ctsid(&["show", &path]);
+    assert!(ok, "{err}");
+    assert!(!out.contains("95 % interval '-'") && !out.contains("above half"), "{out}");
 }

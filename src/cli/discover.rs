@@ -175,6 +175,14 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     out!("{}", d.text())?;
     if let Some(p) = &a.output_model {
         d.augmented_model(&nominal)?.write(p)?;
+        // With no effect added the file is the nominal's equations as written: said, so that a
+        // file named 'augmented' is not taken for a found effect.
+        let what = match (d.effects.is_empty(), d.retuned.is_empty()) {
+            (true, true) => "the nominal's equations: no effect passed the gates",
+            (true, false) => "the nominal re-tuned: no effect passed the gates",
+            (false, _) => "the nominal with the effects above",
+        };
+        super::written(format!("model written to {} ({what})", p.display()));
     }
     if let Some(dir) = &a.report {
         let json = serde_json::to_string_pretty(&d)

@@ -287,6 +287,13 @@ fn output_section(id: &Identification, rep: &OutputReport) -> String {
         .map(|o| o.to_string())
         .unwrap_or_default();
     let mut text = format!("## Output '{}': order {} ({} samples, {} left out for uncertain labels; engine {})\n\n{}\n    {}\n\n", rep.name, rep.order, rep.samples_used, rep.samples_excluded, rep.engine, t.markdown(), written);
+    // What the profiles are: the columns carried no unit, and a reader took them for residuals
+    // of y in its own units.
+    let label = format!("{}_d{}", rep.name, rep.order);
+    text += &format!(
+        "Profiles (the paper's error profile): validation pQ is the Q-th percentile of |{label} - fit| over the validation samples, divided by the median |{label}| ({label} from the smoother); free-run pQ the same of the free run's error against the measured '{}' over its median magnitude, where the order was searched on simulation.\n\n",
+        rep.name
+    );
     if let Some(r) = id.refinement.as_ref().filter(|r| r.kept) {
         text += &format!(
             "Refinement on free-run error changed the derivative fit\n    {}\ninto the model above ({}).\n\n",
@@ -316,7 +323,7 @@ fn output_section(id: &Identification, rep: &OutputReport) -> String {
     }
     if let Some(p) = &rep.test {
         text += &format!(
-            "Test runs, against our labels: p50/80/90/95/98/99/100 = {}\n\n",
+            "Test runs, against our labels: p50/80/90/95/98/99/100 = {} (the same profile: |{label} - fit| over the median |{label}|)\n\n",
             p.compact()
         );
     }

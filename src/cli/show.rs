@@ -33,6 +33,7 @@ pub fn run(a: ShowArgs) -> Result<()> {
         outln!("sign smoothing widths: {}", widths.join(", "))?;
     }
     let mut unknown = false;
+    let (mut no_interval, mut weak) = (false, 0usize);
     for o in &model.outputs {
         outln!(
             "\n{} (order {}):",
@@ -54,6 +55,8 @@ pub fn run(a: ShowArgs) -> Result<()> {
                     ("-".into(), "-".into())
                 }
             };
+            no_interval |= t.interval.is_none();
+            weak += usize::from(t.std_error.is_some_and(|s| s.abs() > 0.5 * t.coefficient.abs()));
             let interval = t.interval.map_or("-".into(), |[lo, hi]| {
                 format!("[{}, {}]", format_coefficient(lo), format_coefficient(hi))
             });
@@ -71,6 +74,14 @@ pub fn run(a: ShowArgs) -> Result<()> {
     }
     if unknown {
         outln!("\n'-': no standard error was estimated for that term (identify writes one for every term it fits; discover for the effects it adds; a hand-written or older file may have none).")?;
+    }
+    // The empty interval column and standard errors larger than the coefficients were shown
+    // without a word (an engineer could not tell an unestimated interval from a missing one).
+    if no_interval {
+        outln!("\n95 % interval '-': intervals are discover's bootstrap over runs, for the effects it adds; for the other terms read coefficient +- 2 std. errors.")?;
+    }
+    if weak > 0 {
+        outln!("\n{weak} term(s) with a standard error above half the coefficient (rel. > 50 %): the data determine them poorly; a model with fewer terms (a lower degree) may simulate as well.")?;
     }
     Ok(())
 }

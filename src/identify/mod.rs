@@ -319,8 +319,20 @@ impl Settings {
         };
         let names = self.names_at(&ord);
         for t in &self.terms {
-            let e = crate::model::Expr::parse(t, &names)
-                .map_err(|e| Error::param("term", format!("{e}{at}")))?;
+            // The parser's reason alone ("invalid setting 'term': invalid setting 'expression':"
+            // read twice), and the states at the fixed orders only where a variable is unknown.
+            let e = crate::model::Expr::parse(t, &names).map_err(|e| {
+                let reason = match e {
+                    Error::InvalidParameter { reason, .. } => reason,
+                    other => other.to_string(),
+                };
+                let at = if reason.contains("unknown variable") {
+                    at.as_str()
+                } else {
+                    ""
+                };
+                Error::param("term", format!("{reason}{at}"))
+            })?;
             if let Some(why) = e.constant_fault() {
                 return Err(Error::param(
                     "term",
