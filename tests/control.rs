@@ -368,7 +368,7 @@ fn the_command_prints_the_design_and_writes_the_trace() {
     );
     let text = std::fs::read_to_string(&trace).unwrap();
     assert!(
-        text.starts_with("t,reference,y,y_measured,y_hat,y_d1_hat,u\n"),
+        text.starts_with("t,reference,designed,y,y_measured,y_hat,y_d1_hat,u\n"),
         "{text}"
     );
     assert_eq!(
@@ -516,4 +516,113 @@ fn eigenvalues_of_pure_chains_of_even_order_converge() {
 /// (re + i im)^n as (re, im).
 fn num_complex_pow(re: f64, im: f64, n: usize) -> (f64, f64) {
     (0..n).fold((1.0, 0.0), |(a, b), _| (a * re - b * im, a * im + b * re))
+}
+
+/// The EMPS model of the README's quick start: `q'' = c - k q - d q' + b u - fc sign(q')`, the
+/// sign smoothed over 8.6e-5 m/s as identify writes it.
+const EMPS_LIKE: &str = r#"{"format":"ctsid-model/2","tau":0.001,"inputs":["force_N"],
+  "sign_smoothing":{"q_m_d1":8.596398560777084e-05},
+  "outputs":[{"name":"q_m","order":2,"terms":[
+    {"exponents":{},"coefficient":0.04190766187410891},
+    {"exponents":{"q_m":1},"coefficient":-0.05532853856282718},
+    {"exponents":{"q_m_d1":1},"coefficient":-1.8527244252390804},
+    {"exponents":{"force_N":1},"coefficient":0.010476679342917355},
+    {"expression":"sign(q_m_d1)","coefficient":-0.23950480722818857}]}]}"#;
+
+/// A sign's slope at rest is its smoothing's (1 / width), not the machine's: the design leaves
+/// it out and says so (it gave EMPS an open-loop pole at -2788 /s, a default bandwidth of
+/// 0.235 rad/s and a 33 s step); a smooth friction law's slope (`tanh(50*y_d1)`) is the model's
+/// and stays.
+#[test]
+fn a_sign_smoothings_slope_is_left_out_of_the_design() {
+    let emps = Model::from_json_str(EMPS_LIKE, "emps").unwrap();
+    let d = control::design(&emps, &DesignOptions::new(0.1, 0.001)).unwrap();
+    let mut fast: Vec<f64> = d.open_loop.iter().map(|(re, _)| *re).collect();
+    fast.sort_by(f64::total_cmp);
+    // s^2 + 1.8527 s + 0.0553 = 0: -1.8224 and -0.0304.
+    assert!(
+        (fast[0] + 1.8224).abs() < 1e-3 && (fast[1] + 0.0304).abs() < 1e-3,
+        "{fast:?}"
+    );
+    assert!((d.a[(1, 1)] + 1.8527).abs() < 1e-3, "{}", d.a);
+    assert!(
+        d.notes.len() == 1 && d.notes[0].contains("sign smoothing"),
+        "{:?}",
+        d.notes
+    );
+    let smooth = EMPS_LIKE
+        .replace("sign(q_m_d1)", "tanh(50*q_m_d1)")
+        .replace(r#""sign_smoothing":{"q_m_d1":8.596398560777084e-05},"#, "");
+    let m = Model::from_json_str(&smooth, "tanh").unwrap();
+    let d = control::design(&m, &DesignOptions::new(0.1, 0.001)).unwrap();
+    // -1.8527 - 50 * 0.2395 = -13.828
+    assert!((d.a[(1, 1)] + 13.828).abs() < 1e-2, "{}", d.a);
+    assert!(d.notes.is_empty(), "{:?}", d.notes);
+}
+
+/// Around the EMPS model the default bandwidth (0.235 rad/s, the geometric mean of its
+/// open-loop poles) sticks and slips on the friction: the error names a bandwidth checked to
+/// follow its design, not the sampling. That bandwidth works; with input limits the step line
+/// counts the samples at a limit, the trace has the designed response and the model's names;
+/// a tracking loop that rings gets a note.
+#[test]
+fn a_loop_that_strays_names_a_bandwidth_that_works() {
+    let model = temp_file("control_emps", "emps.json", EMPS_LIKE);
+    // The design's note on the sign, then the error.
+    let (ok, _, err) = ctsid(&["control", &model, "--setpoint", "0.1", "--from", "0"]);
+    let last = err.trim_end().lines().last().unwrap_or("");
+    assert!(
+        !ok && last.starts_with("error: invalid setting 'bandwidth'")
+            && last.contains("follows its design and settles in"),
+        "{err}"
+    );
+    let w = last
+        .split("--bandwidth ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .unwrap()
+        .to_string();
+    let trace = temp_file("control_emps", "trace.csv", "");
+    let (ok, out, err) = ctsid(&[
+        "control",
+        &model,
+        "--setpoint",
+        "0.1",
+        "--from",
+        "0",
+        "--bandwidth",
+        &w,
+        "--u-min",
+        "-300",
+        "--u-max",
+        "300",
+        "-o",
+        &trace,
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("note: d q_m_d2 / d q_m_d1 at the setpoint"),
+        "{err}"
+    );
+    assert!(out.contains("input at a limit in "), "{out}");
+    let text = std::fs::read_to_string(&trace).unwrap();
+    assert!(
+        text.starts_with("t,reference,designed,q_m,q_m_measured,q_m_hat,q_m_d1_hat,force_N\n"),
+        "{text}"
+    );
+    let (ok, _, err) = ctsid(&[
+        "control",
+        &model,
+        "--setpoint",
+        "0.1",
+        "--from",
+        "0",
+        "--reference",
+        "steps",
+    ]);
+    assert!(ok, "{err}");
+    assert!(
+        err.contains("note: the loop does not settle on the reference's steps"),
+        "{err}"
+    );
 }

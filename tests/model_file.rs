@@ -444,8 +444,14 @@ fn show_explains_empty_intervals_and_poorly_determined_terms() {
     let path = temp_file("show_notes", "m.json", text);
     let (ok, out, err) = ctsid(&["show", &path]);
     assert!(ok, "{err}");
-    assert!(out.contains("95 % interval '-': intervals are discover's bootstrap"), "{out}");
-    assert!(out.contains("1 term(s) with a standard error above half"), "{out}");
+    assert!(
+        out.contains("95 % interval '-': intervals are discover's bootstrap"),
+        "{out}"
+    );
+    assert!(
+        out.contains("1 term(s) with a standard error above half"),
+        "{out}"
+    );
     // Every term with an interval and a small standard error: neither note.
     let tight = text.replace("\"std_error\":2.0", "\"std_error\":0.2");
     let tight = tight.replace(
@@ -459,5 +465,8 @@ fn show_explains_empty_intervals_and_poorly_determined_terms() {
     let path = temp_file("show_notes", "tight.json", &tight);
     let (ok, out, err) = ctsid(&["show", &path]);
     assert!(ok, "{err}");
-    assert!(!out.contains("95 % interval '-'") && !out.contains("above half"), "{out}");
+    assert!(
+        !out.contains("95 % interval '-'") && !out.contains("above half"),
+        "{out}"
+    );
 }

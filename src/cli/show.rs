@@ -56,7 +56,10 @@ pub fn run(a: ShowArgs) -> Result<()> {
                 }
             };
             no_interval |= t.interval.is_none();
-            weak += usize::from(t.std_error.is_some_and(|s| s.abs() > 0.5 * t.coefficient.abs()));
+            weak += usize::from(
+                t.std_error
+                    .is_some_and(|s| s.abs() > 0.5 * t.coefficient.abs()),
+            );
             let interval = t.interval.map_or("-".into(), |[lo, hi]| {
                 format!("[{}, {}]", format_coefficient(lo), format_coefficient(hi))
             });
@@ -78,7 +81,7 @@ pub fn run(a: ShowArgs) -> Result<()> {
     // The empty interval column and standard errors larger than the coefficients were shown
     // without a word (an engineer could not tell an unestimated interval from a missing one).
     if no_interval {
-        outln!("\n95 % interval '-': intervals are discover's bootstrap over runs, for the effects it adds; for the other terms read coefficient +- 2 std. errors.")?;
+        outln!("\n95 % interval '-': intervals are discover's bootstrap over runs, for the effects it adds; for the other terms coefficient +- 2 std. errors is the spread the measurement noise alone would give (an error of the model's structure or of its input interpolation adds a bias it does not cover).")?;
     }
     if weak > 0 {
         outln!("\n{weak} term(s) with a standard error above half the coefficient (rel. > 50 %): the data determine them poorly; a model with fewer terms (a lower degree) may simulate as well.")?;

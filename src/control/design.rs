@@ -68,7 +68,7 @@ pub fn siso_order(model: &Model) -> Result<usize> {
         return Err(Error::param(
             "model",
             format!(
-                "{} output(s) and {} input(s); feedback design takes one output and one input",
+                "{} output(s) and {} input(s); feedback design takes one output and one input: identify a model of the loop's own output from its input (`identify --output Y --input U`) to design on and to run as --plant",
                 model.outputs.len(),
                 model.inputs.len()
             ),
@@ -360,7 +360,7 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
     o.validate()?;
     let n = siso_order(model)?;
     let u_star = steady_input(model, o.setpoint)?;
-    let (a, b) = linearised(model, o.setpoint, u_star, n)?;
+    let (a, b, notes) = linearised(model, o.setpoint, u_star, n)?;
     let open_loop = eigenvalues(&a)?;
     let w = bandwidth(o, &open_loop, n)?;
     let ctrl = placed_poles(&open_loop, w);
@@ -439,6 +439,7 @@ pub fn design(model: &Model, o: &DesignOptions) -> Result<Design> {
             .map(|(r, i)| (r * w, i * w))
             .collect(),
         model: model.clone(),
+        notes,
     })
 }
 
@@ -468,18 +469,64 @@ pub fn with_chain_observer(mut d: super::Design) -> Result<super::Design> {
 }
 
 /// The model's Jacobians at rest at `setpoint` under `u_star` (`n` states); refuses one that
-/// is not finite.
+/// is not finite. A slope that the model's sign smoothing sets is left out, with a note.
+///
+/// `sign(y_d1)` smoothed over a width w has the slope 1/w at rest: an artefact of the width,
+/// not a property of the machine (EMPS: Coulomb friction 0.2395 over w = 8.6e-5 gave an open-loop
+/// pole at -2788 /s, a default bandwidth of 0.235 rad/s and a 33 s step). At rest a Coulomb
+/// friction is a bounded disturbance, which the integral action rejects, so its slope is taken as
+/// 0: the Jacobian with every width 10 times wider is computed as well, and an entry that changes
+/// is extrapolated to infinite width (`(10 J(10 w) - J(w)) / 9`, exact for a slope in 1/w). A
+/// slope of a smooth law (`tanh(100*y_d1)`) or of a sign away from its switch does not depend on
+/// the width and is kept.
 fn linearised(
     model: &Model,
     setpoint: f64,
     u_star: f64,
     n: usize,
-) -> Result<(DMatrix<f64>, DVector<f64>)> {
-    let c = model.compile()?;
-    let mut x = vec![0.0; n];
-    x[0] = setpoint;
-    let (mut jx, mut ju) = (vec![0.0; n * n], vec![0.0; n]);
-    c.jacobians_unchecked(&x, &[u_star], &mut jx, &mut ju);
+) -> Result<(DMatrix<f64>, DVector<f64>, Vec<String>)> {
+    let jacobians = |m: &Model| -> Result<(Vec<f64>, Vec<f64>)> {
+        let c = m.compile()?;
+        let mut x = vec![0.0; n];
+        x[0] = setpoint;
+        let (mut jx, mut ju) = (vec![0.0; n * n], vec![0.0; n]);
+        c.jacobians_unchecked(&x, &[u_star], &mut jx, &mut ju);
+        Ok((jx, ju))
+    };
+    let (mut jx, mut ju) = jacobians(model)?;
+    let mut notes = Vec::new();
+    if !model.sign_smoothing.is_empty() {
+        let mut wide = model.clone();
+        wide.sign_smoothing.values_mut().for_each(|w| *w *= 10.0);
+        let (wx, wu) = jacobians(&wide)?;
+        let names: Vec<String> = (0..n)
+            .map(|k| crate::model::derivative_name(&model.outputs[0].name, k))
+            .chain([model.inputs[0].clone()])
+            .collect();
+        let row = n - 1;
+        let last = crate::model::derivative_name(&model.outputs[0].name, n);
+        for (k, (j, w)) in jx
+            .iter_mut()
+            .zip(&wx)
+            .chain(ju.iter_mut().zip(&wu))
+            .enumerate()
+        {
+            if (*j - w).abs() > 0.01 * j.abs().max(w.abs()) {
+                let kept = (10.0 * w - *j) / 9.0;
+                // Rows above the last are the chain y^(k)' = y^(k+1): only the last has terms.
+                if k < n * n && k / n != row {
+                    continue;
+                }
+                let var = &names[if k < n * n { k % n } else { n }];
+                notes.push(format!(
+                    "d {last} / d {var} at the setpoint, {}, comes from the sign smoothing (it scales with 1 / width), not from the machine: the design takes {} (a Coulomb friction at rest is a disturbance the integral action rejects)",
+                    crate::util::num4(*j),
+                    crate::util::num4(kept)
+                ));
+                *j = kept;
+            }
+        }
+    }
     let a = DMatrix::from_row_slice(n, n, &jx);
     let b = DVector::from_column_slice(&ju);
     if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
@@ -487,7 +534,7 @@ fn linearised(
             "the model's Jacobian at the setpoint is not finite".into(),
         ));
     }
-    Ok((a, b))
+    Ok((a, b, notes))
 }
 
 /// The design bandwidth: the one given, else the geometric mean of the open-loop pole

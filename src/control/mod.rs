@@ -80,6 +80,9 @@ pub struct Design {
     pub observer: Vec<(f64, f64)>,
     /// The model the observer runs.
     pub model: Model,
+    /// What the design changed in the model's linearisation, and why (a sign smoothing's
+    /// slope left out; see [`design::design`]).
+    pub notes: Vec<String>,
 }
 
 /// `a+bi` lists for reports.

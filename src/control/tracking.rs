@@ -540,7 +540,11 @@ pub fn describe(m: &TrackingMetrics, samples: usize, decision_seconds: f64) -> S
         opt(m.rms_ramps, ""),
         opt(m.rise_time, " s"),
         opt(m.overshoot, " %"),
-        opt(m.settling_time, " s"),
+        if m.settling_time.is_nan() {
+            "none within the run".to_string()
+        } else {
+            opt(m.settling_time, " s")
+        },
         m.saturated,
         crate::util::num4(m.reversals_per_s),
         1e6 * decision_seconds
