@@ -63,8 +63,8 @@ pub struct ControlArgs {
     #[arg(short = 'o', long)]
     pub output: Option<PathBuf>,
     /// Write plots into this folder: step.svg (output, measured, designed response, setpoint)
-    /// and input.svg; with a reference, tracking.svg (reference, output, tracking error,
-    /// observer error, input).
+    /// and input.svg; with a reference, the profile law or --block above 1, tracking.svg
+    /// (reference, output, tracking error, observer error, input) and report.md.
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// The control law: `placement` (state feedback with integral action, poles at
