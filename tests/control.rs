@@ -550,14 +550,20 @@ fn a_sign_smoothings_slope_is_left_out_of_the_design() {
         "{:?}",
         d.notes
     );
-    let smooth = EMPS_LIKE
-        .replace("sign(q_m_d1)", "tanh(50*q_m_d1)")
-        .replace(r#""sign_smoothing":{"q_m_d1":8.596398560777084e-05},"#, "");
+    // A smooth law keeps its slope, with the smoothing entry still in the file (the branch that
+    // compares with the exact sign runs and finds nothing to change).
+    let smooth = EMPS_LIKE.replace("sign(q_m_d1)", "tanh(50*q_m_d1)");
     let m = Model::from_json_str(&smooth, "tanh").unwrap();
     let d = control::design(&m, &DesignOptions::new(0.1, 0.001)).unwrap();
     // -1.8527 - 50 * 0.2395 = -13.828
     assert!((d.a[(1, 1)] + 13.828).abs() < 1e-2, "{}", d.a);
     assert!(d.notes.is_empty(), "{:?}", d.notes);
+    // A sign 116 widths off its switch: its smoothed slope is small, the exact one 0, and the
+    // design is within 0.1 % of the exact one (an extrapolation in 1/w made it 0.81).
+    let off = EMPS_LIKE.replace("sign(q_m_d1)", "sign(q_m_d1 + 0.01)");
+    let m = Model::from_json_str(&off, "off").unwrap();
+    let d = control::design(&m, &DesignOptions::new(0.1, 0.001)).unwrap();
+    assert!((d.a[(1, 1)] + 1.8527).abs() < 2e-3, "{}", d.a);
 }
 
 /// Around the EMPS model the default bandwidth (0.235 rad/s, the geometric mean of its

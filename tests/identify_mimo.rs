@@ -304,13 +304,6 @@ fn mimo_csv_record_of_mixed_orders_through_identify() {
             || line.contains("kept a*u1 in place of b*u1 in 'b' (z "),
         "{line}"
     );
-    // Every refused move says which rule it failed (it gave only z and the gate NRMSE, and a
-    // reader could not tell a z of 1757 refused for its small gain from one under 3).
-    let refused = line.split("; refused ").nth(1).unwrap_or("");
-    for item in refused.split("); ").filter(|i| i.contains("gate NRMSE")) {
-        let after = item.split(" -> ").nth(1).unwrap_or("");
-        assert!(after.contains(": "), "no reason in '{item}'\n{line}");
-    }
 }
 
 /// At 1 % noise (d = 4, the demo's 40 runs, orders fixed at 3), every true term of the three

@@ -319,6 +319,8 @@ fn a_time_column_that_disagrees_with_the_models_tau_is_refused() {
         ("time_s", 0.005, true),
         ("t", 0.01, false),
         ("t", 0.010_05, false),
+        // The model's sampling in ms: the column is time in another unit, not another sampling.
+        ("time_ms", 10.0, false),
     ] {
         let data = d.join(format!("{column}{step}.csv"));
         let mut s = format!("{column},u,y\n");
@@ -412,6 +414,11 @@ fn a_run_whose_free_run_fails_is_marked_and_the_others_are_scored() {
     assert_eq!(rows.len(), 900);
     assert!(rows.iter().all(|r| r.ends_with(',') == r.starts_with("1,")));
     assert!(rep.join("sim_0_y.svg").exists() && !rep.join("sim_1_y.svg").exists());
+    let md = std::fs::read_to_string(rep.join("report.md")).unwrap();
+    assert!(
+        md.contains("Not scored, and left out of every figure: simulation diverged"),
+        "{md}"
+    );
     // Every run failing is an error: nothing is scored.
     let only = d.join("only.csv");
     let one: String = s

@@ -389,17 +389,25 @@ fn diagnose_stray(
     scenario: &Scenario,
     m: &control::StepMetrics,
 ) -> Error {
-    // Suggest only a sampling period that is checked to work.
+    // Suggest only a sampling period (or a bandwidth) that is checked to work: the design of
+    // `o2` run noise-free as the failing one (for `duration`, else its default), settled and
+    // following its design; with its settling time.
+    let follows = |o2: &DesignOptions, duration: Option<f64>| -> Option<(control::Design, f64)> {
+        let d2 = designed(model, o2, a.observer).ok()?;
+        let run = Scenario {
+            duration: duration.unwrap_or_else(|| control::default_duration(&d2)),
+            ..scenario.clone()
+        };
+        let m2 = control::run(&d2, plant, &run)
+            .and_then(|tr| control::metrics(&tr, &d2, a.from))
+            .ok()?;
+        (!m2.settling_time.is_nan() && m2.design_deviation <= DESIGN_STRAY)
+            .then_some((d2, m2.settling_time))
+    };
     let works = |t: f64| -> bool {
         let mut o2 = o.clone();
         o2.tau = t;
-        let Ok(d2) = designed(model, &o2, a.observer) else {
-            return false;
-        };
-        // The same noise-free run as the failing one, at the other tau.
-        control::run(&d2, plant, scenario)
-            .and_then(|tr| control::metrics(&tr, &d2, a.from))
-            .is_ok_and(|m2| !m2.settling_time.is_nan() && m2.design_deviation <= DESIGN_STRAY)
+        follows(&o2, Some(scenario.duration)).is_some()
     };
     let stray = |advice: String| {
         Error::param(
@@ -453,33 +461,21 @@ fn diagnose_stray(
         .find_map(|f| {
             let mut o2 = o.clone();
             o2.bandwidth = Some(d.bandwidth * f);
-            let d2 = designed(model, &o2, a.observer).ok()?;
-            let run = Scenario {
-                duration: a.duration.unwrap_or_else(|| control::default_duration(&d2)),
-                ..scenario.clone()
-            };
-            let m2 = control::run(&d2, plant, &run)
-                .and_then(|tr| control::metrics(&tr, &d2, a.from))
-                .ok()?;
-            (!m2.settling_time.is_nan() && m2.design_deviation <= DESIGN_STRAY)
-                .then_some((d2.bandwidth, m2.settling_time))
+            follows(&o2, a.duration)
         });
-    let (name, advice) = match tried {
-        Some((w, settle)) => (
-            "bandwidth",
-            format!(
-                "--bandwidth {} follows its design and settles in {} s",
-                num4(w),
-                num4(settle)
-            ),
+    let advice = match tried {
+        Some((d2, settle)) => format!(
+            "--bandwidth {} follows its design and settles in {} s",
+            num4(d2.bandwidth),
+            num4(settle)
         ),
-        None => (
-            "tau",
-            "neither sampling up to 64 times faster nor a bandwidth 1/16 to 64 times this one helps".to_string(),
-        ),
+        None => {
+            "neither sampling up to 64 times faster nor a bandwidth 1/16 to 64 times this one helps"
+                .to_string()
+        }
     };
     Error::param(
-        name,
+        "bandwidth",
         format!(
             "around its own model the loop at bandwidth {} rad/s, sampled every {} s, does not settle within {} s ({:.1} % off the designed response): {advice}",
             num4(d.bandwidth),
@@ -637,7 +633,9 @@ fn run_tracking(
     // only (EMPS at the default bandwidth: overshoot 96 % and +-6500 N; 4131 of 5001 samples at
     // a limit): said in words.
     let samples = tr.t.len().max(1);
-    if m.overshoot > 50.0 || m.settling_time.is_nan() {
+    // A reference without steps has no overshoot or settling (NaN): nothing to say of them.
+    let has_steps = !m.overshoot.is_nan();
+    if has_steps && (m.overshoot > 50.0 || m.settling_time.is_nan()) {
         eprintln!(
             "note: the loop does not settle on the reference's steps (overshoot {} %): this design does not suit the reference; try another --bandwidth, --law or --observer",
             num4(m.overshoot)

@@ -108,29 +108,85 @@ pub fn run(args: SimulateArgs) -> Result<()> {
         .apply(super::load_records(&args.data, &spec)?)?;
     check_score_from(&rs, args.score_from)?;
     super::note_tau_units(rs.tau, model.tau, spec.time_column.is_some());
-    let n_out = model.outputs.len();
-    // `None` for a run whose free run failed (see `failure_time`).
-    let mut simulated: Vec<Option<Vec<Vec<f64>>>> = Vec::with_capacity(rs.runs.len());
-    let mut failed: Vec<String> = Vec::new();
-    let mut pooled_sim: Vec<Vec<f64>> = vec![Vec::new(); n_out];
-    let mut pooled_meas: Vec<Vec<f64>> = vec![Vec::new(); n_out];
-    let window = args.init_window;
-    // One run's simulated outputs (runs are independent: simulated in parallel), from the
-    // library's one initial-state convention.
-    // Run by run rather than `Model::simulate` (all runs at once), so that rows are printed
-    // while a long record is still being simulated; the same run data and free run.
-    let simulate_run = |run: &ctsid::records::Run| -> Result<Vec<Vec<f64>>> {
-        let data = run_data(&model, &rs, run)?;
-        free_run(&compiled, &data, window, &SimOptions::default())
-    };
-    let mut constant = false;
     let time_known = spec.time_column.is_some();
-    // In chunks, so that rows appear while a long record is still being simulated.
+    let mut sc = simulate_and_print(&args, (&model, &compiled), &rs, time_known)?;
+    // Every run failed: nothing to score, and the first failure is the error.
+    if sc.failed.len() == rs.runs.len() {
+        return Err(Error::InvalidData(sc.failed.swap_remove(0)));
+    }
+    for (i, o) in model.outputs.iter().enumerate() {
+        let (rms, nrmse) = rms_nrmse(&sc.pooled_sim[i], &sc.pooled_meas[i]);
+        sc.constant |= nrmse.is_infinite();
+        score_row("all", &o.name, rms, nrmse)?;
+    }
+    for f in &sc.failed {
+        eprintln!("note: not scored, and left out of 'all': {f}");
+    }
+    if sc.constant {
+        eprintln!(
+            "note: NRMSE '-': the measured output is constant there, so there is no spread to normalise by; judge by RMS (in the output's units)"
+        );
+    }
+    if let Some(path) = &args.output {
+        let out = std::path::Path::new(path);
+        super::csvout::write_with_columns(
+            std::path::Path::new(&args.data),
+            Some(out),
+            &rs,
+            &sim_names,
+            // A failed run's simulated cells are left empty.
+            |r, i, k| {
+                sc.simulated[r]
+                    .as_ref()
+                    .map_or(String::new(), |s| format!("{}", s[k][i]))
+            },
+        )?;
+        super::written(format!("wrote {path}"));
+    }
+    if let Some(dir) = &args.report {
+        write_report(dir, &args, &model, &rs, &sc)?;
+        super::written(format!("report written to {}", dir.display()));
+    }
+    Ok(())
+}
+
+/// What [`simulate_and_print`] leaves for the pooled row and the files: each run's simulated
+/// outputs (`None` where its free run failed, see [`failure_time`]), the failures in words, the
+/// scored samples of every output pooled, and whether some measured output was constant.
+struct Scored {
+    simulated: Vec<Option<Vec<Vec<f64>>>>,
+    failed: Vec<String>,
+    pooled_sim: Vec<Vec<f64>>,
+    pooled_meas: Vec<Vec<f64>>,
+    constant: bool,
+}
+
+/// Simulates every run (in chunks, in parallel within a chunk) and prints its rows as the chunk
+/// ends: rows appear while a long record is still being simulated. A run whose free run fails
+/// is the model's property on that run, so the others are still scored (one diverging run of
+/// six stopped the command, with nothing written); any other error stops the command.
+fn simulate_and_print(
+    args: &SimulateArgs,
+    (model, compiled): (&Model, &ctsid::model::CompiledModel),
+    rs: &ctsid::RecordSet,
+    time_known: bool,
+) -> Result<Scored> {
+    let n_out = model.outputs.len();
+    let mut sc = Scored {
+        simulated: Vec::with_capacity(rs.runs.len()),
+        failed: Vec::new(),
+        pooled_sim: vec![Vec::new(); n_out],
+        pooled_meas: vec![Vec::new(); n_out],
+        constant: false,
+    };
+    // Run by run rather than `Model::simulate` (all runs at once), from the library's one
+    // initial-state convention: the same run data and free run.
+    let simulate_run = |run: &ctsid::records::Run| -> Result<Vec<Vec<f64>>> {
+        let data = run_data(model, rs, run)?;
+        free_run(compiled, &data, args.init_window, &SimOptions::default())
+    };
     let chunk = 2 * rayon::current_num_threads().max(1);
     for runs in rs.runs.chunks(chunk) {
-        // A run whose free run fails is the model's property on that run: the others are
-        // still scored (one diverging run of six stopped the command, with nothing written).
-        // Any other error stops the command before the chunk's rows are printed.
         let results: Vec<std::result::Result<Vec<Vec<f64>>, String>> = runs
             .par_iter()
             .map(|run| match simulate_run(run) {
@@ -145,8 +201,8 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             })
             .collect::<Result<_>>()
             .map_err(|e| args.segment.explain(e))?;
-        // The header once the first runs are simulated: an error in them is the only output.
-        if simulated.is_empty() {
+        // The header once the first runs are simulated.
+        if sc.simulated.is_empty() {
             outln!(
                 "{:<12} {:<12} {:>14} {:>10} {:>8}",
                 "run",
@@ -157,7 +213,7 @@ pub fn run(args: SimulateArgs) -> Result<()> {
             )?;
         }
         for (run, result) in runs.iter().zip(results) {
-            let per_run = result.map_err(|f| failed.push(f)).ok();
+            let per_run = result.map_err(|f| sc.failed.push(f)).ok();
             // Below every run's length: checked after reading the records.
             let from = args.score_from;
             for (i, o) in model.outputs.iter().enumerate() {
@@ -167,52 +223,15 @@ pub fn run(args: SimulateArgs) -> Result<()> {
                 };
                 let (sim, meas) = (&per_run[i][from..], &run.channels[i][from..]);
                 let (rms, nrmse) = rms_nrmse(sim, meas);
-                constant |= nrmse.is_infinite();
+                sc.constant |= nrmse.is_infinite();
                 score_row(&run.id, &o.name, rms, nrmse)?;
-                pooled_sim[i].extend_from_slice(sim);
-                pooled_meas[i].extend_from_slice(meas);
+                sc.pooled_sim[i].extend_from_slice(sim);
+                sc.pooled_meas[i].extend_from_slice(meas);
             }
-            simulated.push(per_run);
+            sc.simulated.push(per_run);
         }
     }
-    // Every run failed: nothing to score, and the first failure is the error.
-    if failed.len() == rs.runs.len() {
-        return Err(Error::InvalidData(failed.swap_remove(0)));
-    }
-    for (i, o) in model.outputs.iter().enumerate() {
-        let (rms, nrmse) = rms_nrmse(&pooled_sim[i], &pooled_meas[i]);
-        constant |= nrmse.is_infinite();
-        score_row("all", &o.name, rms, nrmse)?;
-    }
-    for f in &failed {
-        eprintln!("note: not scored, and left out of 'all': {f}");
-    }
-    if constant {
-        eprintln!(
-            "note: NRMSE '-': the measured output is constant there, so there is no spread to normalise by; judge by RMS (in the output's units)"
-        );
-    }
-    if let Some(path) = &args.output {
-        let out = std::path::Path::new(path);
-        super::csvout::write_with_columns(
-            std::path::Path::new(&args.data),
-            Some(out),
-            &rs,
-            &sim_names,
-            // A failed run's simulated cells are left empty.
-            |r, i, k| {
-                simulated[r]
-                    .as_ref()
-                    .map_or(String::new(), |s| format!("{}", s[k][i]))
-            },
-        )?;
-        super::written(format!("wrote {path}"));
-    }
-    if let Some(dir) = &args.report {
-        write_report(dir, &args, &model, &rs, &simulated)?;
-        super::written(format!("report written to {}", dir.display()));
-    }
-    Ok(())
+    Ok(sc)
 }
 
 /// `report.md` (the scores and residual tests of every run) and the figures of the first runs.
@@ -221,16 +240,23 @@ fn write_report(
     args: &SimulateArgs,
     model: &Model,
     rs: &ctsid::RecordSet,
-    simulated: &[Option<Vec<Vec<f64>>>],
+    sc: &Scored,
 ) -> Result<()> {
     let outputs: Vec<&str> = model.outputs.iter().map(|o| o.name.as_str()).collect();
     let inputs: Vec<&str> = model.inputs.iter().map(String::as_str).collect();
-    let runs: Vec<(usize, &[Vec<f64>])> = simulated
+    let runs: Vec<(usize, &[Vec<f64>])> = sc
+        .simulated
         .iter()
         .enumerate()
         .filter_map(|(r, s)| s.as_deref().map(|s| (r, s)))
         .collect();
     let table = write_record_report(dir, rs, &outputs, &inputs, "model", &runs, args.score_from)?;
+    // The runs whose free run failed are named, as on the console.
+    let failures: String = sc
+        .failed
+        .iter()
+        .map(|f| format!("\n\nNot scored, and left out of every figure: {f}"))
+        .collect();
     let scored = if args.score_from > 0 {
         format!(" Scores, tests and figures cover each run from its sample {} on (`--score-from`), as the printed table.", args.score_from)
     } else {
@@ -239,7 +265,7 @@ fn write_report(
     let text = format!(
         "# Free-run simulation of {} on {}\n\nEach run starts from the initial state fitted on its first {} samples.{scored} Fit = 100 (1 - NRMSE). Residual tests at 99 %: lags of the simulation error's autocorrelation (whiteness) and of its cross-correlation with each input (independence from past inputs, the test that matters for a simulation model) outside the band.\n\n{table}",
         args.model, args.data, args.init_window
-    );
+    ) + &failures;
     write_file(dir, "report.md", &text)
 }
 
@@ -261,12 +287,14 @@ fn score_row(run: &str, output: &str, rms: f64, nrmse: f64) -> Result<()> {
 }
 
 /// The time (seconds into its run) at which a run's free run failed, where the error is such a
-/// failure (diverged, a term left its domain, an unstable mode), not bad input.
+/// failure (diverged, a term left its domain, an unstable mode, a numerical failure from the
+/// run's initial state on: its start), not bad input.
 fn failure_time(e: &Error) -> Option<f64> {
     match e {
         Error::Diverged { time, .. }
         | Error::TermNotFinite { time, .. }
         | Error::UnstableMode { time, .. } => Some(*time),
+        Error::Numerical(_) => Some(0.0),
         _ => None,
     }
 }
@@ -293,9 +321,12 @@ fn check_time_like_columns(
     model_tau: Option<f64>,
 ) -> Result<()> {
     let Some(mt) = model_tau else { return Ok(()) };
-    let Ok(mut rdr) = csv::Reader::from_path(data) else {
-        return Ok(()); // reported by the loader
+    // Through the loader's own opening (a pipe is refused, not read); any failure here is the
+    // loader's to report.
+    let Ok(file) = ctsid::util::open_regular(data.as_ref(), None) else {
+        return Ok(());
     };
+    let mut rdr = csv::Reader::from_reader(file);
     let Ok(header) = rdr.headers() else {
         return Ok(());
     };
@@ -319,7 +350,14 @@ fn check_time_like_columns(
         let Ok(rs) = ctsid::records::RecordSet::from_csv(data, &as_time) else {
             continue;
         };
-        if (rs.tau / mt - 1.0).abs() > 0.01 {
+        // A column in ms (or us, min, h) beside a model in seconds is the model's sampling in
+        // another unit (`time_ms` stepping by 1 at tau = 1 ms simulated right before).
+        let ratio = rs.tau / mt;
+        let near = |k: f64| (ratio / k - 1.0).abs() < 0.01;
+        if [1e3, 1e6, 1.0 / 60.0, 1.0 / 3600.0].into_iter().any(near) {
+            continue;
+        }
+        if (ratio - 1.0).abs() > 0.01 {
             return Err(Error::param(
                 "tau",
                 format!(

@@ -474,61 +474,56 @@ pub fn with_chain_observer(mut d: super::Design) -> Result<super::Design> {
 /// `sign(y_d1)` smoothed over a width w has the slope 1/w at rest: an artefact of the width,
 /// not a property of the machine (EMPS: Coulomb friction 0.2395 over w = 8.6e-5 gave an open-loop
 /// pole at -2788 /s, a default bandwidth of 0.235 rad/s and a 33 s step). At rest a Coulomb
-/// friction is a bounded disturbance, which the integral action rejects, so its slope is taken as
-/// 0: the Jacobian with every width 10 times wider is computed as well, and an entry that changes
-/// is extrapolated to infinite width (`(10 J(10 w) - J(w)) / 9`, exact for a slope in 1/w). A
-/// slope of a smooth law (`tanh(100*y_d1)`) or of a sign away from its switch does not depend on
-/// the width and is kept.
+/// friction is a bounded disturbance, which the integral action rejects, so the design takes the
+/// exact sign's slope, 0: the Jacobian is computed again without the smoothing, and an entry
+/// that differs by more than 1 % is taken from it. Nothing else depends on the widths (abs, sat,
+/// relu and smooth laws such as `tanh(50*y_d1)` keep their slopes), and a sign a few widths off
+/// its switch, whose smoothed slope is small but not the exact 0, gets the exact one too.
 fn linearised(
     model: &Model,
     setpoint: f64,
     u_star: f64,
     n: usize,
 ) -> Result<(DMatrix<f64>, DVector<f64>, Vec<String>)> {
-    let jacobians = |m: &Model| -> Result<(Vec<f64>, Vec<f64>)> {
+    let jacobians = |m: &Model| -> Result<Vec<f64>> {
         let c = m.compile()?;
         let mut x = vec![0.0; n];
         x[0] = setpoint;
         let (mut jx, mut ju) = (vec![0.0; n * n], vec![0.0; n]);
         c.jacobians_unchecked(&x, &[u_star], &mut jx, &mut ju);
-        Ok((jx, ju))
+        jx.extend(ju);
+        Ok(jx)
     };
-    let (mut jx, mut ju) = jacobians(model)?;
+    let mut j = jacobians(model)?;
     let mut notes = Vec::new();
     if !model.sign_smoothing.is_empty() {
-        let mut wide = model.clone();
-        wide.sign_smoothing.values_mut().for_each(|w| *w *= 10.0);
-        let (wx, wu) = jacobians(&wide)?;
-        let names: Vec<String> = (0..n)
-            .map(|k| crate::model::derivative_name(&model.outputs[0].name, k))
-            .chain([model.inputs[0].clone()])
-            .collect();
-        let row = n - 1;
+        let mut exact = model.clone();
+        exact.sign_smoothing.clear();
+        let je = jacobians(&exact)?;
+        // Entry k: row k / n (k < n n) or the input's column (k >= n n); the rows above the last
+        // are the chain y^(k)' = y^(k+1), which has no terms.
+        let var = |k: usize| -> String {
+            if k < n * n {
+                crate::model::derivative_name(&model.outputs[0].name, k % n)
+            } else {
+                model.inputs[0].clone()
+            }
+        };
         let last = crate::model::derivative_name(&model.outputs[0].name, n);
-        for (k, (j, w)) in jx
-            .iter_mut()
-            .zip(&wx)
-            .chain(ju.iter_mut().zip(&wu))
-            .enumerate()
-        {
-            if (*j - w).abs() > 0.01 * j.abs().max(w.abs()) {
-                let kept = (10.0 * w - *j) / 9.0;
-                // Rows above the last are the chain y^(k)' = y^(k+1): only the last has terms.
-                if k < n * n && k / n != row {
-                    continue;
-                }
-                let var = &names[if k < n * n { k % n } else { n }];
+        for (k, (v, e)) in j.iter_mut().zip(&je).enumerate() {
+            if (*v - e).abs() > 0.01 * v.abs().max(e.abs()) && (*v - e).abs() > 1e-12 {
                 notes.push(format!(
-                    "d {last} / d {var} at the setpoint, {}, comes from the sign smoothing (it scales with 1 / width), not from the machine: the design takes {} (a Coulomb friction at rest is a disturbance the integral action rejects)",
-                    crate::util::num4(*j),
-                    crate::util::num4(kept)
+                    "d {last} / d {} at the setpoint, {}, comes from the sign smoothing (the exact sign's slope is 0 there), not from the machine: the design takes {} (a Coulomb friction at rest is a disturbance the integral action rejects)",
+                    var(k),
+                    crate::util::num4(*v),
+                    crate::util::num4(*e)
                 ));
-                *j = kept;
+                *v = *e;
             }
         }
     }
-    let a = DMatrix::from_row_slice(n, n, &jx);
-    let b = DVector::from_column_slice(&ju);
+    let a = DMatrix::from_row_slice(n, n, &j[..n * n]);
+    let b = DVector::from_column_slice(&j[n * n..]);
     if a.iter().chain(b.iter()).any(|v| !v.is_finite()) {
         return Err(Error::InvalidData(
             "the model's Jacobian at the setpoint is not finite".into(),

@@ -540,7 +540,8 @@ pub fn describe(m: &TrackingMetrics, samples: usize, decision_seconds: f64) -> S
         opt(m.rms_ramps, ""),
         opt(m.rise_time, " s"),
         opt(m.overshoot, " %"),
-        if m.settling_time.is_nan() {
+        // NaN settling with steps: not settled; without steps (NaN overshoot): nothing to say.
+        if m.settling_time.is_nan() && !m.overshoot.is_nan() {
             "none within the run".to_string()
         } else {
             opt(m.settling_time, " s")

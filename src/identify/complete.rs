@@ -391,6 +391,7 @@ fn try_term(
     // coefficients only.
     let start = if c != 0.0 { c } else { 1e-6 };
     let Some(term) = term_of(name, vars, start) else {
+        trial.why = "it could not be read as a term of the model's variables".into();
         return (trial, None);
     };
     let simpler = replaces.is_some_and(|k| divides(&term.exponents, &best.outputs[i].terms[k]));
@@ -420,39 +421,55 @@ fn try_term(
     // no worse, so that of two terms they cannot tell apart the simpler stays (MIMO plant,
     // d = 6, 1 %, seed 2: `u1*y2*y2_d1` for `u1*y2^2*y2_d1^2`, z 3.4 but a change of 0.07 noise
     // standard deviations, under an addition's MIN_CHANGE).
-    // Each condition as the rule states it, so that a NaN z (free runs equal to the model's)
-    // fails it as before.
-    let (z_ok, change_ok) = (trial.z >= Z_KEEP, trial.change >= MIN_CHANGE);
-    let (gain_ok, simpler_ok) = (
-        after <= (1.0 - MIN_GAIN) * before,
-        trial.z >= 0.0 && after <= before,
-    );
-    trial.why = if judged.is_none() {
-        "it could not be refined or simulated".into()
+    (trial.kept, trial.why) = match judged {
+        None => (false, "it could not be refined or simulated".into()),
+        Some(_) => addition_verdict(&trial, simpler, (before, after)),
+    };
+    (trial, judged)
+}
+
+/// The keep rule of an addition or a swap (`simpler`: for a proper divisor of the term it
+/// replaces), given the errors above the noise floor before and after; and, for a refused move,
+/// the condition it failed in words.
+fn addition_verdict(t: &Trial, simpler: bool, (before, after): (f64, f64)) -> (bool, String) {
+    let kept = if simpler {
+        t.z >= 0.0 && after <= before
+    } else {
+        t.z >= Z_KEEP && t.change >= MIN_CHANGE && after <= (1.0 - MIN_GAIN) * before
+    };
+    let why = if kept {
+        String::new()
+    } else if t.z.is_nan() {
+        "its free runs on the gate runs are the model's own".into()
     } else if simpler {
-        if simpler_ok {
-            String::new()
-        } else {
-            "the simpler term fits the gate runs worse".into()
-        }
-    } else if !z_ok {
+        "the simpler term fits the gate runs worse".into()
+    } else if t.z < Z_KEEP {
         format!("z under {Z_KEEP}")
-    } else if !change_ok {
+    } else if t.change < MIN_CHANGE {
         format!(
             "a change of {} noise standard deviations, under {MIN_CHANGE}",
-            crate::util::num4(trial.change)
+            crate::util::num4(t.change)
         )
-    } else if !gain_ok {
+    } else {
+        format!("the error above the noise {}", gain_words(before, after))
+    };
+    (kept, why)
+}
+
+/// The relative change of the error above the noise floor from `before` to `after`, in words
+/// against [`MIN_GAIN`].
+fn gain_words(before: f64, after: f64) -> String {
+    if before <= 0.0 {
+        "is already at the noise floor".into()
+    } else if after >= before {
+        format!("{:.1} % higher", 100.0 * (after / before - 1.0))
+    } else {
         format!(
-            "the error above the noise {:.1} % lower, under {:.0} %",
+            "{:.1} % lower, under {:.0} %",
             100.0 * (1.0 - after / before),
             100.0 * MIN_GAIN
         )
-    } else {
-        String::new()
-    };
-    trial.kept = trial.why.is_empty();
-    (trial, judged)
+    }
 }
 
 /// Whether the monomial `ex` is a proper divisor of the monomial term `t`.
@@ -527,22 +544,25 @@ fn try_removal(
         excess(trial.gate_before, floor),
         excess(trial.gate_after, floor),
     );
-    let z_ok = trial.z > -Z_KEEP;
-    let growth_ok = after <= (1.0 + MIN_GAIN) * before;
-    trial.why = if judged.is_none() {
+    let kept = judged.is_some() && trial.z > -Z_KEEP && after <= (1.0 + MIN_GAIN) * before;
+    trial.why = if kept {
+        String::new()
+    } else if judged.is_none() {
         "it could not be refined or simulated".into()
-    } else if !z_ok {
+    } else if trial.z.is_nan() {
+        "its free runs on the gate runs are the model's own".into()
+    } else if trial.z <= -Z_KEEP {
         format!("the gate runs significantly worse without (z under -{Z_KEEP})")
-    } else if !growth_ok {
+    } else if before <= 0.0 {
+        "the error rises above the noise floor without".into()
+    } else {
         format!(
             "the error above the noise {:.1} % higher without, over {:.0} %",
             100.0 * (after / before - 1.0),
             100.0 * MIN_GAIN
         )
-    } else {
-        String::new()
     };
-    trial.kept = trial.why.is_empty();
+    trial.kept = kept;
     (trial, judged)
 }
 
