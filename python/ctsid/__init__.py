@@ -10,7 +10,8 @@ command line uses, and reads and writes the same model files.
 Quick start::
 
     import pandas as pd, ctsid
-    data = pd.read_csv("throttle.csv")          # columns run, t, u, y
+    ctsid.throttle_dataset("throttle.csv", runs=40)   # the paper's experiment: run, t, u, y
+    data = pd.read_csv("throttle.csv")
     model = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=0.003, run_column="run",
                            train="0-24", validation="25-29", test="30-39", degree=3)
     model.print()                               # y_d3 = ...
@@ -19,7 +20,11 @@ Quick start::
 
 Data are a pandas DataFrame (one run, or several told apart by ``run_column``), a list of
 DataFrames (one per run), a dict ``{run id: DataFrame}``, or the same with 2-D numpy arrays
-(samples x columns) and ``columns=[...]`` naming their columns. Errors in the data or settings
+(samples x columns) and ``columns=[...]`` naming their columns. A frame with a ``run`` column of
+several values needs ``run_column`` (it is refused without: its runs would be joined). One long
+record is cut into runs by a run column of your own (``k // samples_per_run``; the command line's
+``--segment`` joins a remainder under half a piece to the last run). The times are not read:
+``tau`` is the sampling period. Errors in the data or settings
 raise :class:`CtsidError` (a ``ValueError``) with the one-line message the command line
 prints. Long calls release the GIL; progress goes to the ``logging`` logger ``"ctsid"`` at INFO.
 """
@@ -145,6 +150,17 @@ def _frames(data: Any, run_column: Optional[str], columns: Optional[Sequence[str
         )
     table = _table(data, columns)
     if run_column is None:
+        # A frame with a run-id column given as one run joins its runs end to end, and every
+        # figure still looks plausible (the throttle frame of 30 runs scored 85.9 %).
+        for name in table:
+            if str(name).strip().lower() in ("run", "run_id"):
+                n = len(set(np.asarray(table[name]).tolist()))
+                if n > 1:
+                    raise CtsidError(
+                        f"the data have a column '{name}' with {n} different values but no "
+                        f"run_column: the runs would be joined end to end; give "
+                        f"run_column='{name}' (or drop the column if the data are one run)"
+                    )
         return [("0", table)]
     if run_column not in table:
         raise CtsidError(f"run column '{run_column}' not found (columns: {', '.join(table)})")
@@ -202,13 +218,48 @@ def _table(d: Any, columns: Optional[Sequence[str]]) -> Dict[str, np.ndarray]:
     return {str(c): a[:, k] for k, c in enumerate(columns)}
 
 
+def _time_like(name: str) -> bool:
+    """``t``, ``time``, ``t_s``, ``time [s]``, ... (not ``temp``)."""
+    n = str(name).strip().lower()
+    return any(n == t or (n.startswith(t) and n[len(t)] in "_ [(") for t in ("t", "time"))
+
+
+def _check_time(rid: str, table: Mapping[str, Any], names: Sequence[str], tau: float) -> None:
+    """A column named like time whose uniform step is not ``tau`` means the data are sampled
+    otherwise (the times are not read): every derivative and free run would use the wrong step
+    (``tau=0.03`` on 3 ms data scored a fit of -264 % without a word). A step of ``tau`` in ms,
+    us, min or h is that sampling in another unit; a column that is not uniform is not time."""
+    for name, v in table.items():
+        if name in names or not _time_like(name):
+            continue
+        try:
+            a = np.asarray(v, dtype=float)
+        except (TypeError, ValueError):
+            continue
+        if a.size < 3 or not np.all(np.isfinite(a)):
+            continue
+        d = np.diff(a)
+        step = float(np.median(d))
+        if step <= 0 or float(np.max(np.abs(d - step))) > 1e-3 * step:
+            continue
+        ratio = step / tau
+        if any(abs(ratio / k - 1) < 0.01 for k in (1.0, 1e3, 1e6, 1 / 60, 1 / 3600)):
+            continue
+        raise CtsidError(
+            f"run {rid}: column '{name}' steps by {step:g} s but tau is {tau:g} s; give the "
+            f"data's sampling period as tau (the times themselves are not read)"
+        )
+
+
 def _records(
     data: Any,
     names: Sequence[str],
     run_column: Optional[str],
     columns: Optional[Sequence[str]],
+    tau: Optional[float] = None,
 ):
-    """The (names, runs) the extension takes: the named channels of every run as float lists."""
+    """The (names, runs) the extension takes: the named channels of every run as float lists;
+    with ``tau``, a column named like time is checked against it (:func:`_check_time`)."""
     if run_column is not None and str(run_column) in names:
         # It was looked up in each run after the split and named by a sample value.
         raise CtsidError(
@@ -224,6 +275,8 @@ def _records(
         if all(len(np.asarray(table[n])) == 0 for n in names):
             # An empty frame was reported as a constant output.
             raise CtsidError(f"run {rid}: no data rows")
+        if tau is not None:
+            _check_time(rid, table, names, tau)
         cols = []
         for n in names:
             v = np.asarray(table[n])
@@ -313,8 +366,9 @@ class Model:
         return self._m.tau
 
     def _run(self, data, tau, run_column, columns):
-        names, runs = _records(data, self.outputs + self.inputs, run_column, columns)
-        return self._m.simulate(_tau(tau, self), names, runs)
+        tau = _tau(tau, self)
+        names, runs = _records(data, self.outputs + self.inputs, run_column, columns, tau)
+        return self._m.simulate(tau, names, runs)
 
     def simulate(
         self,
@@ -387,7 +441,7 @@ def identify(
     outputs, inputs = _names("outputs", outputs), _names("inputs", inputs)
     if order is not None and orders is not None:
         raise ValueError("order fixes the orders and orders lists those to search; give one of them")
-    names, runs = _records(data, outputs + inputs, run_column, columns)
+    names, runs = _records(data, outputs + inputs, run_column, columns, tau)
     if isinstance(order, numbers.Integral) and not isinstance(order, bool):
         order = [order] * len(outputs)
     inner, summary = _ctsid.identify(
@@ -466,9 +520,10 @@ def discover(
     stiffness, ...), adds it and refits (``ctsid discover``)."""
     if not isinstance(nominal, Model):
         raise TypeError("nominal: a ctsid.Model (ctsid.load(path) reads a model file)")
-    names, runs = _records(data, nominal.outputs + nominal.inputs, run_column, columns)
+    tau = _tau(tau, nominal)
+    names, runs = _records(data, nominal.outputs + nominal.inputs, run_column, columns, tau)
     verdict, text, inner, before, after = _ctsid.discover(
-        _tau(tau, nominal),
+        tau,
         names,
         runs,
         nominal._m,

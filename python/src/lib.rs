@@ -122,18 +122,39 @@ fn records_and_split(
     Ok((rs, sp))
 }
 
+/// The first error a progress line raised in Python (Ctrl-C arrives as a `KeyboardInterrupt`
+/// raised inside `logging`), kept until the call returns. Restored into the interpreter at
+/// once, it left an exception set under the library's next calls into Python: a chain of
+/// `SystemError: ... returned a result with an exception set` instead of the interrupt.
+static PROGRESS_ERROR: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
+
 /// Progress lines of the long stages, to the `logging` logger "ctsid" (a plain function: the
-/// library's callback is a `fn`, so it cannot hold a Python object).
+/// library's callback is a `fn`, so it cannot hold a Python object). After an error no more
+/// lines are logged; [`progress_error`] hands it back when the call ends.
 fn log_progress(line: &str) {
+    let mut pending = PROGRESS_ERROR.lock().unwrap_or_else(|e| e.into_inner());
+    if pending.is_some() {
+        return;
+    }
     Python::attach(|py| {
         let logged = py
             .import("logging")
             .and_then(|m| m.call_method1("getLogger", ("ctsid",)))
             .and_then(|l| l.call_method1("info", (line,)));
         if let Err(e) = logged {
-            e.restore(py);
+            *pending = Some(e);
         }
     });
+}
+
+/// The error a progress line raised during the call that just ended, if any (taken: the next
+/// call starts clean).
+fn progress_error() -> PyResult<()> {
+    let pending = PROGRESS_ERROR
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .take();
+    pending.map_or(Ok(()), Err)
 }
 
 /// A model file: polynomial and named terms per output, as `ctsid` writes and reads it.
@@ -272,7 +293,10 @@ fn identify(
     s.progress = Some(log_progress);
     s.validate().map_err(err)?;
     let (rs, sp) = records_and_split(py, tau, names, runs, [train, validation, test])?;
-    let id = py.detach(|| identify_rs(&rs, &sp, &s)).map_err(err)?;
+    let id = py.detach(|| identify_rs(&rs, &sp, &s));
+    // An interrupt (or a logging failure) during the call is the call's result.
+    progress_error()?;
+    let id = id.map_err(err)?;
     let summary = serde_json::json!({
         "orders": id.model.outputs.iter().map(|o| o.order).collect::<Vec<_>>(),
         "test_nrmse": id.test_nrmse(),

@@ -5,6 +5,7 @@ line, its binary: `CTSID_BIN`, else `target/release/ctsid` of this repository (b
 test --release`); without it those tests skip with a notice.
 """
 
+import logging
 import os
 import subprocess
 import warnings
@@ -153,6 +154,18 @@ def test_wrong_shapes_and_settings_raise_clear_errors(fitted):
         ctsid.derive(np.where(np.arange(600) == 7, 1e149, wave), 0.01, 2)
     with pytest.raises(ctsid.CtsidError, match="engine"):
         ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", engine="tpu")
+    # A frame of several runs given without run_column joined them end to end, and scored a
+    # plausible fit (85.9 % on 30 throttle runs).
+    with pytest.raises(ctsid.CtsidError, match="run_column='run'"):
+        model.score(data)
+    with pytest.raises(ctsid.CtsidError, match="12 different values"):
+        ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, **SETTINGS)
+    # The times are not read: a tau ten times the time column's step scored -264 % silently.
+    with pytest.raises(ctsid.CtsidError, match="column 't' steps by 0.003 s but tau is 0.03 s"):
+        model.score(data, tau=10 * TAU, run_column="run")
+    # The same times in ms are the same sampling.
+    in_ms = data.assign(t=1000 * data.t).rename(columns={"t": "t_ms"})
+    assert model.score(in_ms, tau=TAU, run_column="run")[0]["fit_percent"] > 50
     # Run lists as lists of ids give the model the strings give.
     lists = dict(SETTINGS, train=list(range(8)), validation=[8.0, 9], test=["10", 11])
     listed = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", **lists)
@@ -246,3 +259,28 @@ def test_findings_of_the_tenth_reading(fitted):
     with pytest.raises(ctsid.CtsidError, match="'y' is the run column"):
         ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="y", degree=1,
                        order=3)
+
+
+def test_an_interrupt_in_a_progress_line_is_raised_as_itself(fitted):
+    """Ctrl-C arrives as a KeyboardInterrupt inside `logging` while a progress line is logged; it
+    came out as a chain of `SystemError: ... returned a result with an exception set`, which
+    `except KeyboardInterrupt` does not catch. A handler that raises it stands in for the key."""
+    data, _ = fitted
+
+    class Stop(logging.Handler):
+        def emit(self, record):
+            raise KeyboardInterrupt
+
+    log, stop = logging.getLogger("ctsid"), Stop()
+    level = log.level
+    log.addHandler(stop)
+    log.setLevel(logging.INFO)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", **SETTINGS)
+    finally:
+        log.removeHandler(stop)
+        log.setLevel(level)
+    # The next call starts clean.
+    again = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", **SETTINGS)
+    assert again.to_json() == fitted[1].to_json()
