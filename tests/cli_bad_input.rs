@@ -1445,3 +1445,42 @@ fn channels_whose_names_print_ambiguously_are_refused() {
     ]);
     assert!(ok, "{err}");
 }
+
+/// A file of several runs read without its run column was one run, its runs joined end to end:
+/// every command scored or fitted it without a word (the Python package did the same with a
+/// frame). Refused by name where a column named `run` or `run_id` holds more than one value;
+/// one value (a single run that carries its id) passes.
+#[test]
+fn a_run_column_left_out_is_refused_where_it_holds_several_runs() {
+    let data = file("runs_unnamed.csv", &good_csv());
+    for cmd in [
+        "identify --output y --input u --time-column t --degree 1 --order 1",
+        "derive --column y --order 1 --time-column t",
+    ] {
+        let args: Vec<&str> = std::iter::once(cmd.split(' ').next().unwrap())
+            .chain(std::iter::once(data.as_str()))
+            .chain(cmd.split(' ').skip(1))
+            .collect();
+        fails(
+            &args,
+            &["column 'run' holds more than one run", "--run-column run"],
+        );
+    }
+    let one: String = good_csv()
+        .lines()
+        .filter(|l| !l.starts_with("1,"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let one = file("runs_one.csv", &one);
+    let (ok, _, err) = ctsid(&[
+        "derive",
+        &one,
+        "--column",
+        "y",
+        "--order",
+        "1",
+        "--time-column",
+        "t",
+    ]);
+    assert!(ok, "{err}");
+}

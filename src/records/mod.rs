@@ -601,6 +601,9 @@ struct Columns {
     channels: Vec<usize>,
     run: Option<usize>,
     time: Option<usize>,
+    /// Without a run column: a column named `run` or `run_id` (any case), whose values are
+    /// checked to be one run's ([`read_rows`]).
+    unnamed_run: Option<(usize, String)>,
 }
 
 /// Reads the header and finds the columns `spec` names (each exactly once).
@@ -651,6 +654,11 @@ fn locate_columns<R: std::io::Read>(
             .collect::<Result<_>>()?,
         run: spec.run_column.as_deref().map(find).transpose()?,
         time: spec.time_column.as_deref().map(find).transpose()?,
+        unnamed_run: header
+            .iter()
+            .position(|h| ["run", "run_id"].contains(&h.to_ascii_lowercase().as_str()))
+            .filter(|_| spec.run_column.is_none())
+            .map(|i| (i, header[i].clone())),
     })
 }
 
@@ -683,6 +691,7 @@ fn read_rows<R: std::io::Read>(
 ) -> Result<Vec<Acc>> {
     let mut runs: Vec<Acc> = Vec::new();
     let mut index: std::collections::HashMap<String, usize> = Default::default();
+    let mut unnamed_first: Option<String> = None;
     for (i, rec) in rdr.records().enumerate() {
         let row = i + 2;
         let rec = rec.map_err(|e| Error::Csv {
@@ -690,6 +699,22 @@ fn read_rows<R: std::io::Read>(
             row,
             message: e.to_string(),
         })?;
+        // A file of several runs read without its run column is one run, its runs joined end to
+        // end, and every figure of it still looks plausible.
+        if let Some((c, name)) = &at.unnamed_run {
+            let v = &rec[*c];
+            match &unnamed_first {
+                None => unnamed_first = Some(v.to_string()),
+                Some(f) if f != v => {
+                    return Err(Error::InvalidData(format!(
+                        "{label}: column '{name}' holds more than one run ('{}' and '{}' at row {row}) but no run column was given: the runs would be joined end to end; give it as the run column (--run-column {name}), or drop it if the file is one run",
+                        crate::util::clip(f, 40),
+                        crate::util::clip(v, 40)
+                    )))
+                }
+                Some(_) => {}
+            }
+        }
         let id = at
             .run
             .map(|c| rec[c].to_string())
