@@ -59,6 +59,7 @@ fn read_csv(bytes: &[u8]) -> ctsid::Result<RecordSet> {
         run_column: Some("run".into()),
         time_column: Some("t".into()),
         tau: None,
+        rows_independent: false,
     };
     RecordSet::from_reader(bytes, "fuzz.csv", &spec)
 }

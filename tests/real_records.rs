@@ -116,6 +116,7 @@ fn no_shared_record_or_signal_has_a_suspect_sample() {
                 run_column: None,
                 time_column: None,
                 tau: Some(1.0),
+                rows_independent: true,
             };
             // Text columns (segment names) do not load; every numeric one must, unsuspected
             // and not refused.

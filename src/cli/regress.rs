@@ -77,6 +77,8 @@ fn read_columns(path: &std::path::Path, wanted: &[String]) -> Result<Vec<Vec<f64
         run_column: None,
         time_column: None,
         tau: Some(1.0),
+        // Samples of a static relation: a run column means nothing here.
+        rows_independent: true,
     };
     let mut rs = super::load_records(path, &spec)?;
     Ok(rs.runs.remove(0).channels)

@@ -34,6 +34,7 @@ impl SamplingArgs {
             tau: self
                 .tau
                 .or(fallback_tau.filter(|_| self.time_column.is_none())),
+            rows_independent: false,
         }
     }
 }

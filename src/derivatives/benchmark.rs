@@ -95,6 +95,7 @@ pub fn load_signal(dir: &Path, name: &str) -> Result<Signal> {
         run_column: None,
         time_column: Some("t".into()),
         tau: None,
+        rows_independent: false,
     };
     let rs = crate::records::RecordSet::from_csv(dir.join(format!("{name}.csv")), &spec)?;
     let mut ch = rs

@@ -34,6 +34,7 @@ pub(crate) fn columns(path: &str, names: &[&str], tau: f64) -> Result<Vec<Vec<f6
         run_column: None,
         time_column: None,
         tau: Some(tau),
+        rows_independent: false,
     };
     let rs = RecordSet::from_csv(path, &spec)?;
     let Some(run) = rs.runs.into_iter().next() else {

@@ -179,6 +179,9 @@ pub struct CsvSpec {
     pub time_column: Option<String>,
     /// Sampling period in seconds; required unless a time column is given.
     pub tau: Option<f64>,
+    /// The rows are samples of a static relation (`regress`), not runs in time: a column named
+    /// like a run id is not checked to hold one run (see [`RecordSet::from_reader`]).
+    pub rows_independent: bool,
 }
 
 /// Fewest training samples an output must leave its resting value at ([`RecordSet::require_varies`]):
@@ -543,6 +546,7 @@ impl RecordSet {
             run_column: run_column.map(str::to_string),
             time_column: None,
             tau: Some(tau),
+            rows_independent: false,
         };
         Self::from_csv(path, &spec)
     }
@@ -553,7 +557,9 @@ impl RecordSet {
     /// malformed row (a wrong number of fields), a cell that is not a finite number below
     /// [`MAX_MAGNITUDE`], an empty run id, no data rows, times that do not increase within a run or
     /// are not uniform, a time column with no run of two samples and no tau, a tau that disagrees
-    /// with the time column by more than [`TAU_RTOL`], and all that [`RecordSet::new`] refuses.
+    /// with the time column by more than [`TAU_RTOL`], a column named `run` or `run_id` that holds
+    /// several runs where no run column is given (their runs would be joined; not checked where
+    /// the spec's rows are independent), and all that [`RecordSet::new`] refuses.
     pub fn from_reader<R: std::io::Read>(
         reader: R,
         label: &str,
@@ -657,7 +663,7 @@ fn locate_columns<R: std::io::Read>(
         unnamed_run: header
             .iter()
             .position(|h| ["run", "run_id"].contains(&h.to_ascii_lowercase().as_str()))
-            .filter(|_| spec.run_column.is_none())
+            .filter(|_| spec.run_column.is_none() && !spec.rows_independent)
             .map(|i| (i, header[i].clone())),
     })
 }
@@ -895,6 +901,7 @@ mod tests {
             run_column: run.map(Into::into),
             time_column: time.map(Into::into),
             tau,
+            rows_independent: false,
         }
     }
 
