@@ -589,22 +589,10 @@ fn a_loop_that_strays_names_a_bandwidth_that_works() {
         .unwrap()
         .to_string();
     let trace = temp_file("control_emps", "trace.csv", "");
-    let (ok, out, err) = ctsid(&[
-        "control",
-        &model,
-        "--setpoint",
-        "0.1",
-        "--from",
-        "0",
-        "--bandwidth",
-        &w,
-        "--u-min",
-        "-300",
-        "--u-max",
-        "300",
-        "-o",
-        &trace,
-    ]);
+    // The arguments after the model as words (the helper splits those that start with '-').
+    let at_w =
+        format!("--setpoint 0.1 --from 0 --bandwidth {w} --u-min -300 --u-max 300 -o {trace}");
+    let (ok, out, err) = ctsid(&["control", &model, &at_w]);
     assert!(ok, "{err}");
     assert!(
         err.contains("note: d q_m_d2 / d q_m_d1 at the setpoint"),
@@ -619,12 +607,7 @@ fn a_loop_that_strays_names_a_bandwidth_that_works() {
     let (ok, _, err) = ctsid(&[
         "control",
         &model,
-        "--setpoint",
-        "0.1",
-        "--from",
-        "0",
-        "--reference",
-        "steps",
+        "--setpoint 0.1 --from 0 --reference steps",
     ]);
     assert!(ok, "{err}");
     assert!(
