@@ -17,8 +17,10 @@ use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
+// Named in the package's module, where `ctsid.CtsidError` re-exports it: pickle looks the class
+// up by that name (as `_ctsid.CtsidError`, a worker's error reached its parent as a PicklingError).
 create_exception!(
-    _ctsid,
+    ctsid,
     CtsidError,
     PyValueError,
     "An error from ctsid: bad data or settings, with the one-line message the command line prints."

@@ -7,6 +7,7 @@ test --release`); without it those tests skip with a notice.
 
 import logging
 import os
+import pickle
 import subprocess
 import warnings
 from pathlib import Path
@@ -284,3 +285,10 @@ def test_an_interrupt_in_a_progress_line_is_raised_as_itself(fitted):
     # The next call starts clean.
     again = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run", **SETTINGS)
     assert again.to_json() == fitted[1].to_json()
+
+
+def test_an_error_pickles_as_itself():
+    """A worker process's CtsidError reached its parent as a PicklingError (the class was named
+    `_ctsid.CtsidError`, which pickle could not find)."""
+    e = pickle.loads(pickle.dumps(ctsid.CtsidError("run '3': no data rows")))
+    assert type(e) is ctsid.CtsidError and str(e) == "run '3': no data rows"
