@@ -168,6 +168,25 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
     Ok(())
 }
 
+/// A time unit's factor to seconds, as printed, and the unit: a sampling ratio of one of these
+/// is mostly a time in another unit.
+const UNIT_FACTORS: [(f64, &str, &str); 4] = [
+    (1e3, "1000", "ms"),
+    (1e6, "1e6", "us"),
+    (1.0 / 60.0, "1/60", "min"),
+    (1.0 / 3600.0, "1/3600", "h"),
+];
+
+/// Whether `ratio` is within 1 % of `k`.
+fn near_factor(ratio: f64, k: f64) -> bool {
+    (ratio / k - 1.0).abs() < 0.01
+}
+
+/// Whether a sampling ratio is a time unit's factor ([`UNIT_FACTORS`]).
+pub fn is_unit_factor(ratio: f64) -> bool {
+    UNIT_FACTORS.iter().any(|&(k, _, _)| near_factor(ratio, k))
+}
+
 /// A note where the data's sampling is a unit's factor from the model's (a continuous-time
 /// model simulates at any sampling, but a ratio of 1e3, 1e6, 1/60 or 1/3600 to the
 /// identification's is mostly a time column in ms, us, min or h; and the inverse, a model
@@ -175,25 +194,19 @@ pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
 /// said nothing.
 pub fn note_tau_units(data_tau: f64, model_tau: Option<f64>, from_time_column: bool) {
     let Some(mt) = model_tau else { return };
-    let near = |r: f64, k: f64| (r / k - 1.0).abs() < 0.01;
     let (data, model) = (ctsid::util::num4(data_tau), ctsid::util::num4(mt));
     let source = if from_time_column {
         "the time column"
     } else {
         "--tau"
     };
-    for (k, label, unit) in [
-        (1e3, "1000", "ms"),
-        (1e6, "1e6", "us"),
-        (1.0 / 60.0, "1/60", "min"),
-        (1.0 / 3600.0, "1/3600", "h"),
-    ] {
-        if near(data_tau / mt, k) {
+    for (k, label, unit) in UNIT_FACTORS {
+        if near_factor(data_tau / mt, k) {
             eprintln!(
                 "note: the data are sampled every {data} s, the model was identified at {model} s (about {label} times): if {source} is in another unit ({unit}?), convert it to seconds"
             );
         }
-        if near(mt / data_tau, k) {
+        if near_factor(mt / data_tau, k) {
             eprintln!(
                 "note: the model was identified at {model} s, about {label} times the data's {data} s: if its data's times were in {unit}, identify it again with times in seconds"
             );

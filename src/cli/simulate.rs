@@ -353,8 +353,7 @@ fn check_time_like_columns(
         // A column in ms (or us, min, h) beside a model in seconds is the model's sampling in
         // another unit (`time_ms` stepping by 1 at tau = 1 ms simulated right before).
         let ratio = rs.tau / mt;
-        let near = |k: f64| (ratio / k - 1.0).abs() < 0.01;
-        if [1e3, 1e6, 1.0 / 60.0, 1.0 / 3600.0].into_iter().any(near) {
+        if super::is_unit_factor(ratio) {
             continue;
         }
         if (ratio - 1.0).abs() > 0.01 {
