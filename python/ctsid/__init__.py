@@ -22,8 +22,9 @@ Data are a pandas DataFrame (one run, or several told apart by ``run_column``), 
 DataFrames (one per run), a dict ``{run id: DataFrame}``, or the same with 2-D numpy arrays
 (samples x columns) and ``columns=[...]`` naming their columns. A frame with a ``run`` column of
 several values needs ``run_column`` (it is refused without: its runs would be joined). One long
-record is cut into runs by a run column of your own (``k // samples_per_run``; the command line's
-``--segment`` joins a remainder under half a piece to the last run). The times are not read:
+record is cut into runs by ``segment=SECONDS`` (as the command line's ``--segment``: pieces
+``0``, ``1``, ... of one run, ``RUN#0``, ``RUN#1``, ... of run ``RUN``, a remainder under half a
+piece joined to the last, and a run list naming ``RUN`` takes all its pieces). The times are not read:
 ``tau`` is the sampling period. Errors in the data or settings
 raise :class:`CtsidError` (a ``ValueError``) with the one-line message the command line
 prints. Long calls release the GIL; progress goes to the ``logging`` logger ``"ctsid"`` at INFO.
@@ -287,6 +288,11 @@ def _records(
     return list(names), runs
 
 
+def _segment(v: Any) -> Optional[float]:
+    """A piece's length in seconds (the library checks it against ``tau``)."""
+    return None if v is None else _real("segment", v)
+
+
 def _run_list(v: RunList) -> Optional[str]:
     if v is None:
         return None
@@ -365,10 +371,10 @@ class Model:
     def tau(self) -> Optional[float]:
         return self._m.tau
 
-    def _run(self, data, tau, run_column, columns):
+    def _run(self, data, tau, run_column, columns, segment):
         tau = _tau(tau, self)
         names, runs = _records(data, self.outputs + self.inputs, run_column, columns, tau)
-        return self._m.simulate(tau, names, runs)
+        return self._m.simulate(tau, names, runs, segment=_segment(segment))
 
     def simulate(
         self,
@@ -376,14 +382,16 @@ class Model:
         tau: Optional[float] = None,
         run_column: Optional[str] = None,
         columns: Optional[Sequence[str]] = None,
+        segment: Optional[float] = None,
     ) -> Union[np.ndarray, Dict[str, np.ndarray]]:
         """Free runs from the measured inputs, each from the initial state fitted on the run's
         first 200 samples (the convention of every score ctsid prints).
 
         Returns an array (samples x outputs) for one run, else ``{run id: array}``. ``tau``
-        defaults to the model's own.
+        defaults to the model's own; ``segment`` cuts the runs into pieces of that many seconds.
         """
-        out = {rid: np.asarray(sim).T for rid, sim, _, _ in self._run(data, tau, run_column, columns)}
+        sims = self._run(data, tau, run_column, columns, segment)
+        out = {rid: np.asarray(sim).T for rid, sim, _, _ in sims}
         return next(iter(out.values())) if len(out) == 1 else out
 
     def score(
@@ -392,23 +400,35 @@ class Model:
         tau: Optional[float] = None,
         run_column: Optional[str] = None,
         columns: Optional[Sequence[str]] = None,
+        segment: Optional[float] = None,
     ) -> List[dict]:
         """Per run and output: RMS, NRMSE (RMS over the measured output's standard deviation)
         and fit in percent, ``100 (1 - NRMSE)``, as ``ctsid simulate`` prints them; ``None``
         where the command line prints ``-`` (the measured output is constant in that run)."""
         rows = []
-        for rid, _, rms, nrmse in self._run(data, tau, run_column, columns):
+        for rid, _, rms, nrmse in self._run(data, tau, run_column, columns, segment):
             for o, r, e in zip(self.outputs, rms, nrmse):
                 e = _finite_or_none(e)
                 fit = None if e is None else 100.0 * (1.0 - e)
                 rows.append({"run": rid, "output": o, "rms": r, "nrmse": e, "fit_percent": fit})
         return rows
 
+    def __reduce__(self):
+        # Pickled as its model file's text (exact: floats are written in shortest round-trip
+        # form), so a model crosses to multiprocessing workers and caches; without this pickle
+        # raised "cannot pickle ... object".
+        return (_model_from_json, (self.to_json(), self.summary))
+
     def __str__(self) -> str:
         return str(self._m)
 
     def __repr__(self) -> str:
         return repr(self._m)
+
+
+def _model_from_json(text: str, summary: Optional[dict]) -> Model:
+    """What unpickling a :class:`Model` calls."""
+    return Model(_ctsid.Model.from_json(text), summary)
 
 
 def identify(
@@ -427,6 +447,7 @@ def identify(
     terms: Sequence[str] = (),
     engine: str = "auto",
     refine: bool = True,
+    segment: Optional[float] = None,
 ) -> Model:
     """Identifies a model, with the command line's defaults (``ctsid identify``).
 
@@ -435,7 +456,9 @@ def identify(
     ``order`` fixes the order (an int for every output, or one per output); otherwise each
     output's order is searched over ``orders`` (default 1 to 4) by the eta-rule. ``terms`` adds
     named terms to the dictionary (``"sign(y_d1)"``). ``engine`` is ``"auto"``, ``"cpu"`` or
-    ``"gpu"``. The returned model's ``summary`` holds the orders and test NRMSE.
+    ``"gpu"``. ``segment`` cuts long runs into pieces of that many seconds, each a run (named
+    as the module's docstring says). The returned model's ``summary`` holds the orders and test
+    NRMSE.
     """
     tau = _tau(tau)
     outputs, inputs = _names("outputs", outputs), _names("inputs", inputs)
@@ -459,6 +482,7 @@ def identify(
         terms=_names("terms", terms),
         engine=str(engine),
         refine=_flag("refine", refine),
+        segment=_segment(segment),
     )
     summary = json.loads(summary)
     # What the command line notes on standard error (a named term no chosen order could use).
@@ -515,9 +539,11 @@ def discover(
     validation: RunList = None,
     test: RunList = None,
     seed: int = 0,
+    segment: Optional[float] = None,
 ) -> Discovery:
     """Compares a nominal model with the data, names the effect it misses (friction, drag,
-    stiffness, ...), adds it and refits (``ctsid discover``)."""
+    stiffness, ...), adds it and refits (``ctsid discover``). ``segment`` cuts long runs into
+    pieces of that many seconds, as in :func:`identify`."""
     if not isinstance(nominal, Model):
         raise TypeError("nominal: a ctsid.Model (ctsid.load(path) reads a model file)")
     tau = _tau(tau, nominal)
@@ -531,6 +557,7 @@ def discover(
         validation=_run_list(validation),
         test=_run_list(test),
         seed=_int("seed", seed),
+        segment=_segment(segment),
     )
     return Discovery(verdict, text, Model(inner), before, after)
 

@@ -24,7 +24,7 @@ class Model:
     def tau(self) -> Optional[float]: ...
     def coefficients(self) -> List[Tuple[str, str, float, Optional[float]]]: ...
     def simulate(
-        self, tau: float, names: List[str], runs: List[Run]
+        self, tau: float, names: List[str], runs: List[Run], segment: Optional[float] = ...
     ) -> List[Tuple[str, List[List[float]], List[float], List[float]]]: ...
 
 def identify(
@@ -43,6 +43,7 @@ def identify(
     engine: str = ...,
     refine: bool = ...,
     eta: Optional[float] = ...,
+    segment: Optional[float] = ...,
 ) -> Tuple[Model, str]: ...
 def derive(y: List[float], tau: float, order: int) -> Tuple[List[List[float]], List[List[float]]]: ...
 def discover(
@@ -54,6 +55,7 @@ def discover(
     validation: Optional[str] = ...,
     test: Optional[str] = ...,
     seed: int = ...,
+    segment: Optional[float] = ...,
 ) -> Tuple[str, str, Model, float, float]: ...
 def throttle_dataset(
     path: str,

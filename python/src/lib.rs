@@ -105,15 +105,33 @@ fn split(
     Split::new(train, validation, test, &ids)
 }
 
-/// The record set of `runs` and its split by the run lists `[train, validation, test]`.
+/// The record set of `runs`, cut into pieces of `segment` seconds where given
+/// (`RecordSet::segmented_seconds`, the command line's `--segment`).
+fn pieces(
+    py: Python<'_>,
+    tau: f64,
+    names: Vec<String>,
+    runs: Vec<PyRun>,
+    segment: Option<f64>,
+) -> PyResult<RecordSet> {
+    let rs = record_set(py, tau, names, runs)?;
+    match segment {
+        Some(s) => rs.segmented_seconds(s).map_err(err),
+        None => Ok(rs),
+    }
+}
+
+/// The record set of `runs` (cut into pieces of `segment` seconds where given) and its split by
+/// the run lists `[train, validation, test]`.
 fn records_and_split(
     py: Python<'_>,
     tau: f64,
     names: Vec<String>,
     runs: Vec<PyRun>,
     [train, validation, test]: [Option<String>; 3],
+    segment: Option<f64>,
 ) -> PyResult<(RecordSet, Split)> {
-    let rs = record_set(py, tau, names, runs)?;
+    let rs = pieces(py, tau, names, runs, segment)?;
     let sp = split(
         &rs,
         train.as_deref(),
@@ -229,16 +247,19 @@ impl PyModel {
         out
     }
 
-    /// Free runs on every run of the records, each from the initial state fitted on its first
-    /// samples: per run (id, simulated outputs, RMS per output, NRMSE per output).
+    /// Free runs on every run of the records (cut into pieces of `segment` seconds where
+    /// given), each from the initial state fitted on its first samples: per run (id, simulated
+    /// outputs, RMS per output, NRMSE per output).
+    #[pyo3(signature = (tau, names, runs, segment=None))]
     fn simulate(
         &self,
         py: Python<'_>,
         tau: f64,
         names: Vec<String>,
         runs: Vec<PyRun>,
+        segment: Option<f64>,
     ) -> PyResult<Vec<SimulatedRun>> {
-        let rs = record_set(py, tau, names, runs)?;
+        let rs = pieces(py, tau, names, runs, segment)?;
         let sim = py.detach(|| self.inner.simulate(&rs)).map_err(err)?;
         Ok(sim
             .runs
@@ -260,7 +281,8 @@ impl PyModel {
 /// and a JSON summary (orders, test NRMSE per output, engine, refinement).
 #[pyfunction]
 #[pyo3(signature = (tau, names, runs, outputs, inputs, degree, train=None, validation=None,
-    test=None, order=None, orders=None, terms=Vec::new(), engine="auto", refine=true, eta=None))]
+    test=None, order=None, orders=None, terms=Vec::new(), engine="auto", refine=true, eta=None,
+    segment=None))]
 #[allow(clippy::too_many_arguments)]
 fn identify(
     py: Python<'_>,
@@ -279,6 +301,7 @@ fn identify(
     engine: &str,
     refine: bool,
     eta: Option<f64>,
+    segment: Option<f64>,
 ) -> PyResult<(PyModel, String)> {
     let mut s = Settings::new(outputs, inputs, degree);
     if let Some(o) = order {
@@ -294,7 +317,7 @@ fn identify(
     s.refine = refine;
     s.progress = Some(log_progress);
     s.validate().map_err(err)?;
-    let (rs, sp) = records_and_split(py, tau, names, runs, [train, validation, test])?;
+    let (rs, sp) = records_and_split(py, tau, names, runs, [train, validation, test], segment)?;
     let id = py.detach(|| identify_rs(&rs, &sp, &s));
     // An interrupt (or a logging failure) during the call is the call's result.
     progress_error()?;
@@ -325,7 +348,8 @@ fn derive(py: Python<'_>, y: Vec<f64>, tau: f64, order: usize) -> PyResult<(Rows
 /// Names what `nominal` misses on the records: (verdict, report text, augmented model,
 /// test NRMSE before, after).
 #[pyfunction]
-#[pyo3(signature = (tau, names, runs, nominal, train=None, validation=None, test=None, seed=0))]
+#[pyo3(signature = (tau, names, runs, nominal, train=None, validation=None, test=None, seed=0,
+    segment=None))]
 #[allow(clippy::too_many_arguments)]
 fn discover(
     py: Python<'_>,
@@ -337,9 +361,10 @@ fn discover(
     validation: Option<String>,
     test: Option<String>,
     seed: u64,
+    segment: Option<f64>,
 ) -> PyResult<(String, String, PyModel, f64, f64)> {
     let nominal = &nominal.inner;
-    let (rs, sp) = records_and_split(py, tau, names, runs, [train, validation, test])?;
+    let (rs, sp) = records_and_split(py, tau, names, runs, [train, validation, test], segment)?;
     let (d, augmented) = py
         .detach(|| {
             let mut o = Options::new(sp.train, sp.validation.unwrap_or_default(), sp.test);

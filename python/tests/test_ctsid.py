@@ -5,6 +5,7 @@ line, its binary: `CTSID_BIN`, else `target/release/ctsid` of this repository (b
 test --release`); without it those tests skip with a notice.
 """
 
+import copy
 import logging
 import os
 import pickle
@@ -292,3 +293,48 @@ def test_an_error_pickles_as_itself():
     `_ctsid.CtsidError`, which pickle could not find)."""
     e = pickle.loads(pickle.dumps(ctsid.CtsidError("run '3': no data rows")))
     assert type(e) is ctsid.CtsidError and str(e) == "run '3': no data rows"
+
+
+def test_a_model_pickles_and_simulates_as_before(fitted):
+    """`Model` did not pickle, so it could not cross to a multiprocessing worker or a cache."""
+    data, model = fitted
+    for again in (pickle.loads(pickle.dumps(model)), copy.deepcopy(model)):
+        assert type(again) is ctsid.Model
+        assert again.to_json() == model.to_json() and again.summary == model.summary
+        a = again.simulate(data, run_column="run")["10"]
+        assert np.array_equal(a, model.simulate(data, run_column="run")["10"])
+
+
+def test_segment_cuts_runs_as_the_command_line_does(throttle, fitted, tmp_path):
+    """`segment=` is the command line's `--segment`: the same pieces, names and scores."""
+    data, model = fitted
+    one = data[data["run"] == 10].drop(columns=["run"])
+    rows = model.score(one, segment=1.5)
+    assert [r["run"] for r in rows] == ["0", "1"]
+    path = tmp_path / "model.json"
+    model.save(str(path))
+    run10 = tmp_path / "run10.csv"
+    one.to_csv(run10, index=False)
+    printed = run_cli("simulate", str(path), str(run10), "--tau", str(TAU), "--segment", "1.5")
+    cli_rms = {l.split()[0]: float(l.split()[2]) for l in printed.splitlines()[1:] if l.split()[1] == "y"}
+    for r in rows:
+        assert r["rms"] == pytest.approx(cli_rms[r["run"]], rel=1e-6), r
+    # Run lists name a run for all its pieces, as on the command line.
+    cut = ctsid.identify(data, outputs=["y"], inputs=["u"], tau=TAU, run_column="run",
+                         segment=1.5, **SETTINGS)
+    out = tmp_path / "cli.json"
+    run_cli(
+        "identify", str(throttle), "--output", "y", "--input", "u", "--run-column", "run",
+        "--tau", str(TAU), "--train", "0-7", "--validation", "8-9", "--test", "10-11",
+        "--degree", "2", "--order", "3", "--segment", "1.5", "--quiet", "-o", str(out),
+    )
+    from_cli = ctsid.load(str(out))
+    assert cut.equations() == from_cli.equations()
+    assert [c["coefficient"] for c in cut.coefficients()] == [
+        c["coefficient"] for c in from_cli.coefficients()
+    ]
+    assert cut.equations() != model.equations()  # the pieces are other runs than the whole
+    with pytest.raises(ctsid.CtsidError, match="less than 2 samples"):
+        model.score(one, segment=0.003)
+    with pytest.raises(TypeError, match="segment"):
+        model.score(one, segment="1.5")

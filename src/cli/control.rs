@@ -513,7 +513,7 @@ fn write_trace(
     header.extend([y.clone(), format!("{y}_measured")]);
     header.extend(names.iter().map(|n| format!("{n}_hat")));
     header.push(input.to_string());
-    w.write_record(&header).map_err(bad)?;
+    w.write_record(distinct(header)).map_err(bad)?;
     for i in 0..tr.t.len() {
         let mut row = vec![tr.t[i].to_string(), tr.reference[i].to_string()];
         if let Some(dr) = designed {
@@ -527,6 +527,24 @@ fn write_trace(
     w.flush().map_err(io)?;
     drop(w);
     file.commit()
+}
+
+/// The header with every repeated name made distinct (`t`, ..., `t_2`): a model whose output or
+/// input is named `t`, `reference` or `designed`, or a state `y_measured` beside the output `y`,
+/// gave a trace with two columns of one name, which CSV readers join or rename silently.
+fn distinct(header: Vec<String>) -> Vec<String> {
+    let mut out: Vec<String> = Vec::with_capacity(header.len());
+    for name in &header {
+        let mut candidate = name.clone();
+        let mut k = 2;
+        // A new name may not take one that comes later in the header either.
+        while out.contains(&candidate) || (candidate != *name && header.contains(&candidate)) {
+            candidate = format!("{name}_{k}");
+            k += 1;
+        }
+        out.push(candidate);
+    }
+    out
 }
 
 fn write_plots(
@@ -663,4 +681,40 @@ fn run_tracking(
         super::written(format!("plots written to {}", dir.display()));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::distinct;
+
+    fn names(v: &[&str]) -> Vec<String> {
+        v.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn a_trace_header_never_repeats_a_name() {
+        // An output named `t`, an input named `reference`, a state `t_2` further on.
+        let h = distinct(names(&[
+            "t",
+            "reference",
+            "t",
+            "t_measured",
+            "t_2",
+            "reference",
+        ]));
+        assert_eq!(
+            h,
+            names(&["t", "reference", "t_3", "t_measured", "t_2", "reference_2"])
+        );
+        let plain = names(&[
+            "t",
+            "reference",
+            "designed",
+            "y",
+            "y_measured",
+            "y_hat",
+            "u",
+        ]);
+        assert_eq!(distinct(plain.clone()), plain);
+    }
 }

@@ -105,35 +105,16 @@ pub struct SegmentArgs {
 impl SegmentArgs {
     /// Checks the length before any data are read.
     pub fn check(&self) -> Result<()> {
-        match self.segment {
-            Some(s) if !(s.is_finite() && s > 0.0) => Err(Error::param(
-                "segment",
-                format!(
-                    "{} s; give the length of a piece in seconds, > 0",
-                    ctsid::util::short(s)
-                ),
-            )),
-            _ => Ok(()),
-        }
+        self.segment
+            .map_or(Ok(()), ctsid::records::check_piece_seconds)
     }
 
     /// The record set cut into pieces (unchanged without --segment).
     pub fn apply(&self, rs: RecordSet) -> Result<RecordSet> {
-        let Some(s) = self.segment else {
-            return Ok(rs);
-        };
-        let len = (s / rs.tau).round();
-        if len < 2.0 {
-            return Err(Error::param(
-                "segment",
-                format!(
-                    "{} s is less than 2 samples at tau = {} s; give a longer piece",
-                    ctsid::util::short(s),
-                    ctsid::util::short(rs.tau)
-                ),
-            ));
+        match self.segment {
+            Some(s) => rs.segmented_seconds(s),
+            None => Ok(rs),
         }
-        rs.segmented(len.min(usize::MAX as f64) as usize)
     }
 
     /// A run too short for the method is, when pieces were cut, a piece too short: mostly the

@@ -188,6 +188,21 @@ pub struct CsvSpec {
 /// fewer cannot carry a derivative, let alone a dynamics.
 pub const MIN_MOVING: usize = 10;
 
+/// A piece's length in seconds for [`RecordSet::segmented_seconds`], checked before any data
+/// are read: finite and > 0.
+pub fn check_piece_seconds(seconds: f64) -> Result<()> {
+    if seconds.is_finite() && seconds > 0.0 {
+        return Ok(());
+    }
+    Err(Error::param(
+        "segment",
+        format!(
+            "{} s; give the length of a piece in seconds, > 0",
+            crate::util::short(seconds)
+        ),
+    ))
+}
+
 impl RecordSet {
     /// Builds a record set from in-memory runs (validated like a file). Refuses a tau that
     /// [`check_tau`] refuses, a channel name given twice, a run id used twice, a run with another number of channels
@@ -506,6 +521,25 @@ impl RecordSet {
             }
         }
         RecordSet::new(self.tau, self.channel_names.clone(), runs)
+    }
+
+    /// [`RecordSet::segmented`] with the piece given in seconds (the command line's
+    /// `--segment`, Python's `segment=`): refuses a length that is not finite and > 0, or that
+    /// is under 2 samples at this record's `tau`.
+    pub fn segmented_seconds(&self, seconds: f64) -> Result<RecordSet> {
+        check_piece_seconds(seconds)?;
+        let len = (seconds / self.tau).round();
+        if len < 2.0 {
+            return Err(Error::param(
+                "segment",
+                format!(
+                    "{} s is less than 2 samples at tau = {} s; give a longer piece",
+                    crate::util::short(seconds),
+                    crate::util::short(self.tau)
+                ),
+            ));
+        }
+        self.segmented(len.min(usize::MAX as f64) as usize)
     }
 
     /// Loads channels from a CSV file with a header row. Refuses a path that is not a readable
