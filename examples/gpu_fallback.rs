@@ -1,16 +1,27 @@
 //! Identify on the GPU engine where the machine has one, on the CPU engine where it has not.
 //!
-//! `cargo run --release --example gpu_fallback -- DATA.csv OUTPUT INPUT TAU` (the record as in
-//! `identify_csv`). `EngineChoice::Auto` makes the same choice by itself (and also keeps the CPU
+//! `cargo run --release --example gpu_fallback -- DATA.csv OUTPUT INPUT TAU` (a record with a
+//! `run` column as in `identify_csv`). `EngineChoice::Auto` makes the same choice by itself (and also keeps the CPU
 //! engine for problems too small to pay for the GPU); asking for the GPU and falling back shows
 //! the error a missing adapter gives. A GPU lost in the middle of a fit falls back by itself,
 //! said in each output's `engine`.
 use ctsid::engine::select::{probe, EngineChoice};
 use ctsid::{Identifier, RecordSet, Split};
+use std::process::ExitCode;
 
-fn main() -> ctsid::Result<()> {
+fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let [data, y, u, tau] = args.as_slice() else {
+    match run(&args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(args: &[String]) -> ctsid::Result<()> {
+    let [data, y, u, tau] = args else {
         return Err(ctsid::Error::param(
             "arguments",
             "give DATA.csv OUTPUT INPUT TAU",

@@ -375,7 +375,7 @@ pub struct Round {
     pub seconds: f64,
 }
 
-/// One refused candidate given a second look on simulation error ([`second_look`]).
+/// One refused candidate given a second look on simulation error (`second_look`).
 #[derive(Debug, Clone)]
 pub struct Tried {
     pub effect: String,
@@ -391,7 +391,7 @@ pub struct Tried {
 }
 
 impl Tried {
-    /// The second look's tests ([`second_look`]): a finite validation error at most
+    /// The second look's tests (`second_look`): a finite validation error at most
     /// [`SECOND_LOOK_RATIO`] times the current model's, and the coefficient at least
     /// [`PruneOptions::z`] standard errors from zero.
     pub fn passes(&self) -> bool {

@@ -22,10 +22,17 @@
 //! # Ok::<(), ctsid::Error>(())
 //! ```
 //!
+//! A record without a run column is one run, `0`; `RecordSet::read_csv(path, &cols, None,
+//! tau)?.segmented_seconds(4.0)?` cuts it into runs `0`, `1`, ... of 4 s (the command line's
+//! `--segment 4`), and a test record in a file of its own is a second [`RecordSet`] to simulate
+//! (the README's library quick start does both on the EMPS record). Runs built in memory are
+//! [`records::Run::new`]`(id, channels)` in [`RecordSet::new`].
+//!
 //! [`Identifier`] names the other settings (fixed order, named terms such as `sign(y_d1)`,
-//! engine, progress callback); [`Model::read`] loads a model file. The library prints nothing:
-//! progress goes to a callback, notes into the results. `examples/identify_csv.rs` is the same
-//! as a program.
+//! engine, progress callback); [`Model::read`] loads a model file;
+//! [`simulate::simulate_model`] runs a model from an initial state of your own. The library
+//! prints nothing: progress goes to a callback, notes into the results. `examples/identify_csv.rs`
+//! is the same as a program.
 //!
 //! # Modules
 //!

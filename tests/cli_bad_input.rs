@@ -941,7 +941,10 @@ fn slips_that_passed_before_are_refused() {
         "expr-twice.json",
         serde_json::json!({"expression": "2*y", "coefficient": 0.5}),
     );
-    fails(&["show", &twice], &["terms 1 and 3 are both"]);
+    fails(
+        &["show", &twice],
+        &["terms 1 and 3 (y and 2*y) are one column up to a constant factor"],
+    );
     let three = with_term(
         "interval-three.json",
         serde_json::json!({"exponents": {"u": 2}, "coefficient": 0.5, "interval": [0.1, 0.5, 0.9]}),

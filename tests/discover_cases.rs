@@ -139,7 +139,15 @@ fn augmented_model_file_is_valid_and_carries_the_discovery() {
         .iter()
         .find(|t| t.origin == Some(ctsid::model::Origin::Effect("coulomb_friction".into())))
         .expect("no coulomb_friction term in the file");
-    assert!(t.expression.is_some() && t.interval.is_some(), "{t:?}");
+    assert!(t.expression.is_some() && t.std_error.is_some(), "{t:?}");
+    // The bootstrap interval is the weak-form estimate's: a term keeps it only where its
+    // coefficient is that estimate (a refined coefficient once sat outside "its" interval).
+    let e = &d.effects[0];
+    assert_eq!(
+        t.interval.is_some(),
+        t.coefficient == e.weak_coefficient,
+        "{t:?} {e:?}"
+    );
     assert_eq!(
         &back,
         d.final_model

@@ -75,7 +75,7 @@ fn the_examples_identify_and_discover_on_a_csv_record() {
         return;
     };
     let dir = temp_dir("identify");
-    std::fs::write(dir.join("data.csv"), csv).unwrap();
+    std::fs::write(dir.join("data.csv"), &csv).unwrap();
     let text = run_in(&bin, &dir, &["data.csv", "y", "u", &rs.tau.to_string()]);
     assert!(text.starts_with("y_d2 = "), "{text}");
     assert_eq!(
@@ -86,5 +86,35 @@ fn the_examples_identify_and_discover_on_a_csv_record() {
         "{text}"
     );
     assert!(ctsid::Model::read(dir.join("identified.json").to_str().unwrap()).is_ok());
+
+    // The same runs end to end in one record without a run column, cut by SECONDS at the runs'
+    // own length: the same runs, the same model. Without SECONDS the missing run column is one
+    // line, not the `Debug` form a `main` returning `Result` prints.
+    let n = rs.runs[0].len();
+    assert!(rs.runs.iter().all(|r| r.len() == n));
+    let joined: String = csv
+        .lines()
+        .map(|l| l.split_once(',').unwrap().1.to_string() + "\n")
+        .collect();
+    std::fs::write(dir.join("long.csv"), joined).unwrap();
+    let seconds = (n as f64 * rs.tau).to_string();
+    let cut = run_in(
+        &bin,
+        &dir,
+        &["long.csv", "y", "u", &rs.tau.to_string(), &seconds],
+    );
+    assert_eq!(cut, text);
+    let out = Command::new(&bin)
+        .current_dir(&dir)
+        .args(["long.csv", "y", "u", &rs.tau.to_string()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{err}");
+    assert!(
+        err.starts_with("error: ") && err.contains("'run'") && err.lines().count() == 1,
+        "{err}"
+    );
+    assert!(!err.contains('{'), "{err}");
     std::fs::remove_dir_all(&dir).ok();
 }

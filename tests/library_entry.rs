@@ -47,12 +47,18 @@ fn identify_and_simulate_a_csv_record_through_the_entry_point() {
 
     let records = RecordSet::read_csv(&path, &["y", "u"], Some("run"), 0.01).unwrap();
     let split = Split::from_lists(&records, "0-3", Some("4"), "5").unwrap();
+    // Progress goes to a closure that holds its own state (it took a plain `fn`).
+    let lines = std::sync::Arc::new(std::sync::Mutex::new(Vec::<String>::new()));
+    let sink = lines.clone();
     let fit = Identifier::new()
         .outputs(["y"])
         .inputs(["u"])
         .degree(3)
+        .progress(move |l| sink.lock().unwrap().push(l.to_string()))
         .fit(&records, &split)
         .unwrap();
+    let said = lines.lock().unwrap();
+    assert!(said.iter().any(|l| l.contains("order")), "{said:?}");
     let eq = &fit.model.outputs[0];
     assert_eq!(eq.order, 2, "{}", fit.model);
     // The coefficient of the monomial var^power.

@@ -148,9 +148,9 @@ fn records_and_split(
 /// `SystemError: ... returned a result with an exception set` instead of the interrupt.
 static PROGRESS_ERROR: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
 
-/// Progress lines of the long stages, to the `logging` logger "ctsid" (a plain function: the
-/// library's callback is a `fn`, so it cannot hold a Python object). After an error no more
-/// lines are logged; [`progress_error`] hands it back when the call ends.
+/// Progress lines of the long stages, to the `logging` logger "ctsid" (looked up for each line,
+/// so a handler the user adds mid-call counts). After an error no more lines are logged;
+/// [`progress_error`] hands it back when the call ends.
 fn log_progress(line: &str) {
     let mut pending = PROGRESS_ERROR.lock().unwrap_or_else(|e| e.into_inner());
     if pending.is_some() {
@@ -315,7 +315,7 @@ fn identify(
     s.engine = engine.parse::<EngineChoice>().map_err(err)?;
     s.terms = terms;
     s.refine = refine;
-    s.progress = Some(log_progress);
+    s.progress = Some(ctsid::identify::Progress::new(log_progress));
     s.validate().map_err(err)?;
     let (rs, sp) = records_and_split(py, tau, names, runs, [train, validation, test], segment)?;
     let id = py.detach(|| identify_rs(&rs, &sp, &s));

@@ -115,9 +115,10 @@ fn dispatch(cli: Cli) -> Result<()> {
 
 /// Whether long stages print progress lines: on a terminal, unless `--quiet`. Piped or
 /// redirected standard error gets none, so logs and scripts see only results and errors.
-pub fn show_progress(quiet: bool) -> Option<fn(&str)> {
+pub fn show_progress(quiet: bool) -> Option<ctsid::identify::Progress> {
     use std::io::IsTerminal;
-    (!quiet && std::io::stderr().is_terminal()).then_some(progress_line as fn(&str))
+    (!quiet && std::io::stderr().is_terminal())
+        .then(|| ctsid::identify::Progress::new(progress_line))
 }
 
 /// A progress line with the seconds since the first one, so a long run shows where its time goes.

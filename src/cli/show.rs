@@ -81,7 +81,7 @@ pub fn run(a: ShowArgs) -> Result<()> {
     // The empty interval column and standard errors larger than the coefficients were shown
     // without a word (an engineer could not tell an unestimated interval from a missing one).
     if no_interval {
-        outln!("\n95 % interval '-': intervals are discover's bootstrap over runs, for the effects it adds; for the other terms coefficient +- 2 std. errors is the spread the measurement noise alone would give (an error of the model's structure or of its input interpolation adds a bias it does not cover).")?;
+        outln!("\n95 % interval '-': intervals are discover's bootstrap over runs, for the effects it adds, where the coefficient is the weak-form estimate they belong to (a coefficient refined on simulation error has its std. error; the bootstrap interval of its weak-form estimate is in the file's discovery section); for the other terms coefficient +- 2 std. errors is the spread the measurement noise alone would give (an error of the model's structure or of its input interpolation adds a bias it does not cover).")?;
     }
     if weak > 0 {
         outln!("\n{weak} term(s) with a standard error above half the coefficient (rel. > 50 %): the data determine them poorly; a model with fewer terms (a lower degree) may simulate as well.")?;

@@ -35,7 +35,7 @@ pub struct EtcOptions {
     pub engine: EngineChoice,
     pub out: Option<PathBuf>,
     /// Progress lines of the identification (see `identify::Settings::progress`).
-    pub progress: Option<fn(&str)>,
+    pub progress: Option<crate::identify::Progress>,
 }
 
 impl Default for EtcOptions {
@@ -101,7 +101,7 @@ pub fn run(o: &EtcOptions) -> Result<String> {
         s.engine = o.engine;
         match order {
             Some(n) => s.orders = Orders::Fixed(vec![n]),
-            None => s.progress = o.progress,
+            None => s.progress = o.progress.clone(),
         }
         identify(&rs, &split, &s)
     };

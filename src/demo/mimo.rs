@@ -28,7 +28,7 @@ pub struct MimoOptions {
     pub method: Option<crate::regression::Method>,
     pub out: Option<PathBuf>,
     /// Progress lines of the identification (see `identify::Settings::progress`).
-    pub progress: Option<fn(&str)>,
+    pub progress: Option<crate::identify::Progress>,
 }
 
 impl Default for MimoOptions {
@@ -129,7 +129,7 @@ pub fn run(o: &MimoOptions) -> Result<String> {
                 list => Orders::Search(list.to_vec()),
             };
             s.engine = engine;
-            s.progress = o.progress;
+            s.progress = o.progress.clone();
             let t = std::time::Instant::now();
             // An engine the user named that cannot run is the demo's failure, not a table cell.
             let id = identify(&rs, &split, &s).map_err(|e| {

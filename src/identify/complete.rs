@@ -29,7 +29,7 @@
 //! the one with the largest gain goes in first (ranked by z, a small exact change won over a
 //! large one).
 //!
-//! Then swaps ([`swaps`]): a nonlinear term for a neighbour, the same monomial with one factor
+//! Then swaps (`swaps`): a nonlinear term for a neighbour, the same monomial with one factor
 //! changed to a variable of the same kind (the same derivative of another output, or another
 //! input). Where two outputs move together the derivative fit takes one for the other (the MIMO
 //! plant at 1 % noise: y3 kept `u1*y2_d1*y3` for the true `u1*y2*y2_d1`, which no fit ranked
@@ -45,7 +45,7 @@
 //! drops above [`DROP_SCREEN`] are refined and judged as additions are (those for a divisor as
 //! said above).
 //!
-//! Last, pruning ([`prune`]): the terms whose removal the screen expects the fit runs not to
+//! Last, pruning (`prune`): the terms whose removal the screen expects the fit runs not to
 //! notice (growth below [`PRUNE_SCREEN`]) are removed together and stay out when the gate runs'
 //! free runs are not significantly worse (the MIMO plant at 1 %, orders searched: the 8 small
 //! products the derivative fit took from its labels' error, 1e-3 coefficients, all went).
@@ -821,7 +821,7 @@ pub const DROP_SCREEN: f64 = 9.0;
 /// Most swaps refined per round: those with the largest drop the screen predicts.
 pub const SWAP_TRIALS: usize = 3;
 
-/// Most swaps (a term for a neighbour, see [`swaps`]) kept in one completion.
+/// Most swaps (a term for a neighbour, see `swaps`) kept in one completion.
 pub const MAX_SWAPS: usize = 3;
 
 /// What every trial of one completion shares.
@@ -1084,7 +1084,7 @@ fn add_offered_swaps(
 }
 
 /// Tries the terms `asks.terms[i]` (name, starting coefficient) of every output `i`, in order
-/// (see the module docs), then the swaps of [`swaps`] with those of `asks.swaps[i]` (a
+/// (see the module docs), then the swaps of `swaps` with those of `asks.swaps[i]` (a
 /// replacement's name, the name of the term it would replace); the completed model and the
 /// trials. `refined` says that `model` is already refined on `fit_runs` (else it is refined
 /// there first, so that a trial differs from it by its term alone); `noise[o]` is output o's

@@ -103,9 +103,10 @@ impl Identifier {
         self
     }
 
-    /// A function called with each progress line of the long stages (default: silent).
-    pub fn progress(mut self, f: fn(&str)) -> Self {
-        self.settings.progress = Some(f);
+    /// A function or closure called with each progress line of the long stages (default:
+    /// silent); it may be called from the fitting threads ([`crate::identify::Progress`]).
+    pub fn progress(mut self, f: impl Fn(&str) + Send + Sync + 'static) -> Self {
+        self.settings.progress = Some(crate::identify::Progress::new(f));
         self
     }
 
@@ -141,7 +142,7 @@ impl Identifier {
     ///             y += 2e-4 * (-2.0 * y + 3.0 * u(k as f64 * 0.01 + j as f64 * 2e-4));
     ///         }
     ///     }
-    ///     Run { id: r.to_string(), channels: vec![ys, us], t0: 0.0, rows: (2..402).collect() }
+    ///     Run::new(r.to_string(), vec![ys, us])
     /// };
     /// let records = RecordSet::new(0.01, vec!["y".into(), "u".into()], (0..6).map(run).collect())?;
     /// let split = Split::from_lists(&records, "0-3", Some("4"), "5")?;

@@ -43,7 +43,7 @@
 //! every equation. After the refinement, the terms the regression almost took are tried on
 //! simulation error ([`complete`]): a small true term hidden behind a correlated larger one in
 //! the derivative fit (viscous damping beside quadratic drag) comes back there. So do the terms
-//! of a second fit whose regressors pass through the label's own filter ([`label_filtered`]),
+//! of a second fit whose regressors pass through the label's own filter (`label_filtered`),
 //! which the smoother's attenuation of the label does not bias. The derivative
 //! smoother is tuned on the training runs only, so that test runs never influence a fit.
 
@@ -145,6 +145,40 @@ pub enum Orders {
     Fixed(Vec<usize>),
 }
 
+/// A receiver of progress lines: any `Fn(&str)` that may be called from the fitting threads,
+/// so a closure can hold a logger, a channel or a counter.
+///
+/// ```
+/// use std::sync::atomic::{AtomicUsize, Ordering};
+/// use std::sync::Arc;
+/// let lines = Arc::new(AtomicUsize::new(0));
+/// let seen = lines.clone();
+/// let p = ctsid::identify::Progress::new(move |_line: &str| {
+///     seen.fetch_add(1, Ordering::Relaxed);
+/// });
+/// p.say("order 2 scoring");
+/// assert_eq!(lines.load(Ordering::Relaxed), 1);
+/// ```
+#[derive(Clone)]
+pub struct Progress(std::sync::Arc<dyn Fn(&str) + Send + Sync>);
+
+impl Progress {
+    pub fn new(f: impl Fn(&str) + Send + Sync + 'static) -> Progress {
+        Progress(std::sync::Arc::new(f))
+    }
+
+    /// Hands one line to the receiver.
+    pub fn say(&self, line: &str) {
+        (self.0)(line)
+    }
+}
+
+impl std::fmt::Debug for Progress {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Progress(..)")
+    }
+}
+
 /// Settings of an identification, checked by [`Settings::validate`].
 #[derive(Debug, Clone)]
 pub struct Settings {
@@ -168,7 +202,7 @@ pub struct Settings {
     /// the inputs) through one and the same linear smoother (see `equation_data`).
     pub same_filter: bool,
     /// With `same_filter`: pass the regressors through the filter of the label's own order
-    /// ([`label_filtered`]) instead of the smoother's 0-th output. Off by default: it removes
+    /// (`label_filtered`) instead of the smoother's 0-th output. Off by default: it removes
     /// the attenuation of the derivative fit (MIMO plant at 1 % noise, d = 4, fixed orders: y1
     /// exact with `y1^3`, NRMSE vs truth 0.59 %) but its monomials of filtered signals lose two
     /// coupling terms there (`y1*y3_d1`, `u1*y2*y2_d1`); see docs/method/identification.md.
@@ -176,7 +210,7 @@ pub struct Settings {
     /// Called with each progress line of the long stages (order scoring, completion); `None`
     /// (the default) is silent: the library prints nothing. The CLI passes a function that
     /// writes to standard error.
-    pub progress: Option<fn(&str)>,
+    pub progress: Option<Progress>,
     /// Refine the selected structure by free-run simulation error (see the module docs).
     pub refine: bool,
     pub refine_options: refine::RefineOptions,
@@ -415,8 +449,13 @@ pub struct Candidate {
 #[derive(Debug, Clone, Serialize)]
 pub struct OutputReport {
     pub name: String,
+    /// Every order scored, with its derivative and free-run profiles.
     pub candidates: Vec<Candidate>,
+    /// The chosen order.
     pub order: usize,
+    /// The derivative fit's equation at the chosen order, before the refinement on simulation
+    /// error and the completion: what the regression found. The final equation is the
+    /// model's (`Identification::model`, `model.outputs[i]`).
     pub equation: String,
     /// Test-run profile against our own labels (reconstructed derivatives).
     pub test: Option<Profile>,
@@ -885,8 +924,8 @@ fn prepare<'a>(
 ) -> Result<Prepared<'a>> {
     let t = std::time::Instant::now();
     let say = |msg: String| {
-        if let Some(p) = settings.progress {
-            p(&msg);
+        if let Some(p) = &settings.progress {
+            p.say(&msg);
         }
     };
     let mut derivs = Vec::new();
@@ -1015,8 +1054,8 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     let (outputs, inputs) = checked_channels(rs, split, settings)?;
     let max_order = settings.max_order();
     let say = |msg: String| {
-        if let Some(p) = settings.progress {
-            p(&msg);
+        if let Some(p) = &settings.progress {
+            p.say(&msg);
         }
     };
 
@@ -1327,7 +1366,10 @@ fn score_candidate(
 /// Progress lines: each candidate's derivative-domain profile and, where simulated, its
 /// free-run profile.
 fn report_candidates(settings: &Settings, i: usize, list: &[Candidate]) {
-    let Some(say) = settings.progress else { return };
+    let Some(progress) = &settings.progress else {
+        return;
+    };
+    let say = |line: &str| progress.say(line);
     let name = &settings.outputs[i];
     let line = |p: &Profile| format!("{}/{}/{}", num4(p.p50()), num4(p.p95()), num4(p.p100()));
     for c in list {
@@ -1498,7 +1540,7 @@ fn completion_asks(
     Ok(complete::Asks { terms, swaps })
 }
 
-/// Most lower-degree stand-ins offered per term ([`lower_degree_offers`]).
+/// Most lower-degree stand-ins offered per term (`lower_degree_offers`).
 pub const OFFERS_PER_TERM: usize = 3;
 
 /// Path steps of a stand-in fit ([`lower_degree_offers`]): enough for [`OFFERS_PER_TERM`]
@@ -1631,8 +1673,8 @@ fn complete_selected(
 ) -> Result<ModelFile> {
     let (completed, trials) = completion_trials(model, report, prep, outputs, split, asks)?;
     for t in trials.iter().filter(|t| t.kept) {
-        if let Some(p) = prep.settings.progress {
-            p(&format!(
+        if let Some(p) = &prep.settings.progress {
+            p.say(&format!(
                 "completion on simulation error: {} (gate runs better by {:.1} noise standard deviations)",
                 t.describe(),
                 t.z
@@ -2042,8 +2084,8 @@ fn simulation_score(
     let (_, gate, _) = gate_split(prep, split);
     let gate: Vec<refine::RunData> = gate.iter().map(|&r| data(r)).collect();
     c.simulation = Some(free_run_profile(&model, &gate)?);
-    if let (Some(r), Some(p)) = (&report, prep.settings.progress) {
-        p(&format!(
+    if let (Some(r), Some(p)) = (&report, &prep.settings.progress) {
+        p.say(&format!(
             "'{}' order {} scoring: {} ({:.2} s, {} iterations)",
             prep.settings.outputs[i], c.order, r.message, r.seconds, r.iterations
         ));

@@ -219,11 +219,8 @@ impl Split {
     /// ```
     /// use ctsid::records::{RecordSet, Run};
     /// use ctsid::Split;
-    /// let run = |id: usize| Run {
-    ///     id: id.to_string(),
-    ///     channels: vec![(0..50).map(|k| ((k * (id + 1)) as f64).sin()).collect()],
-    ///     t0: 0.0,
-    ///     rows: (2..52).collect(),
+    /// let run = |id: usize| {
+    ///     Run::new(id.to_string(), vec![(0..50).map(|k| ((k * (id + 1)) as f64).sin()).collect()])
     /// };
     /// let records = RecordSet::new(0.1, vec!["y".into()], (0..6).map(run).collect())?;
     /// let split = Split::from_lists(&records, "0-3", Some("4"), "5")?;
@@ -330,8 +327,12 @@ impl Split {
     }
 
     /// Every index names one of `n_runs` runs (the fields are public: a split built by hand is
-    /// checked again where it is used). Refuses an index of `n_runs` or more.
+    /// checked again where it is used). Refuses an empty training list (a hand-built split
+    /// without one was told "no samples to regress on") and an index of `n_runs` or more.
     pub fn check(&self, n_runs: usize) -> Result<()> {
+        if self.train.is_empty() {
+            return Err(Error::param("train", "no training runs"));
+        }
         for (name, list) in self.lists() {
             if let Some(r) = list.iter().find(|&&r| r >= n_runs) {
                 return Err(Error::param(
@@ -373,6 +374,19 @@ mod tests {
 
     fn ids(n: usize) -> Vec<String> {
         (0..n).map(|i| i.to_string()).collect()
+    }
+
+    #[test]
+    fn a_hand_built_split_without_training_runs_is_refused() {
+        let s = Split {
+            train: vec![],
+            validation: None,
+            test: vec![0],
+        };
+        assert_eq!(
+            s.check(2).unwrap_err().to_string(),
+            "invalid setting 'train': no training runs"
+        );
     }
 
     #[test]

@@ -10,13 +10,13 @@
 //! stick phase. The width `eps` belongs to the variable the argument depends on first (its first
 //! variable), and the model file stores it, so that a model simulates the same everywhere.
 //!
-//! The derivatives are taken symbolically by [`super::tape`], which compiles an expression and
+//! The derivatives are taken symbolically by `super::tape`, which compiles an expression and
 //! its partial derivatives into one program: the integrator's Newton steps and the refinement's
 //! sensitivities need exact Jacobians of every term. The derivative of a smoothed `sign` is the
 //! slope of the smoothed curve, `eps^2 / (x^2 + eps^2)^(3/2)`, and 0 where it is exact; those of
 //! `abs`, `sat` and `relu` are taken piecewise (their kinks are a set of measure zero that a
 //! Newton step does not need to resolve). The functions of that list that only derivatives use
-//! (`SignSlope`, `SqrtSlope`, `Step`, `Inside`) are evaluated here, by [`apply`].
+//! (`SignSlope`, `SqrtSlope`, `Step`, `Inside`) are evaluated here, by `apply`.
 
 use crate::error::{Error, Result};
 

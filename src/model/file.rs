@@ -460,12 +460,18 @@ fn check_distinct_terms(
             (mono, String::new())
         });
         if let Some(first) = seen.insert((mono, expr), k) {
+            // Named as written: "terms 1 and 2 are both 2*y" read wrong where term 1 is `y`.
+            let (a, b) = (o.terms[first].monomial(), t.monomial());
+            let same = if a == b {
+                format!("are both {b}")
+            } else {
+                format!("({a} and {b}) are one column up to a constant factor")
+            };
             return Err(format!(
-                "output '{}': terms {} and {} are both {}; combine them into one",
+                "output '{}': terms {} and {} {same}; combine them into one",
                 o.name,
                 first + 1,
                 k + 1,
-                t.monomial()
             ));
         }
     }

@@ -148,11 +148,32 @@ pub struct Run {
     pub channels: Vec<Vec<f64>>,
     /// Time of the first sample (0 when no time column was given).
     pub t0: f64,
-    /// 1-based CSV row of each sample, for error messages downstream.
+    /// 1-based CSV row of each sample, for error messages downstream; empty for a run built in
+    /// memory (messages then name the sample).
     pub rows: Vec<usize>,
 }
 
 impl Run {
+    /// A run built in memory: `channels[c][i]`, sample i of channel c in the record set's channel
+    /// order, starting at time 0, with no CSV rows (messages then name the run and the sample).
+    ///
+    /// ```
+    /// use ctsid::records::{RecordSet, Run};
+    /// let y: Vec<f64> = (0..100).map(|k| (0.1 * k as f64).sin()).collect();
+    /// let u = vec![1.0; 100];
+    /// let rs = RecordSet::new(0.01, vec!["y".into(), "u".into()], vec![Run::new("0", vec![y, u])])?;
+    /// assert_eq!(rs.runs[0].len(), 100);
+    /// # Ok::<(), ctsid::Error>(())
+    /// ```
+    pub fn new(id: impl Into<String>, channels: Vec<Vec<f64>>) -> Run {
+        Run {
+            id: id.into(),
+            channels,
+            t0: 0.0,
+            rows: Vec::new(),
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.channels.first().map_or(0, |c| c.len())
     }
@@ -206,7 +227,8 @@ pub fn check_piece_seconds(seconds: f64) -> Result<()> {
 impl RecordSet {
     /// Builds a record set from in-memory runs (validated like a file). Refuses a tau that
     /// [`check_tau`] refuses, a channel name given twice, a run id used twice, a run with another number of channels
-    /// than names or with channels of different lengths, a NaN, infinite or too large sample
+    /// than names, with no samples, with channels of different lengths or with row numbers
+    /// that are not one per sample, a NaN, infinite or too large sample
     /// ([`first_unusable`]), a channel whose largest magnitude is below [`MIN_MAGNITUDE`] (all
     /// zeros aside) and a sample [`MAX_OUTLIER`] times further from its channel's median than
     /// nearly all others.
@@ -240,6 +262,17 @@ impl RecordSet {
                 )));
             }
             let n = r.len();
+            if n == 0 {
+                // Its output was reported as constant within every training run.
+                return Err(Error::InvalidData(format!("run '{}' has no samples", r.id)));
+            }
+            if !(r.rows.is_empty() || r.rows.len() == n) {
+                return Err(Error::InvalidData(format!(
+                    "run '{}' has {n} samples but {} CSV row numbers; give one per sample or none",
+                    r.id,
+                    r.rows.len()
+                )));
+            }
             for (c, ch) in r.channels.iter().enumerate() {
                 if ch.len() != n {
                     return Err(Error::InvalidData(format!(
@@ -937,6 +970,27 @@ mod tests {
             tau,
             rows_independent: false,
         }
+    }
+
+    #[test]
+    fn runs_built_in_memory_are_checked_and_named_by_sample() {
+        let names = || vec!["y".to_string()];
+        let e = RecordSet::new(0.1, names(), vec![Run::new("a", vec![vec![]])]).unwrap_err();
+        assert_eq!(e.to_string(), "run 'a' has no samples");
+        let mut r = Run::new("b", vec![vec![1.0, 2.0, 3.0]]);
+        r.rows = vec![2, 3];
+        let e = RecordSet::new(0.1, names(), vec![r])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("3 samples but 2 CSV row numbers"), "{e}");
+        // A glitch in a run without CSV rows is named by run and sample, not by a made-up row.
+        let mut y: Vec<f64> = (0..300).map(|k| (0.1 * k as f64).sin()).collect();
+        y[52] = 1e13;
+        let e = RecordSet::new(0.1, names(), vec![Run::new("c", vec![y])]).unwrap_err();
+        assert!(
+            e.to_string().contains("run 'c': channel 'y' sample 52"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -30,7 +30,7 @@ pub fn write_file(dir: &Path, name: &str, text: &str) -> Result<()> {
 /// Characters of a name from the data that a file name stem keeps ([`safe_name`]): file systems
 /// refuse names over 255 bytes, and a run id of 300 characters failed the report after its first
 /// figures. Callers clip a name once, make it unique, then add their prefix and suffix; those
-/// fit within [`MAX_FILE_CHARS`], the last guard of [`write_file`].
+/// fit within `MAX_FILE_CHARS`, the last guard of [`write_file`].
 pub const MAX_NAME_CHARS: usize = 120;
 
 /// Characters [`write_file`] keeps of a file's stem (well under 255 bytes with any extension).

@@ -13,7 +13,7 @@
 //! IV.8, as in RADAU5): `err = (I - gamma0 h J)^(-1) (gamma0 h f(x0) + sum_i e_i Z_i)` from the
 //! step's own stage increments `Z_i`, filtered through `I - gamma0 h J` so that stiff components
 //! do not inflate it (`gamma0` the real eigenvalue of the Radau matrix, `e` from the order
-//! conditions, both computed in [`Radau::new`]). It costs one right-hand side and one `n x n`
+//! conditions, both computed in `Radau::new`). It costs one right-hand side and one `n x n`
 //! solve per step. It bounds the error of an embedded order-3 solution, far above that of the
 //! order-5 step kept where steps are long against the dynamics: where it refuses a step, step
 //! doubling decides (the step taken twice more with `h/2`; their difference over `2^5 - 1`
@@ -1478,10 +1478,32 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
     ))
 }
 
-/// Simulates a compiled model with inputs sampled at `times`, read between them as the model says
-/// ([`CompiledModel::input_interpolation`]).
+/// Simulates a compiled model from an initial state of the caller's with inputs sampled at
+/// `times`, read between them as the model says ([`CompiledModel::input_interpolation`]).
 ///
-/// `inputs[channel][sample]`; the result has the model's state at every sample time.
+/// `x0` holds each output's value and derivatives up to its order minus one, outputs in the
+/// model's order (`y, y_d1, ...`); `inputs[channel][sample]`; the result has the model's state
+/// at every sample time. Refuses a non-finite initial state (it was reported as a diverging
+/// model). [`Model::simulate`](crate::Model::simulate) fits the initial state from measured
+/// outputs instead.
+///
+/// ```
+/// use ctsid::simulate::{simulate_model, SimOptions};
+/// // y'' = -y - 0.5 y' + u, from rest, a unit step for 2 s.
+/// let model = ctsid::Model::from_json_str(
+///     r#"{"format": "ctsid-model/2", "inputs": ["u"], "outputs": [{"name": "y", "order": 2,
+///        "terms": [{"exponents": {"y": 1}, "coefficient": -1.0},
+///                  {"exponents": {"y_d1": 1}, "coefficient": -0.5},
+///                  {"exponents": {"u": 1}, "coefficient": 1.0}]}]}"#,
+///     "example",
+/// )?;
+/// let times: Vec<f64> = (0..201).map(|k| k as f64 * 0.01).collect();
+/// let step = vec![vec![1.0; times.len()]];
+/// let tr = simulate_model(&model.compile()?, &[0.0, 0.0], &times, &step, &SimOptions::default())?;
+/// let y_end = tr.state(200)?[0];
+/// assert!(y_end > 0.5 && y_end < 1.5);
+/// # Ok::<(), ctsid::Error>(())
+/// ```
 pub fn simulate_model(
     model: &CompiledModel,
     x0: &[f64],
@@ -1489,6 +1511,12 @@ pub fn simulate_model(
     inputs: &[Vec<f64>],
     opts: &SimOptions,
 ) -> Result<Trajectory> {
+    if let Some(k) = x0.iter().position(|v| !v.is_finite()) {
+        return Err(Error::param(
+            "initial state",
+            format!("value {k} is {}; give finite values", x0[k]),
+        ));
+    }
     let input = SampledInput::with_interpolation(
         times.to_vec(),
         inputs.to_vec(),
@@ -1733,6 +1761,27 @@ impl crate::lm::LeastSquares for InitialState<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_caller_s_initial_state_must_be_finite() {
+        let model = crate::Model::from_json_str(
+            r#"{"format": "ctsid-model/2", "inputs": ["u"], "outputs": [{"name": "y",
+                "order": 1, "terms": [{"exponents": {"y": 1}, "coefficient": -1.0},
+                {"exponents": {"u": 1}, "coefficient": 1.0}]}]}"#,
+            "t",
+        )
+        .unwrap();
+        let c = model.compile().unwrap();
+        let times = [0.0, 0.1, 0.2];
+        let u = vec![vec![1.0; 3]];
+        let e = simulate_model(&c, &[f64::NAN], &times, &u, &SimOptions::default()).unwrap_err();
+        // It was "simulation diverged ... into run '0'", a run the caller never named.
+        assert_eq!(
+            e.to_string(),
+            "invalid setting 'initial state': value 0 is NaN; give finite values"
+        );
+        assert!(simulate_model(&c, &[0.0], &times, &u, &SimOptions::default()).is_ok());
+    }
 
     #[test]
     fn the_continuation_doubles_up_to_the_window() {

@@ -69,7 +69,8 @@ impl Model {
     ///
     /// The record set must hold a channel for each output and input of the model, by name.
     /// Fails on the first run that cannot be simulated (too short, or the model diverges or has
-    /// an unstable mode there), naming the run.
+    /// an unstable mode there), naming the run. From an initial state of your own, without
+    /// measured outputs: [`crate::simulate::simulate_model`].
     ///
     /// ```no_run
     /// use ctsid::{Model, RecordSet};
