@@ -59,6 +59,21 @@ fn identify_and_simulate_a_csv_record_through_the_entry_point() {
         .unwrap();
     let said = lines.lock().unwrap();
     assert!(said.iter().any(|l| l.contains("order")), "{said:?}");
+    // The model file as `identify -o` writes it: the same model with its provenance.
+    let settings = Identifier::new()
+        .outputs(["y"])
+        .inputs(["u"])
+        .degree(3)
+        .settings();
+    let file = fit.model_file(&settings, &records, &split);
+    let training = &file.extra["training"];
+    assert_eq!(
+        training["settings"]["train"],
+        serde_json::json!(["0", "1", "2", "3"])
+    );
+    assert_eq!(training["settings"]["degree"], 3);
+    assert_eq!(file.outputs, fit.model.outputs);
+    assert!(fit.model.extra.is_empty());
     let eq = &fit.model.outputs[0];
     assert_eq!(eq.order, 2, "{}", fit.model);
     // The coefficient of the monomial var^power.

@@ -329,7 +329,9 @@ fn identify(
         "refinement": id.refinement.as_ref().map(|r| r.message.clone()),
         "notes": id.notes,
     });
-    Ok((PyModel { inner: id.model }, summary.to_string()))
+    // With its `training` section, as `ctsid identify -o` writes it.
+    let inner = id.model_file(&s, &rs, &sp);
+    Ok((PyModel { inner }, summary.to_string()))
 }
 
 /// Self-tuning derivatives of one uniformly sampled signal: (values, sigmas), each a list of

@@ -149,15 +149,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     out!("{text}")?;
 
     if let Some(path) = &a.output_model {
-        let mut model = id.model.clone();
-        model.extra.insert("training".into(), serde_json::json!({
-            "outputs": id.outputs,
-            "test_nrmse": id.test_nrmse(),
-            "weighting": id.weighting,
-            "refinement": id.refinement,
-            "settings": {"degree": a.degree, "eta": a.eta, "engine": a.engine.to_string(), "method": s.method, "train": split.train.iter().map(|&r| ids[r].clone()).collect::<Vec<_>>()},
-        }));
-        model.write(path)?;
+        id.model_file(&s, &rs, &split).write(path)?;
         super::written(format!("model written to {}", path.display()));
     }
     if let Some(dir) = &a.report {

@@ -118,6 +118,8 @@ pub struct Trial {
     /// then outputs, as the refinement gate).
     pub gate_before: f64,
     pub gate_after: f64,
+    /// The move was kept: the term added (or swapped in), or for a removal (`removed`) the
+    /// terms taken out.
     pub kept: bool,
     /// Why a refined move was not kept, in words (the rule it failed); empty where kept or
     /// screened out.

@@ -522,6 +522,37 @@ pub struct Identification {
 }
 
 impl Identification {
+    /// The model with its `training` section: what was identified and how (the order reports,
+    /// the test NRMSE, the weighting, the refinement, the settings and the training runs' ids),
+    /// as `ctsid identify -o` writes it. `settings`, `records` and `split` are the ones the
+    /// identification ran with. [`Identification::model`] alone has no section (it is the
+    /// model to compute with; a model changed afterwards would carry a stale one).
+    pub fn model_file(&self, settings: &Settings, records: &RecordSet, split: &Split) -> ModelFile {
+        let mut model = self.model.clone();
+        let train: Vec<&str> = split
+            .train
+            .iter()
+            .filter_map(|&r| records.runs.get(r).map(|run| run.id.as_str()))
+            .collect();
+        model.extra.insert(
+            "training".into(),
+            serde_json::json!({
+                "outputs": self.outputs,
+                "test_nrmse": self.test_nrmse(),
+                "weighting": self.weighting,
+                "refinement": self.refinement,
+                "settings": {
+                    "degree": settings.degree,
+                    "eta": settings.eta,
+                    "engine": settings.engine.to_string(),
+                    "method": settings.method,
+                    "train": train,
+                },
+            }),
+        );
+        model
+    }
+
     /// Overall free-run NRMSE per output over the simulated test runs (root of mean squares). NaN
     /// for every output when no test run was simulated without error.
     pub fn test_nrmse(&self) -> Vec<f64> {
