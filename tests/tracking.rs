@@ -278,5 +278,19 @@ fn bad_tracking_settings_are_one_line_errors() {
         out.contains("tracking RMS") && out.contains("per decision"),
         "{out}"
     );
+    // The profile law's design: its rates and the observer it takes from the placement, not the
+    // placement's controller poles and gains, which it does not use.
+    assert!(
+        out.contains("law: exponential profile, rates 2 .. 4 1/s"),
+        "{out}"
+    );
+    assert!(
+        out.contains("observer poles (the design's at bandwidth"),
+        "{out}"
+    );
+    assert!(
+        !out.contains("controller poles") && !out.contains("gains: u = u*"),
+        "{out}"
+    );
     std::fs::remove_file(&model).ok();
 }

@@ -161,7 +161,7 @@ pub fn run(a: ControlArgs) -> Result<()> {
     if let Some(tk) = &tracking {
         control::check_block(&d, &scenario, tk)?;
     }
-    let names = print_design(&a, &d)?;
+    let names = print_design(&a, &d, law)?;
     if let Some(tk) = tracking {
         return run_tracking(&a, &d, &plant, &scenario, &tk, &names);
     }
@@ -308,7 +308,7 @@ fn plant_model(a: &ControlArgs, model: &Model) -> Result<Model> {
 }
 
 /// Prints the design (operating point, poles, gains) and returns the state names.
-fn print_design(a: &ControlArgs, d: &control::Design) -> Result<Vec<String>> {
+fn print_design(a: &ControlArgs, d: &control::Design, law: &control::Law) -> Result<Vec<String>> {
     let y = &d.output;
     outln!(
         "# Feedback on {} ({} -> {y}, order {})",
@@ -327,6 +327,26 @@ fn print_design(a: &ControlArgs, d: &control::Design) -> Result<Vec<String>> {
         "open-loop poles at the setpoint: {}",
         control::format_poles(&d.open_loop)
     )?;
+    let names: Vec<String> = (0..d.order)
+        .map(|k| ctsid::model::derivative_name(y, k))
+        .collect();
+    if let control::Law::Profile(p) = law {
+        // The placement's poles and gains were printed here though the profile law never uses
+        // them: only its observer is the design's.
+        let last = ctsid::model::derivative_name(y, d.order);
+        outln!(
+            "law: exponential profile, rates {} .. {} 1/s: the input whose predicted {last} brings {y} to the reference along them; tau {} s",
+            short(p.sigma),
+            short(p.sigma * d.order as f64),
+            short(d.tau)
+        )?;
+        outln!(
+            "observer poles (the design's at bandwidth {} rad/s): {}",
+            num4(d.bandwidth),
+            control::format_poles(&d.observer)
+        )?;
+        return observer_gains(a, d, &names).map(|()| names);
+    }
     outln!(
         "design: bandwidth {} rad/s, tau {} s; controller poles (with integral action): {}",
         num4(d.bandwidth),
@@ -334,35 +354,41 @@ fn print_design(a: &ControlArgs, d: &control::Design) -> Result<Vec<String>> {
         control::format_poles(&d.closed_loop)
     )?;
     outln!("observer poles: {}", control::format_poles(&d.observer))?;
-    let names: Vec<String> = (0..d.order)
-        .map(|k| ctsid::model::derivative_name(y, k))
-        .collect();
-    let gains = |g: &[f64]| {
-        names
-            .iter()
-            .zip(g)
-            .map(|(n, v)| format!("{n} {v:.6e}"))
-            .collect::<Vec<_>>()
-            .join(", ")
-    };
     outln!(
         "gains: u = u* - K (x_hat - x*) - k_i * integral({y} - setpoint); K: {}; k_i {:.6e}",
-        gains(&d.k),
+        gains(&names, &d.k),
         d.k_i
     )?;
+    observer_gains(a, d, &names)?;
+    Ok(names)
+}
+
+/// `name value` pairs of a gain vector over the state's names.
+fn gains(names: &[String], g: &[f64]) -> String {
+    names
+        .iter()
+        .zip(g)
+        .map(|(n, v)| format!("{n} {v:.6e}"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// The observer's gains, the end of the design's lines, and the design's notes.
+fn observer_gains(a: &ControlArgs, d: &control::Design, names: &[String]) -> Result<()> {
+    let y = &d.output;
     outln!(
         "observer gains L (on {y} - {y}_hat, {}): {}",
         match a.observer {
             ObserverArg::Linearised => "placed on the linearisation",
             ObserverArg::Chain => "chain of integrators",
         },
-        gains(&d.l)
+        gains(names, &d.l)
     )?;
     outln!("")?;
     for n in &d.notes {
         eprintln!("note: {n}");
     }
-    Ok(names)
+    Ok(())
 }
 
 /// The design with the observer asked for (the chain observer's poles and sampled loop checked
