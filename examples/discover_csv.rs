@@ -36,12 +36,13 @@ fn run(args: &[String]) -> ctsid::Result<()> {
             .map_err(|_| ctsid::Error::param(what, format!("'{text}' is not a number")))
     };
     let tau = number("TAU", tau)?;
+    // Every setting before the data are read, as the command line checks them.
+    let seconds = seconds.map(|s| number("SECONDS", s)).transpose()?;
     let nominal = Model::read(nominal)?;
     let mut columns: Vec<&str> = nominal.outputs.iter().map(|o| o.name.as_str()).collect();
     columns.extend(nominal.inputs.iter().map(String::as_str));
     let records = match seconds {
-        Some(s) => RecordSet::read_csv(data, &columns, None, tau)?
-            .segmented_seconds(number("SECONDS", s)?)?,
+        Some(s) => RecordSet::read_csv(data, &columns, None, tau)?.segmented_seconds(s)?,
         None => RecordSet::read_csv(data, &columns, Some("run"), tau)?,
     };
     let split = Split::from_lists(&records, "0-3", Some("4"), "5")?;

@@ -1,9 +1,9 @@
 //! Identify on the GPU engine where the machine has one, on the CPU engine where it has not.
 //!
 //! `cargo run --release --example gpu_fallback -- DATA.csv OUTPUT INPUT TAU` (a record with a
-//! `run` column as in `identify_csv`). `EngineChoice::Auto` makes the same choice by itself (and also keeps the CPU
-//! engine for problems too small to pay for the GPU); asking for the GPU and falling back shows
-//! the error a missing adapter gives. A GPU lost in the middle of a fit falls back by itself,
+//! `run` column as in `identify_csv`). `EngineChoice::Auto` makes the same choice by itself
+//! (and also keeps the CPU engine for problems too small to pay for the GPU); asking for the
+//! GPU and falling back shows the error a missing adapter gives. A GPU lost in the middle of a fit falls back by itself,
 //! said in each output's `engine`.
 use ctsid::engine::select::{probe, EngineChoice};
 use ctsid::{Identifier, RecordSet, Split};

@@ -35,10 +35,11 @@ fn run(args: &[String]) -> ctsid::Result<()> {
             .map_err(|_| ctsid::Error::param(what, format!("'{text}' is not a number")))
     };
     let tau = number("TAU", tau)?;
+    // Every setting before the data are read, as the command line checks them.
+    let seconds = seconds.map(|s| number("SECONDS", s)).transpose()?;
     let records = match seconds {
         // A file without a run column is run "0", cut into runs "0", "1", ...
-        Some(s) => RecordSet::read_csv(data, &[y, u], None, tau)?
-            .segmented_seconds(number("SECONDS", s)?)?,
+        Some(s) => RecordSet::read_csv(data, &[y, u], None, tau)?.segmented_seconds(s)?,
         None => RecordSet::read_csv(data, &[y, u], Some("run"), tau)?,
     };
     let split = Split::from_lists(&records, "0-3", Some("4"), "5")?;

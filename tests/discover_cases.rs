@@ -140,14 +140,17 @@ fn augmented_model_file_is_valid_and_carries_the_discovery() {
         .find(|t| t.origin == Some(ctsid::model::Origin::Effect("coulomb_friction".into())))
         .expect("no coulomb_friction term in the file");
     assert!(t.expression.is_some() && t.std_error.is_some(), "{t:?}");
-    // The bootstrap interval is the weak-form estimate's: a term keeps it only where its
-    // coefficient is that estimate (a refined coefficient once sat outside "its" interval).
+    // Refined on simulation error, the coefficient is no longer the weak-form estimate the
+    // bootstrap interval belongs to (one once sat outside "its" interval): the term has none,
+    // the discovery section keeps the estimate and its interval.
     let e = &d.effects[0];
-    assert_eq!(
-        t.interval.is_some(),
-        t.coefficient == e.weak_coefficient,
+    assert!(
+        t.coefficient != e.weak_coefficient && t.interval.is_none(),
         "{t:?} {e:?}"
     );
+    let section = &back.extra["discovery"]["effects"][0];
+    assert_eq!(section["weak_coefficient"], e.weak_coefficient);
+    assert_eq!(section["interval"][0], e.interval[0]);
     assert_eq!(
         &back,
         d.final_model

@@ -60,12 +60,7 @@ fn identify_and_simulate_a_csv_record_through_the_entry_point() {
     let said = lines.lock().unwrap();
     assert!(said.iter().any(|l| l.contains("order")), "{said:?}");
     // The model file as `identify -o` writes it: the same model with its provenance.
-    let settings = Identifier::new()
-        .outputs(["y"])
-        .inputs(["u"])
-        .degree(3)
-        .settings();
-    let file = fit.model_file(&settings, &records, &split);
+    let file = fit.model_file();
     let training = &file.extra["training"];
     assert_eq!(
         training["settings"]["train"],

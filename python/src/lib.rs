@@ -30,6 +30,15 @@ fn err(e: ctsid::Error) -> PyErr {
     CtsidError::new_err(e.to_string())
 }
 
+/// [`err`] for a call on runs cut into pieces of `segment` seconds: a piece too short says to
+/// give a longer `segment=`, as the command line says of `--segment`.
+fn err_in(segment: Option<f64>) -> impl Fn(ctsid::Error) -> PyErr {
+    move |e| match segment {
+        Some(s) => err(ctsid::records::piece_too_short(e, s, "segment=")),
+        None => err(e),
+    }
+}
+
 /// A run as it crosses from Python: its id and one column of samples per channel name.
 type PyRun = (String, Vec<Vec<f64>>);
 
@@ -143,38 +152,40 @@ fn records_and_split(
 }
 
 /// The first error a progress line raised in Python (Ctrl-C arrives as a `KeyboardInterrupt`
-/// raised inside `logging`), kept until the call returns. Restored into the interpreter at
-/// once, it left an exception set under the library's next calls into Python: a chain of
-/// `SystemError: ... returned a result with an exception set` instead of the interrupt.
-static PROGRESS_ERROR: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
+/// raised inside `logging`), kept until the call returns: one per call, so two threads'
+/// identifications never see each other's. Restored into the interpreter at once, it left an
+/// exception set under the library's next calls into Python: a chain of `SystemError: ...
+/// returned a result with an exception set` instead of the interrupt.
+type Pending = std::sync::Arc<std::sync::Mutex<Option<PyErr>>>;
 
 /// Progress lines of the long stages, to the `logging` logger "ctsid" (looked up for each line,
-/// so a handler the user adds mid-call counts). After an error no more lines are logged;
-/// [`progress_error`] hands it back when the call ends.
-fn log_progress(line: &str) {
-    let mut pending = PROGRESS_ERROR.lock().unwrap_or_else(|e| e.into_inner());
-    if pending.is_some() {
-        return;
-    }
-    Python::attach(|py| {
-        let logged = py
-            .import("logging")
-            .and_then(|m| m.call_method1("getLogger", ("ctsid",)))
-            .and_then(|l| l.call_method1("info", (line,)));
-        if let Err(e) = logged {
-            *pending = Some(e);
+/// so a handler the user adds mid-call counts). After an error no more lines are logged; the
+/// call raises it when it ends ([`raise_pending`]).
+fn log_progress(pending: Pending) -> ctsid::identify::Progress {
+    ctsid::identify::Progress::new(move |line: &str| {
+        if pending.lock().unwrap_or_else(|e| e.into_inner()).is_some() {
+            return;
         }
-    });
+        // The lock is not held while Python runs: the handler may take as long as it likes.
+        let logged = Python::attach(|py| {
+            py.import("logging")
+                .and_then(|m| m.call_method1("getLogger", ("ctsid",)))
+                .and_then(|l| l.call_method1("info", (line,)))
+                .map(|_| ())
+        });
+        if let Err(e) = logged {
+            pending
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .get_or_insert(e);
+        }
+    })
 }
 
-/// The error a progress line raised during the call that just ended, if any (taken: the next
-/// call starts clean).
-fn progress_error() -> PyResult<()> {
-    let pending = PROGRESS_ERROR
-        .lock()
-        .unwrap_or_else(|e| e.into_inner())
-        .take();
-    pending.map_or(Ok(()), Err)
+/// The error a progress line raised during the call that just ended, if any.
+fn raise_pending(pending: &Pending) -> PyResult<()> {
+    let e = pending.lock().unwrap_or_else(|e| e.into_inner()).take();
+    e.map_or(Ok(()), Err)
 }
 
 /// A model file: polynomial and named terms per output, as `ctsid` writes and reads it.
@@ -260,7 +271,9 @@ impl PyModel {
         segment: Option<f64>,
     ) -> PyResult<Vec<SimulatedRun>> {
         let rs = pieces(py, tau, names, runs, segment)?;
-        let sim = py.detach(|| self.inner.simulate(&rs)).map_err(err)?;
+        let sim = py
+            .detach(|| self.inner.simulate(&rs))
+            .map_err(err_in(segment))?;
         Ok(sim
             .runs
             .into_iter()
@@ -315,13 +328,14 @@ fn identify(
     s.engine = engine.parse::<EngineChoice>().map_err(err)?;
     s.terms = terms;
     s.refine = refine;
-    s.progress = Some(ctsid::identify::Progress::new(log_progress));
+    let pending = Pending::default();
+    s.progress = Some(log_progress(pending.clone()));
     s.validate().map_err(err)?;
     let (rs, sp) = records_and_split(py, tau, names, runs, [train, validation, test], segment)?;
     let id = py.detach(|| identify_rs(&rs, &sp, &s));
     // An interrupt (or a logging failure) during the call is the call's result.
-    progress_error()?;
-    let id = id.map_err(err)?;
+    raise_pending(&pending)?;
+    let id = id.map_err(err_in(segment))?;
     let summary = serde_json::json!({
         "orders": id.model.outputs.iter().map(|o| o.order).collect::<Vec<_>>(),
         "test_nrmse": id.test_nrmse(),
@@ -330,7 +344,7 @@ fn identify(
         "notes": id.notes,
     });
     // With its `training` section, as `ctsid identify -o` writes it.
-    let inner = id.model_file(&s, &rs, &sp);
+    let inner = id.model_file();
     Ok((PyModel { inner }, summary.to_string()))
 }
 
@@ -375,7 +389,7 @@ fn discover(
             let augmented = d.augmented_model(nominal)?;
             Ok::<_, ctsid::Error>((d, augmented))
         })
-        .map_err(err)?;
+        .map_err(err_in(segment))?;
     Ok((
         d.verdict.clone(),
         d.text(),

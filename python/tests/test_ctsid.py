@@ -347,5 +347,12 @@ def test_segment_cuts_runs_as_the_command_line_does(throttle, fitted, tmp_path):
     assert cut.equations() != model.equations()  # the pieces are other runs than the whole
     with pytest.raises(ctsid.CtsidError, match="less than 2 samples"):
         model.score(one, segment=0.003)
+    # Pieces too short for the model say which option to change, as on the command line.
+    with pytest.raises(ctsid.CtsidError, match="give a longer segment="):
+        model.score(one, segment=0.012)
+    # discover takes the same pieces.
+    found = ctsid.discover(data, model, run_column="run", segment=1.5, train="0-7",
+                           validation="8-9", test="10-11")
+    assert "| 10#1 | test |" in found.text, found.text
     with pytest.raises(TypeError, match="segment"):
         model.score(one, segment="1.5")

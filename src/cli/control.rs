@@ -556,8 +556,9 @@ fn write_trace(
 }
 
 /// The header with every repeated name made distinct (`t`, ..., `t_2`): a model whose output or
-/// input is named `t`, `reference` or `designed`, or a state `y_measured` beside the output `y`,
-/// gave a trace with two columns of one name, which CSV readers join or rename silently.
+/// input is named `t`, `reference` or `designed`, or an input named `y_measured` or `y_hat`
+/// beside the output `y`, gave a trace with two columns of one name, which CSV readers join or
+/// rename silently.
 fn distinct(header: Vec<String>) -> Vec<String> {
     let mut out: Vec<String> = Vec::with_capacity(header.len());
     for name in &header {

@@ -149,7 +149,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     out!("{text}")?;
 
     if let Some(path) = &a.output_model {
-        id.model_file(&s, &rs, &split).write(path)?;
+        id.model_file().write(path)?;
         super::written(format!("model written to {}", path.display()));
     }
     if let Some(dir) = &a.report {

@@ -121,23 +121,9 @@ impl SegmentArgs {
     /// fix is a longer --segment (a run shorter than a piece was not cut, and needs more
     /// samples or a lower order).
     pub fn explain(&self, e: Error) -> Error {
-        match (self.segment, e) {
-            (
-                Some(s),
-                Error::RunTooShort {
-                    run,
-                    len,
-                    min,
-                    what,
-                },
-            ) => Error::param(
-                "segment",
-                format!(
-                    "piece '{run}' of {} s has {len} samples but {what} needs at least {min}; give a longer --segment (a run shorter than one piece needs more samples or a lower order)",
-                    ctsid::util::short(s)
-                ),
-            ),
-            (_, e) => e,
+        match self.segment {
+            Some(s) => ctsid::records::piece_too_short(e, s, "--segment"),
+            None => e,
         }
     }
 }

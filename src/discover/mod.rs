@@ -1662,9 +1662,9 @@ impl Discovery {
     /// The augmented model file: the final model (the nominal's terms re-tuned or refined,
     /// each added effect as a term with its family as origin, and its bootstrap interval where
     /// the coefficient is the weak-form estimate the interval belongs to) and the `discovery`
-    /// section (every effect's weak-form estimate and interval). `nominal` must be the model the discovery was run with. Refuses a
-    /// discovery without a final model, a `nominal` other than the one it was run with, and an
-    /// augmented model that [`Model::validate`] refuses.
+    /// section (every effect's weak-form estimate and interval). `nominal` must be the model the
+    /// discovery was run with. Refuses a discovery without a final model, a `nominal` other than
+    /// the one it was run with, and an augmented model that [`Model::validate`] refuses.
     pub fn augmented_model(&self, nominal: &Model) -> Result<Model> {
         let fm = self.final_model.as_ref().ok_or_else(|| {
             Error::param(
@@ -1688,10 +1688,7 @@ impl Discovery {
         let mut m = fm.clone();
         let nt = nominal.outputs[0].terms.len();
         for (t, e) in m.outputs[0].terms[nt..].iter_mut().zip(&self.effects) {
-            // The bootstrap interval is the weak-form estimate's: beside a coefficient refined on
-            // simulation error it read as that coefficient's (-0.2416 next to [-0.2204,
-            // -0.2083] on EMPS). The section below keeps both; the term keeps its std. error.
-            t.interval = (t.coefficient == e.weak_coefficient).then_some(e.interval);
+            t.interval = term_interval(t.coefficient, e);
         }
         let section = serde_json::json!({
             "verdict": self.verdict,
@@ -1706,6 +1703,15 @@ impl Discovery {
         m.validate()?;
         Ok(m)
     }
+}
+
+/// The interval a term of the augmented model keeps: the bootstrap interval is the weak-form
+/// estimate's, so only a coefficient that is still that estimate (bit for bit: the refit on
+/// simulation error could not run and left the model as it was, see `refit`) keeps it. Beside a
+/// refined coefficient it read as that coefficient's (-0.2416 next to [-0.2204, -0.2083] on
+/// EMPS); the `discovery` section keeps both, the term its standard error.
+fn term_interval(coefficient: f64, e: &FoundEffect) -> Option<[f64; 2]> {
+    (coefficient == e.weak_coefficient).then_some(e.interval)
 }
 
 /// A gate's ratio for the summary, to three decimals (see [`or_diverged`]).
@@ -1729,7 +1735,7 @@ fn or_diverged(x: f64, f: impl Fn(f64) -> String) -> String {
 mod tests {
     use super::{
         block_grams, blocking, blocking_within, contradicts, drifts, gate_ratio, gram_bytes,
-        or_diverged, spread, Blocking, Rows, BLOCK, MIN_BLOCKS,
+        or_diverged, spread, term_interval, Blocking, FoundEffect, Rows, BLOCK, MIN_BLOCKS,
     };
 
     /// An effect singular on the data made the free run diverge: the summary said `ratio inf`
@@ -1888,6 +1894,29 @@ mod tests {
         assert!(!drifts(0.03, 0.09, 2.0));
         assert!(!drifts(f64::NAN, f64::NAN, f64::NAN));
         assert!(!drifts(0.03, 0.09, f64::NAN));
+    }
+
+    #[test]
+    fn a_term_keeps_the_bootstrap_interval_only_beside_its_own_estimate() {
+        let e = FoundEffect {
+            family: "coulomb_friction".into(),
+            formula: "sign(y_d1)".into(),
+            coefficient: -0.2416,
+            weak_coefficient: -0.2136,
+            interval: [-0.2204, -0.2083],
+            inclusion: 1.0,
+            aliases: Vec::new(),
+            reading: None,
+            halves: [f64::NAN; 2],
+            halves_z: f64::NAN,
+            simulation_share: None,
+        };
+        assert_eq!(
+            term_interval(-0.2416, &e),
+            None,
+            "refined: not its interval"
+        );
+        assert_eq!(term_interval(-0.2136, &e), Some([-0.2204, -0.2083]));
     }
 
     #[test]

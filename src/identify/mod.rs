@@ -163,6 +163,7 @@ pub enum Orders {
 pub struct Progress(std::sync::Arc<dyn Fn(&str) + Send + Sync>);
 
 impl Progress {
+    /// The receiver `f`, called with each line.
     pub fn new(f: impl Fn(&str) + Send + Sync + 'static) -> Progress {
         Progress(std::sync::Arc::new(f))
     }
@@ -519,21 +520,18 @@ pub struct Identification {
     /// What the caller should know about the settings on these data (a named term that no
     /// chosen order could use), one line each.
     pub notes: Vec<String>,
+    /// The settings the identification ran with and its training runs' ids, for the model
+    /// file's `training` section ([`Identification::model_file`]).
+    pub provenance: serde_json::Value,
 }
 
 impl Identification {
     /// The model with its `training` section: what was identified and how (the order reports,
     /// the test NRMSE, the weighting, the refinement, the settings and the training runs' ids),
-    /// as `ctsid identify -o` writes it. `settings`, `records` and `split` are the ones the
-    /// identification ran with. [`Identification::model`] alone has no section (it is the
-    /// model to compute with; a model changed afterwards would carry a stale one).
-    pub fn model_file(&self, settings: &Settings, records: &RecordSet, split: &Split) -> ModelFile {
+    /// as `ctsid identify -o` writes it. [`Identification::model`] alone has no section (it is
+    /// the model to compute with; a model changed afterwards would carry a stale one).
+    pub fn model_file(&self) -> ModelFile {
         let mut model = self.model.clone();
-        let train: Vec<&str> = split
-            .train
-            .iter()
-            .filter_map(|&r| records.runs.get(r).map(|run| run.id.as_str()))
-            .collect();
         model.extra.insert(
             "training".into(),
             serde_json::json!({
@@ -541,13 +539,7 @@ impl Identification {
                 "test_nrmse": self.test_nrmse(),
                 "weighting": self.weighting,
                 "refinement": self.refinement,
-                "settings": {
-                    "degree": settings.degree,
-                    "eta": settings.eta,
-                    "engine": settings.engine.to_string(),
-                    "method": settings.method,
-                    "train": train,
-                },
+                "settings": self.provenance,
             }),
         );
         model
@@ -1213,6 +1205,24 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         weighting,
         refinement,
         notes: unused_terms(settings, &ord),
+        provenance: provenance(settings, rs, split),
+    })
+}
+
+/// What the model file records of the settings (`training.settings`): the ones a reader needs
+/// to run the identification again, and the training runs by id.
+fn provenance(settings: &Settings, rs: &RecordSet, split: &Split) -> serde_json::Value {
+    let train: Vec<&str> = split
+        .train
+        .iter()
+        .filter_map(|&r| rs.runs.get(r).map(|run| run.id.as_str()))
+        .collect();
+    serde_json::json!({
+        "degree": settings.degree,
+        "eta": settings.eta,
+        "engine": settings.engine.to_string(),
+        "method": settings.method,
+        "train": train,
     })
 }
 

@@ -209,6 +209,28 @@ pub struct CsvSpec {
 /// fewer cannot carry a derivative, let alone a dynamics.
 pub const MIN_MOVING: usize = 10;
 
+/// A run too short for the method, where runs were cut into pieces of `seconds`
+/// ([`RecordSet::segmented_seconds`]), is a piece too short: mostly the fix is a longer piece,
+/// given by `option` (`--segment`, `segment=`). A run shorter than a piece was not cut, and
+/// needs more samples or a lower order. Other errors pass unchanged.
+pub fn piece_too_short(e: Error, seconds: f64, option: &str) -> Error {
+    match e {
+        Error::RunTooShort {
+            run,
+            len,
+            min,
+            what,
+        } => Error::param(
+            "segment",
+            format!(
+                "piece '{run}' of {} s has {len} samples but {what} needs at least {min}; give a longer {option} (a run shorter than one piece needs more samples or a lower order)",
+                crate::util::short(seconds)
+            ),
+        ),
+        e => e,
+    }
+}
+
 /// A piece's length in seconds for [`RecordSet::segmented_seconds`], checked before any data
 /// are read: finite and > 0.
 pub fn check_piece_seconds(seconds: f64) -> Result<()> {
@@ -262,8 +284,9 @@ impl RecordSet {
                 )));
             }
             let n = r.len();
-            if n == 0 {
-                // Its output was reported as constant within every training run.
+            // Every channel empty (the lengths are compared below): its output was reported as
+            // constant within every training run.
+            if r.channels.iter().all(Vec::is_empty) {
                 return Err(Error::InvalidData(format!("run '{}' has no samples", r.id)));
             }
             if !(r.rows.is_empty() || r.rows.len() == n) {
@@ -989,6 +1012,38 @@ mod tests {
         let e = RecordSet::new(0.1, names(), vec![Run::new("c", vec![y])]).unwrap_err();
         assert!(
             e.to_string().contains("run 'c': channel 'y' sample 52"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn pieces_in_seconds_round_to_samples_and_refuse_what_is_no_length() {
+        let y: Vec<f64> = (0..100).map(|k| (0.1 * k as f64).sin()).collect();
+        let rs = RecordSet::new(0.1, vec!["y".into()], vec![Run::new("0", vec![y])]).unwrap();
+        // 2.54 s at tau 0.1 is 25 samples (rounded): pieces of 25.
+        let s = rs.segmented_seconds(2.54).unwrap();
+        assert_eq!(s.runs.iter().map(Run::len).collect::<Vec<_>>(), [25; 4]);
+        // 0.16 s rounds to 2 samples (allowed), 0.14 s to 1 (refused).
+        assert_eq!(rs.segmented_seconds(0.16).unwrap().runs.len(), 50);
+        let e = rs.segmented_seconds(0.14).unwrap_err().to_string();
+        assert!(e.contains("less than 2 samples at tau = 0.1 s"), "{e}");
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let e = rs.segmented_seconds(bad).unwrap_err().to_string();
+            assert!(
+                e.contains("give the length of a piece in seconds, > 0"),
+                "{e}"
+            );
+        }
+        // A method's "run too short" on pieces says to give a longer piece.
+        let short = Error::RunTooShort {
+            run: "3".into(),
+            len: 10,
+            min: 16,
+            what: "the derivatives".into(),
+        };
+        let e = piece_too_short(short, 1.0, "segment=").to_string();
+        assert!(
+            e.contains("piece '3' of 1 s has 10 samples") && e.contains("a longer segment="),
             "{e}"
         );
     }
