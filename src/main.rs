@@ -1,6 +1,16 @@
 //! The `ctsid` command line. Each subcommand lives in `src/cli/<name>.rs`; errors print as one
 //! line on standard error and the process exits non-zero.
 
+/// `eprintln!` that a closed standard error cannot stop: the standard macro panics when the
+/// write fails (`ctsid regress ... 2>&1 | head -1` exited 101 at its first note). Defined
+/// before the modules, so every `eprintln!` of the command line is this one.
+macro_rules! eprintln {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
+
 mod cli;
 
 use clap::Parser;

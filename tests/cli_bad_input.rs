@@ -1487,3 +1487,18 @@ fn a_run_column_left_out_is_refused_where_it_holds_several_runs() {
     ]);
     assert!(ok, "{err}");
 }
+
+/// `ctsid ... 2>&1 | head -1` closes standard error after one line: the next note or the
+/// error line panicked in the standard `eprintln!` (exit 101, a panic message nobody sees).
+#[test]
+fn a_closed_standard_error_is_no_panic() {
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let status = bin()
+        .args(["show", "/nonexistent/model.json"])
+        .stdout(std::process::Stdio::null())
+        .stderr(writer)
+        .status()
+        .unwrap();
+    assert_eq!(status.code(), Some(2), "{status:?}");
+}

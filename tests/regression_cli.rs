@@ -162,3 +162,117 @@ fn regress_engine_gpu_runs_on_any_adapter_or_fails_clearly() {
         assert!(out.starts_with("L = -0.5*C + 2*A^2*B + 1.25\n"), "{out}");
     }
 }
+
+/// What a researcher's day with `regress` found (2026-11-30, session 24), each refused in one
+/// line by the option it concerns.
+#[test]
+fn regress_refuses_what_read_wrong_before() {
+    let d = dir();
+    let csv = d.join("good.csv");
+    write_csv(&csv, None);
+    let c = csv.to_str().unwrap();
+    // A feature named like a monomial printed `y = 3*x^2 + 0.5*x^2`.
+    let text = std::fs::read_to_string(&csv)
+        .unwrap()
+        .replacen("A,B,C,L", "A,B^2,C,L", 1);
+    let odd = d.join("odd.csv");
+    std::fs::write(&odd, text).unwrap();
+    let o = odd.to_str().unwrap();
+    // Two rows were called a constant feature; -o - wrote a file named '-'.
+    let short = d.join("short.csv");
+    std::fs::write(&short, "A,B,C,L\n1,2,3,4\n2,1,3,5\n").unwrap();
+    let s = short.to_str().unwrap();
+    let base = |data: &str, features: &str| {
+        let mut v = vec!["regress", "--label", "L", "--degree", "2", "--features"];
+        v.push(if features.is_empty() {
+            "A,B,C"
+        } else {
+            features
+        });
+        v.push(data);
+        v.into_iter().map(String::from).collect::<Vec<_>>()
+    };
+    let cases: Vec<(Vec<String>, &[&str], &str)> = vec![
+        (
+            base(o, "A,B^2"),
+            &[],
+            "'B^2' is not one name to the expression parser",
+        ),
+        (
+            base(c, ""),
+            &["--weights", "L"],
+            "'--weights': 'L' is also the label",
+        ),
+        (
+            base(c, ""),
+            &["--weights", "A"],
+            "'--weights': 'A' is also a feature",
+        ),
+        (base(s, ""), &[], "2 samples are too few to select terms"),
+        (
+            base(c, ""),
+            &["-o", "-"],
+            "standard output is not an output file here",
+        ),
+        (
+            base(c, ""),
+            &["--max-terms", "0"],
+            "invalid setting '--max-terms'",
+        ),
+    ];
+    for (mut args, extra, want) in cases {
+        args.extend(extra.iter().map(|s| s.to_string()));
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (ok, _, err) = ctsid(&refs);
+        assert!(!ok && err.contains(want), "{args:?}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+    }
+    assert!(!std::path::Path::new("-").exists());
+}
+
+/// `--patience 0` runs the whole path up to --max-terms (to compare paths with other tools);
+/// the default ends it once eBIC has not improved for 40 breakpoints.
+#[test]
+fn regress_patience_zero_runs_the_whole_path() {
+    let d = dir();
+    let csv = d.join("whole.csv");
+    // Noisy: a noise-free label ends the path once its three terms fit exactly.
+    let mut text = String::from("A,B,C,L\n");
+    let mut x = 0.377f64;
+    let mut next = || {
+        x = (x * 7919.0 + 0.31).fract();
+        2.0 * x - 1.0
+    };
+    for _ in 0..400 {
+        let (a, b, c) = (next(), next(), next());
+        let l = 2.0 * a * a * b - 0.5 * c + 1.25 + 0.3 * next();
+        text += &format!("{a},{b},{c},{l}\n");
+    }
+    std::fs::write(&csv, text).unwrap();
+    let steps = |patience: &str| {
+        let (ok, out, err) = ctsid(&[
+            "regress",
+            csv.to_str().unwrap(),
+            "--features",
+            "A,B,C",
+            "--label",
+            "L",
+            "--degree",
+            "4",
+            "--method",
+            "lars",
+            "--engine",
+            "cpu",
+            "--max-terms",
+            "30",
+            "--patience",
+            patience,
+        ]);
+        assert!(ok, "{err}");
+        let after = out.split("path of ").nth(1).expect("no path line");
+        after.split(' ').next().unwrap().parse::<usize>().unwrap()
+    };
+    let (short, whole) = (steps("1"), steps("0"));
+    assert!(short < whole, "patience 1: {short} steps, 0: {whole}");
+    assert!(whole >= 30, "{whole} steps for 30 terms");
+}

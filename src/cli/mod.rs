@@ -157,6 +157,14 @@ pub fn write_stdout(text: &str) -> Result<()> {
 /// is none of `inputs` (writing would truncate a file that is still to be read), and it is a
 /// target [`ctsid::util::output_target`] accepts.
 pub fn check_output_file(out: &Path, inputs: &[&Path]) -> Result<()> {
+    // `-o -` wrote a file named `-` ("model written to -") where the Unix habit reads
+    // standard output.
+    if out == Path::new("-") {
+        return Err(Error::Io {
+            path: "-".into(),
+            message: "standard output is not an output file here; give a file name (./- for a file named '-')".into(),
+        });
+    }
     // A folder, a device, a pipe, a name ending in a separator, a missing folder, a link into
     // one or an over-long name: refused now, not after the work (`util::output_target`).
     ctsid::util::output_target(out)?;

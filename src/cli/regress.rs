@@ -22,21 +22,31 @@ pub struct RegressArgs {
     /// Label column.
     #[arg(long)]
     pub label: String,
-    /// Largest monomial degree.
+    /// Largest monomial degree (1 to 12; at most 32 features and 5,000,000 candidates).
     #[arg(long)]
     pub degree: usize,
-    /// Most active terms along the path.
+    /// Most active terms along the path (and at most half the samples).
     #[arg(long, default_value_t = 40)]
     pub max_terms: usize,
+    /// End the path after this many breakpoints in a row without a better eBIC (default 40, 10
+    /// for forward-ols); 0 runs the whole path up to --max-terms (to compare paths).
+    #[arg(long)]
+    pub patience: Option<usize>,
     /// Structure search: the LARS / lasso path (scikit-learn's) or forward orthogonal least squares.
     #[arg(long, value_enum, default_value_t = MethodArg::Lassolars)]
     pub method: MethodArg,
+    /// Which engine runs the sweeps X^T v: the CPU one, the GPU one (wgpu; an error without an
+    /// adapter), or auto (the GPU where one pays, else the CPU; a note says which and why).
     #[arg(long, value_enum, default_value_t = EngineArg::Auto)]
     pub engine: EngineArg,
-    /// Optional column of per-sample weights (weighted least squares).
+    /// Optional column of per-sample weights (weighted least squares; not a feature or the
+    /// label).
     #[arg(long)]
     pub weights: Option<String>,
-    /// Relevance threshold epsilon (0: off).
+    /// Relevance threshold: end the path when a new term lowers the relative residual
+    /// ||r|| / ||y - mean|| by less than this (0: off). Meant for forward-ols, which adds one term
+    /// per step; on a lars / lasso path it ends at the first small step, before later terms are
+    /// tried.
     #[arg(long, default_value_t = 0.0)]
     pub epsilon: f64,
     /// Write the model as JSON here.
@@ -84,6 +94,55 @@ fn read_columns(path: &std::path::Path, wanted: &[String]) -> Result<Vec<Vec<f64
     Ok(rs.runs.remove(0).channels)
 }
 
+/// The builder's setting named as the option that sets it (`'max_terms'` read as a field).
+fn as_flag(e: Error) -> Error {
+    match e {
+        Error::InvalidParameter { name, reason } => {
+            let flag = match name.as_str() {
+                "max_terms" => "--max-terms",
+                "epsilon" => "--epsilon",
+                _ => return Error::InvalidParameter { name, reason },
+            };
+            Error::param(flag, reason)
+        }
+        e => e,
+    }
+}
+
+/// The columns before any are read: no feature is the label, the weights are neither, and each
+/// feature is one name in printed monomials (`x^2` beside `x` printed `3*x^2 + 0.5*x^2`).
+fn check_columns(a: &RegressArgs) -> Result<()> {
+    if let Some(dup) = a.features.iter().find(|f| **f == a.label) {
+        return Err(Error::param(
+            "features",
+            format!("'{dup}' is also the label"),
+        ));
+    }
+    if let Some(w) = &a.weights {
+        if *w == a.label || a.features.contains(w) {
+            let role = if *w == a.label {
+                "the label"
+            } else {
+                "a feature"
+            };
+            return Err(Error::param(
+                "--weights",
+                format!("'{w}' is also {role}; give a column of weights of its own"),
+            ));
+        }
+    }
+    for f in &a.features {
+        if let Some(why) = ctsid::util::channel_name_fault(f) {
+            let f = ctsid::util::clip(f, 40);
+            return Err(Error::param(
+                "features",
+                format!("'{f}' {why}; rename the column"),
+            ));
+        }
+    }
+    Ok(())
+}
+
 pub fn run(a: RegressArgs) -> Result<()> {
     if let Some(o) = &a.output {
         super::check_output_file(o, &[&a.data])?;
@@ -94,18 +153,19 @@ pub fn run(a: RegressArgs) -> Result<()> {
         EngineArg::Auto => EngineChoice::Auto,
     };
     let method = Method::from(a.method);
-    let reg = Regression::builder()
+    let mut builder = Regression::builder()
         .degree(a.degree)
         .max_terms(a.max_terms)
         .method(method)
         .engine(engine)
-        .epsilon(a.epsilon)
-        .build()?;
-    if let Some(dup) = a.features.iter().find(|f| **f == a.label) {
-        return Err(Error::param(
-            "features",
-            format!("'{dup}' is also the label"),
-        ));
+        .epsilon(a.epsilon);
+    if let Some(p) = a.patience {
+        builder = builder.ebic_patience(p);
+    }
+    let reg = builder.build().map_err(as_flag)?;
+    check_columns(&a)?;
+    if a.epsilon > 0.0 && !matches!(a.method, MethodArg::ForwardOls) {
+        eprintln!("note: --epsilon ends the lars / lasso path at its first step that lowers the relative residual by less than {}; terms that would enter later are not tried (forward-ols adds one term per step)", a.epsilon);
     }
     let mut wanted = a.features.clone();
     wanted.push(a.label.clone());
@@ -120,8 +180,10 @@ pub fn run(a: RegressArgs) -> Result<()> {
     let label = cols.pop().unwrap();
     // A constant feature makes every monomial with it a multiple of one without it: the model
     // read `l = 0.4*a*k` for `l = 2*a` with `k` = 5 throughout (identify refuses a constant
-    // channel the same way).
-    for (name, c) in a.features.iter().zip(&cols) {
+    // channel the same way). Too few rows are the fit's error, not a constant (one row was
+    // called a constant feature).
+    let enough = label.len() >= ctsid::regression::MIN_SAMPLES;
+    for (name, c) in a.features.iter().zip(&cols).filter(|_| enough) {
         if c.iter().all(|v| *v == c[0]) {
             return Err(Error::param(
                 "features",
@@ -142,16 +204,30 @@ pub fn run(a: RegressArgs) -> Result<()> {
         eprintln!("note: {note}");
     }
     outln!(
-        "engine: {}; {} samples, {} candidates ({} constant), {:?} path of {} steps ({:?}), {} sweeps, {} refreshes, {:.2} s",
+        "engine: {}; {} samples, {} candidates ({} constant), {:?} path of {} steps ({:?}), {} sweeps, {} refreshes, fitted in {:.2} s",
         d.engine, d.n_samples, d.n_candidates, d.constant_candidates, d.method, d.path_steps, d.stop, d.sweeps, d.refreshes,
         started.elapsed().as_secs_f64()
     )?;
+    // `pruned [1]` read like an index; the constant term is named `1`.
+    let pruned = match d.pruned.as_slice() {
+        [] => "none".to_string(),
+        p => p
+            .iter()
+            .map(|t| {
+                if t == "1" {
+                    "1 (the constant)"
+                } else {
+                    t.as_str()
+                }
+            })
+            .collect::<Vec<_>>()
+            .join(", "),
+    };
     outln!(
-        "selection: eBIC chose breakpoint {} ({} terms, eBIC {:.2}); pruned [{}]; final eBIC {:.2}, R^2 {:.6}",
+        "selection: eBIC chose breakpoint {} ({} terms, eBIC {:.2}); pruned: {pruned}; final eBIC {:.2}, R^2 {:.6}",
         d.chosen_breakpoint,
         model.path[d.chosen_breakpoint].active.len(),
         d.ebic_path_choice,
-        d.pruned.join(", "),
         d.ebic_final,
         d.r2
     )?;
