@@ -433,3 +433,188 @@ fn a_run_whose_free_run_fails_is_marked_and_the_others_are_scored() {
     );
     std::fs::remove_dir_all(&d).ok();
 }
+
+/// A record of `y' = -y + u` (exact between samples for an input held over each step), `runs`
+/// runs of 300 samples at tau = 0.05 s, `t_ms` in ms beside `t`; the input held for `hold`
+/// samples at a time (a step generator), or a smooth sum of sines where `hold` is 0.
+fn first_order_csv(path: &std::path::Path, runs: usize, hold: usize) {
+    let tau = 0.05;
+    let mut text = String::from("run,t,t_ms,u,y\n");
+    let mut level = 0.3f64;
+    for r in 0..runs {
+        let mut y = 0.0;
+        for k in 0..300 {
+            let t = k as f64 * tau;
+            let u = if hold == 0 {
+                (0.7 * t + r as f64).sin() + 0.5 * (1.9 * t).cos()
+            } else {
+                if k % hold == 0 {
+                    level = (level * 7919.0 + 0.31).fract();
+                }
+                2.0 * level - 1.0
+            };
+            text += &format!("{r},{t},{},{u},{y}\n", 1e3 * t);
+            // Exact for an input held over the step.
+            let a = (-tau).exp();
+            y = a * y + (1.0 - a) * u;
+        }
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+/// What a MIMO test engineer's day found (2026-11-30, session 24): held inputs read linearly,
+/// a model's reading of its inputs on a record whose inputs move otherwise, a time column in
+/// ms read as seconds, and messages that named no option.
+#[test]
+fn input_readings_and_time_units_are_pointed_out() {
+    let d = tmpdir("held");
+    let steps = d.join("steps.csv");
+    first_order_csv(&steps, 4, 10);
+    let s = steps.to_str().unwrap();
+    let model = d.join("hold.json");
+    let m = model.to_str().unwrap();
+    let common = [
+        "--output",
+        "y",
+        "--input",
+        "u",
+        "--run-column",
+        "run",
+        "--tau",
+        "0.05",
+    ];
+    let id = |extra: &[&str]| {
+        let mut args = vec!["identify", s];
+        args.extend(common);
+        args.extend([
+            "--train",
+            "0-1",
+            "--validation",
+            "2",
+            "--test",
+            "3",
+            "--order",
+            "1",
+        ]);
+        args.extend(["--degree", "1", "--quiet"]);
+        args.extend(extra);
+        ctsid(&args)
+    };
+    let (ok, _, err) = id(&[]);
+    assert!(
+        ok && err.contains("--input-interpolation hold reads it so"),
+        "{err}"
+    );
+    let (ok, _, err) = id(&["--input-interpolation", "hold", "-o", m]);
+    assert!(ok && !err.contains("note: input"), "{err}");
+    // The hold model on a record of smooth inputs: a note, and the override reads them so.
+    let smooth = d.join("smooth.csv");
+    first_order_csv(&smooth, 1, 0);
+    let sm = smooth.to_str().unwrap();
+    let sim = |extra: &[&str]| {
+        let mut args = vec!["simulate", m, sm, "--run-column", "run", "--tau", "0.05"];
+        args.extend(extra);
+        ctsid(&args)
+    };
+    let (ok, _, err) = sim(&[]);
+    assert!(
+        ok && err.contains("--input-interpolation linear reads them so"),
+        "{err}"
+    );
+    let (ok, _, err) = sim(&["--input-interpolation", "linear"]);
+    assert!(ok && !err.contains("reads them so"), "{err}");
+    // A time column named in ms is not read as seconds.
+    fails(
+        &[
+            "identify",
+            s,
+            "--output",
+            "y",
+            "--input",
+            "u",
+            "--run-column",
+            "run",
+            "--time-column",
+            "t_ms",
+            "--degree",
+            "1",
+        ],
+        &["'--time-column': 't_ms' is named in ms"],
+    );
+    // An output listed as an input, and runs too short for the default search.
+    fails(
+        &[
+            "identify",
+            s,
+            "--output",
+            "y",
+            "--input",
+            "u,y",
+            "--run-column",
+            "run",
+            "--tau",
+            "0.05",
+            "--degree",
+            "1",
+        ],
+        &["'y' is given as both an output and an input"],
+    );
+    let short: String = std::fs::read_to_string(&steps)
+        .unwrap()
+        .lines()
+        .enumerate()
+        .filter(|(i, l)| {
+            *i == 0
+                || l.split(',')
+                    .nth(1)
+                    .and_then(|t| t.parse::<f64>().ok())
+                    .is_some_and(|t| t < 0.74)
+        })
+        .map(|(_, l)| format!("{l}\n"))
+        .collect();
+    let short_csv = d.join("short.csv");
+    std::fs::write(&short_csv, short).unwrap();
+    fails(
+        &[
+            "identify",
+            short_csv.to_str().unwrap(),
+            "--output",
+            "y",
+            "--input",
+            "u",
+            "--run-column",
+            "run",
+            "--tau",
+            "0.05",
+            "--degree",
+            "1",
+        ],
+        &[
+            "15 samples",
+            "the highest order searched (orders up to 2 fit this run)",
+        ],
+    );
+    // discover on a two-output model says what to do instead.
+    let two = d.join("two.json");
+    std::fs::write(
+        &two,
+        r#"{"format":"ctsid-model/2","tau":0.05,"inputs":["u"],"outputs":[
+        {"name":"y","order":1,"terms":[{"exponents":{"y":1},"coefficient":-1},{"exponents":{"u":1},"coefficient":1}]},
+        {"name":"t","order":1,"terms":[{"exponents":{"t":1},"coefficient":-1}]}]}"#,
+    )
+    .unwrap();
+    fails(
+        &[
+            "discover",
+            s,
+            "--nominal",
+            two.to_str().unwrap(),
+            "--run-column",
+            "run",
+            "--tau",
+            "0.05",
+        ],
+        &["identify the output in question alone"],
+    );
+    std::fs::remove_dir_all(&d).ok();
+}

@@ -50,7 +50,7 @@ pub fn run(a: DeriveArgs) -> Result<()> {
     super::csvout::check(&a.input, a.output.as_deref(), &[], &names, "derive")?;
     let spec = a
         .sampling
-        .spec(vec![a.column.clone()], a.run_column.clone(), None);
+        .spec(vec![a.column.clone()], a.run_column.clone(), None)?;
     let rs = super::load_records(&a.input, &spec)?;
     rs.require_derivable(a.order)?;
     let runs: Vec<&[f64]> = rs.runs.iter().map(|r| r.channels[0].as_slice()).collect();

@@ -92,7 +92,7 @@ pub fn run(a: DiscoverArgs) -> Result<()> {
     let nominal = Model::read(&a.nominal)?;
     let mut columns: Vec<String> = nominal.outputs.iter().map(|o| o.name.clone()).collect();
     columns.extend(nominal.inputs.iter().cloned());
-    let spec = a.sampling.spec(columns, a.run_column.clone(), None);
+    let spec = a.sampling.spec(columns, a.run_column.clone(), None)?;
     let rs = a.segment.apply(super::load_records(&a.data, &spec)?)?;
     super::note_tau_units(rs.tau, nominal.tau, spec.time_column.is_some());
     let names: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();

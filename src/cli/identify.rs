@@ -116,7 +116,7 @@ pub fn run(a: IdentifyArgs) -> Result<()> {
     a.segment.check()?;
     let mut columns = a.output.clone();
     columns.extend(a.input.iter().cloned());
-    let spec = a.sampling.spec(columns, a.run_column.clone(), None);
+    let spec = a.sampling.spec(columns, a.run_column.clone(), None)?;
     let rs = a.segment.apply(super::load_records(&a.data, &spec)?)?;
     let ids: Vec<String> = rs.runs.iter().map(|r| r.id.clone()).collect();
     let given = a.split.resolve(&ids)?;
@@ -287,9 +287,16 @@ fn output_section(id: &Identification, rep: &OutputReport) -> String {
         rep.name
     );
     if let Some(r) = id.refinement.as_ref().filter(|r| r.kept) {
+        // The refinement's figures are of all outputs together: under each output they read
+        // as that output's.
+        let how = if id.model.outputs.len() > 1 {
+            "refined with the other outputs: the joint figures are at the end".to_string()
+        } else {
+            r.message.clone()
+        };
         text += &format!(
-            "Refinement on free-run error changed the derivative fit\n    {}\ninto the model above ({}).\n\n",
-            rep.equation, r.message
+            "Refinement on free-run error changed the derivative fit\n    {}\ninto the model above ({how}).\n\n",
+            rep.equation
         );
     }
     if rep.candidates.iter().any(|c| c.simulation.is_some()) {
@@ -304,7 +311,15 @@ fn output_section(id: &Identification, rep: &OutputReport) -> String {
         } else {
             "simulation on held-out runs"
         };
-        text += &format!("The eta-rule chose on the free-run profiles ({on}; errors below {} count as equal, and the lowest order wins); the derivative-domain validation profiles are shown beside them.\n\n", ctsid::identify::FREE_RUN_RESOLUTION);
+        // The rule in full: "the lowest order wins" alone did not say why order 1 beat an order 2
+        // of lower p95 (within eta of it, the MIMO search takes the lowest order).
+        let eta = id.provenance["eta"].as_f64().unwrap_or(f64::NAN);
+        let rule = if id.model.outputs.len() > 1 {
+            format!("of the orders whose free-run p100 is within eta = {eta} times the best, the lowest whose p95 is within eta times the smallest")
+        } else {
+            format!("of the orders whose free-run p100 is within eta = {eta} times the best, the one of smallest p95, the lowest of equals")
+        };
+        text += &format!("The eta-rule chose on the free-run profiles ({on}): {rule} (errors below {} count as equal); the derivative-domain validation profiles are shown beside them.\n\n", ctsid::identify::FREE_RUN_RESOLUTION);
     }
     if rep
         .candidates

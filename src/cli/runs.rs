@@ -20,14 +20,28 @@ pub struct SamplingArgs {
 
 impl SamplingArgs {
     /// The CSV spec for `columns` grouped by `run_column`, with `fallback_tau` as the period
-    /// when neither --tau nor --time-column is given.
+    /// when neither --tau nor --time-column is given. Refuses a time column named in another
+    /// unit than seconds (`time_ms`): read as seconds it gave a model at 1000 times the step
+    /// with coefficients 1000 times too small, and `identify` said nothing.
     pub fn spec(
         &self,
         columns: Vec<String>,
         run_column: Option<String>,
         fallback_tau: Option<f64>,
-    ) -> CsvSpec {
-        CsvSpec {
+    ) -> Result<CsvSpec> {
+        if let Some((c, unit)) = self
+            .time_column
+            .as_deref()
+            .and_then(|c| time_unit(c).map(|u| (c, u)))
+        {
+            return Err(Error::param(
+                "--time-column",
+                format!(
+                    "'{c}' is named in {unit}, but a time column is read in seconds; give --tau with the sampling period in seconds instead (the column is then not read), or a column in seconds"
+                ),
+            ));
+        }
+        Ok(CsvSpec {
             columns,
             run_column,
             time_column: self.time_column.clone(),
@@ -35,6 +49,52 @@ impl SamplingArgs {
                 .tau
                 .or(fallback_tau.filter(|_| self.time_column.is_none())),
             rows_independent: false,
+        })
+    }
+}
+
+/// The unit a column named like time says it is in, where that is not seconds: `time_ms`,
+/// `t [ms]`, `t_us`, `time (min)`, `t_h`.
+fn time_unit(name: &str) -> Option<&'static str> {
+    let n = name.trim().to_ascii_lowercase();
+    let rest = ["time", "t"].iter().find_map(|p| {
+        n.strip_prefix(p)
+            .filter(|r| r.starts_with(['_', ' ', '[', '(']))
+    })?;
+    let unit = rest.trim_matches(|c: char| "_ [()]".contains(c));
+    [
+        ("ms", "ms"),
+        ("msec", "ms"),
+        ("us", "us"),
+        ("usec", "us"),
+        ("min", "minutes"),
+        ("minutes", "minutes"),
+        ("h", "hours"),
+        ("hr", "hours"),
+        ("hours", "hours"),
+    ]
+    .iter()
+    .find(|(k, _)| *k == unit)
+    .map(|(_, u)| *u)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::time_unit;
+
+    #[test]
+    fn time_columns_named_in_other_units_are_told_apart() {
+        for (name, unit) in [
+            ("time_ms", "ms"),
+            ("t [ms]", "ms"),
+            ("T_us", "us"),
+            ("time (min)", "minutes"),
+            ("t_h", "hours"),
+        ] {
+            assert_eq!(time_unit(name), Some(unit), "{name}");
+        }
+        for name in ["t", "time", "t_s", "time [s]", "temp_ms", "tms", "throttle"] {
+            assert_eq!(time_unit(name), None, "{name}");
         }
     }
 }

@@ -284,8 +284,9 @@ fn check_setup(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<(usize, V
         return Err(Error::param(
             "nominal",
             format!(
-                "has {} outputs; discover handles one output per model for now",
-                nominal.outputs.len()
+                "has {} outputs; discover handles one output per model: identify the output in question alone, with the outputs it depends on as inputs (`identify --output {o} --input U1,...,Y2,...`), then discover on that model",
+                nominal.outputs.len(),
+                o = nominal.outputs.last().map_or("Y", |q| q.name.as_str())
             ),
         ));
     }

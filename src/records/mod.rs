@@ -183,6 +183,16 @@ impl Run {
     }
 }
 
+/// How a channel moves between samples ([`RecordSet::step_shape`]).
+#[derive(Debug, Clone, Copy)]
+pub struct StepShape {
+    /// Share of the sample-to-sample steps with no change (a signal held for several samples).
+    pub held: f64,
+    /// Sum of |second differences| over the sum of |first differences|: near 0 for a signal
+    /// that varies smoothly between samples, near 1 or above for one that jumps.
+    pub roughness: f64,
+}
+
 /// A set of runs sharing tau and channel names.
 #[derive(Debug, Clone)]
 pub struct RecordSet {
@@ -502,6 +512,30 @@ impl RecordSet {
             "{role} '{}' is constant within every training run (its level changes only from run to run): there are no dynamics to identify; give training runs in which it moves",
             self.channel_names[channel]
         )))
+    }
+
+    /// How channel `c` moves from sample to sample over `runs`: what tells an input held between
+    /// samples from one that varies smoothly (the model's `input_interpolation`). `None` where it
+    /// never changes.
+    pub fn step_shape(&self, c: usize, runs: &[usize]) -> Option<StepShape> {
+        let (mut steps, mut held, mut d1, mut d2) = (0usize, 0usize, 0.0, 0.0);
+        for x in runs
+            .iter()
+            .filter_map(|&r| self.runs.get(r))
+            .map(|r| &r.channels[c])
+        {
+            steps += x.len().saturating_sub(1);
+            held += x.windows(2).filter(|w| w[0] == w[1]).count();
+            d1 += x.windows(2).map(|w| (w[1] - w[0]).abs()).sum::<f64>();
+            d2 += x
+                .windows(3)
+                .map(|w| (w[2] - 2.0 * w[1] + w[0]).abs())
+                .sum::<f64>();
+        }
+        (d1 > 0.0).then(|| StepShape {
+            held: held as f64 / steps.max(1) as f64,
+            roughness: d2 / d1,
+        })
     }
 
     /// Refuses any run too short for derivatives up to `order` (named by its id).
