@@ -507,6 +507,14 @@ fn input_readings_and_time_units_are_pointed_out() {
     );
     let (ok, _, err) = id(&["--input-interpolation", "hold", "-o", m]);
     assert!(ok && !err.contains("note: input"), "{err}");
+    assert!(!err.contains("faster than the samples can show"), "{err}");
+    // Order 2 for a first-order system: a pole thousands of times 1/tau, said.
+    let mut args = vec!["identify", s];
+    args.extend(common);
+    args.extend(["--train", "0-1", "--validation", "2", "--test", "3", "--order", "2"]);
+    args.extend(["--degree", "1", "--quiet", "--input-interpolation", "hold"]);
+    let (ok, _, err) = ctsid(&args);
+    assert!(ok && err.contains("faster than the samples can show"), "{err}");
     // The hold model on a record of smooth inputs: a note, and the override reads them so.
     let smooth = d.join("smooth.csv");
     first_order_csv(&smooth, 1, 0);

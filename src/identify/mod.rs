@@ -1240,6 +1240,12 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     } else {
         "all samples weighted equally".into()
     };
+    let notes = [
+        unused_terms(settings, &ord),
+        held_inputs(settings, rs, split),
+        fast_modes(&model, rs, split, (&outputs, &inputs)),
+    ]
+    .concat();
     Ok(Identification {
         model,
         outputs: reports,
@@ -1247,13 +1253,69 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         derivatives: prep.derivs,
         weighting,
         refinement,
-        notes: [
-            unused_terms(settings, &ord),
-            held_inputs(settings, rs, split),
-        ]
-        .concat(),
+        notes,
         provenance: provenance(settings, rs, split),
     })
+}
+
+/// A mode this many times faster than 1/tau is beyond what the samples can show.
+const FAST_MODE: f64 = 10.0;
+
+/// A note where the model, linearised at the training runs' mean (outputs at their means, their
+/// derivatives at 0, inputs at their means; a sign term's smoothing left out, as the control
+/// design does), has a mode faster than [`FAST_MODE`] / tau: `--order 2,2,1` on a first-order
+/// output gave `y1_d2 = -1024.57*y1 - 1023.81*y1_d1 + ...`, a pole near -1023 /s at tau = 0.02 s,
+/// with a test score as good as the true order's and not a word.
+fn fast_modes(
+    model: &ModelFile,
+    rs: &RecordSet,
+    split: &Split,
+    (outputs, inputs): (&[usize], &[usize]),
+) -> Vec<String> {
+    let mut exact = model.clone();
+    exact.sign_smoothing.clear();
+    let Ok(c) = exact.compile() else {
+        return Vec::new();
+    };
+    let mean = |ch: usize| {
+        let runs = split.train.iter().filter_map(|&r| rs.runs.get(r));
+        let (s, n) = runs.fold((0.0, 0), |(s, n), r| {
+            (s + r.channels[ch].iter().sum::<f64>(), n + r.len())
+        });
+        s / n.max(1) as f64
+    };
+    let mut x = Vec::new();
+    for (o, &ch) in model.outputs.iter().zip(outputs) {
+        x.push(mean(ch));
+        x.extend(std::iter::repeat_n(0.0, o.order.saturating_sub(1)));
+    }
+    let u: Vec<f64> = inputs.iter().map(|&ch| mean(ch)).collect();
+    let n = x.len();
+    let (mut jx, mut ju) = (vec![0.0; n * n], vec![0.0; n * u.len()]);
+    if c.jacobians(&x, &u, &mut jx, &mut ju).is_err() {
+        return Vec::new();
+    }
+    let jx = nalgebra::DMatrix::from_row_slice(n, n, &jx);
+    let Ok(modes) = crate::linalg::eigenvalues(&jx) else {
+        return Vec::new();
+    };
+    let size = |m: &(f64, f64)| m.0.hypot(m.1);
+    let Some(fastest) = modes.iter().max_by(|a, b| size(a).total_cmp(&size(b))) else {
+        return Vec::new();
+    };
+    let times = size(fastest) * rs.tau;
+    if times <= FAST_MODE {
+        return Vec::new();
+    }
+    vec![format!(
+        "the model has a mode at {}{} /s, {times:.0} times 1/tau (linearised at the training data's mean): faster than the samples can show; an order above the data's (a fixed --order too high?) or a stiff term, and a lower order may simulate as well",
+        crate::util::num4(fastest.0),
+        if fastest.1 == 0.0 {
+            String::new()
+        } else {
+            format!(" +- {}i", crate::util::num4(fastest.1.abs()))
+        }
+    )]
 }
 
 /// Share of an input's sample-to-sample steps with no change above which it looks held between
