@@ -250,21 +250,14 @@ fn regress_patience_zero_runs_the_whole_path() {
     }
     std::fs::write(&csv, text).unwrap();
     let steps = |patience: &str| {
+        // `ctsid` splits an argument that starts with `-` at its spaces.
+        let settings = "--label L --degree 4 --method lars --engine cpu --max-terms 30";
         let (ok, out, err) = ctsid(&[
             "regress",
             csv.to_str().unwrap(),
             "--features",
             "A,B,C",
-            "--label",
-            "L",
-            "--degree",
-            "4",
-            "--method",
-            "lars",
-            "--engine",
-            "cpu",
-            "--max-terms",
-            "30",
+            settings,
             "--patience",
             patience,
         ]);

@@ -473,80 +473,47 @@ fn input_readings_and_time_units_are_pointed_out() {
     let s = steps.to_str().unwrap();
     let model = d.join("hold.json");
     let m = model.to_str().unwrap();
-    let common = [
-        "--output",
-        "y",
-        "--input",
-        "u",
-        "--run-column",
-        "run",
-        "--tau",
-        "0.05",
-    ];
-    let id = |extra: &[&str]| {
-        let mut args = vec!["identify", s];
-        args.extend(common);
-        args.extend([
-            "--train",
-            "0-1",
-            "--validation",
-            "2",
-            "--test",
-            "3",
-            "--order",
-            "1",
-        ]);
-        args.extend(["--degree", "1", "--quiet"]);
-        args.extend(extra);
-        ctsid(&args)
-    };
-    let (ok, _, err) = id(&[]);
+    // `ctsid` and `fails` split an argument that starts with `-` at its spaces.
+    let common = "--output y --input u --run-column run --tau 0.05";
+    let split = "--train 0-1 --validation 2 --test 3 --degree 1 --quiet";
+    let id = |extra: &str| ctsid(&["identify", s, common, split, extra]);
+    let (ok, _, err) = id("--order 1");
     assert!(
         ok && err.contains("--input-interpolation hold reads it so"),
         "{err}"
     );
-    let (ok, _, err) = id(&["--input-interpolation", "hold", "-o", m]);
+    let (ok, _, err) = ctsid(&[
+        "identify",
+        s,
+        common,
+        split,
+        "--order 1 --input-interpolation hold -o",
+        m,
+    ]);
     assert!(ok && !err.contains("note: input"), "{err}");
     assert!(!err.contains("faster than the samples can show"), "{err}");
     // Order 2 for a first-order system: a pole thousands of times 1/tau, said.
-    let mut args = vec!["identify", s];
-    args.extend(common);
-    args.extend(["--train", "0-1", "--validation", "2", "--test", "3", "--order", "2"]);
-    args.extend(["--degree", "1", "--quiet", "--input-interpolation", "hold"]);
-    let (ok, _, err) = ctsid(&args);
-    assert!(ok && err.contains("faster than the samples can show"), "{err}");
+    let (ok, _, err) = id("--order 2 --input-interpolation hold");
+    assert!(
+        ok && err.contains("faster than the samples can show"),
+        "{err}"
+    );
     // The hold model on a record of smooth inputs: a note, and the override reads them so.
     let smooth = d.join("smooth.csv");
     first_order_csv(&smooth, 1, 0);
     let sm = smooth.to_str().unwrap();
-    let sim = |extra: &[&str]| {
-        let mut args = vec!["simulate", m, sm, "--run-column", "run", "--tau", "0.05"];
-        args.extend(extra);
-        ctsid(&args)
-    };
-    let (ok, _, err) = sim(&[]);
+    let sim = |extra: &str| ctsid(&["simulate", m, sm, "--run-column run --tau 0.05", extra]);
+    let (ok, _, err) = ctsid(&["simulate", m, sm, "--run-column run --tau 0.05"]);
     assert!(
         ok && err.contains("--input-interpolation linear reads them so"),
         "{err}"
     );
-    let (ok, _, err) = sim(&["--input-interpolation", "linear"]);
+    let (ok, _, err) = sim("--input-interpolation linear");
     assert!(ok && !err.contains("reads them so"), "{err}");
     // A time column named in ms is not read as seconds.
+    let other = "--output y --input u --run-column run --degree 1";
     fails(
-        &[
-            "identify",
-            s,
-            "--output",
-            "y",
-            "--input",
-            "u",
-            "--run-column",
-            "run",
-            "--time-column",
-            "t_ms",
-            "--degree",
-            "1",
-        ],
+        &["identify", s, other, "--time-column t_ms"],
         &["'--time-column': 't_ms' is named in ms"],
     );
     // An output listed as an input, and runs too short for the default search.
@@ -554,16 +521,7 @@ fn input_readings_and_time_units_are_pointed_out() {
         &[
             "identify",
             s,
-            "--output",
-            "y",
-            "--input",
-            "u,y",
-            "--run-column",
-            "run",
-            "--tau",
-            "0.05",
-            "--degree",
-            "1",
+            "--output y --input u,y --run-column run --tau 0.05 --degree 1",
         ],
         &["'y' is given as both an output and an input"],
     );
@@ -586,16 +544,8 @@ fn input_readings_and_time_units_are_pointed_out() {
         &[
             "identify",
             short_csv.to_str().unwrap(),
-            "--output",
-            "y",
-            "--input",
-            "u",
-            "--run-column",
-            "run",
-            "--tau",
-            "0.05",
-            "--degree",
-            "1",
+            common,
+            "--degree 1",
         ],
         &[
             "15 samples",
@@ -617,10 +567,7 @@ fn input_readings_and_time_units_are_pointed_out() {
             s,
             "--nominal",
             two.to_str().unwrap(),
-            "--run-column",
-            "run",
-            "--tau",
-            "0.05",
+            "--run-column run --tau 0.05",
         ],
         &["identify the output in question alone"],
     );
