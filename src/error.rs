@@ -38,18 +38,22 @@ pub enum Error {
         available: String,
     },
 
-    #[error("{path}: row {row}, column '{column}': '{value}' is not a finite number; remove or repair that sample")]
+    /// `run`: ` (run 'R')` where the file has a run column, else empty.
+    #[error("{path}: row {row}{run}, column '{column}': '{value}' is not a finite number; remove or repair that sample")]
     NonFinite {
         path: String,
         row: usize,
+        run: String,
         column: String,
         value: String,
     },
 
-    #[error("{path}: row {row}, column '{column}': {value:e} is too large in magnitude to compute with (limit {:e}); rescale the column, e.g. to other units", crate::records::MAX_MAGNITUDE)]
+    /// `run` as in [`Error::NonFinite`].
+    #[error("{path}: row {row}{run}, column '{column}': {value:e} is too large in magnitude to compute with (limit {:e}); rescale the column, e.g. to other units", crate::records::MAX_MAGNITUDE)]
     ValueTooLarge {
         path: String,
         row: usize,
+        run: String,
         column: String,
         value: f64,
     },

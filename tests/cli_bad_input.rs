@@ -1502,3 +1502,23 @@ fn a_closed_standard_error_is_no_panic() {
         .unwrap();
     assert_eq!(status.code(), Some(2), "{status:?}");
 }
+
+/// A cell that is no number in a file of several runs names its run beside the file row (the
+/// row alone left the run to be looked up); a file without a run column is as before.
+#[test]
+fn a_bad_cell_names_its_run() {
+    let runs = temp_file("runcell", "runs.csv", "run,y,u\n1,1,2\n1,2,3\n2,nan,1\n");
+    fails(
+        &[
+            "identify",
+            &runs,
+            "--output y --input u --run-column run --tau 1 --degree 1",
+        ],
+        &["row 4 (run '2'), column 'y': 'nan' is not a finite number"],
+    );
+    let one = temp_file("runcell", "one.csv", "y,u\n1,2\n2,3\nnan,1\n");
+    fails(
+        &["identify", &one, "--output y --input u --tau 1 --degree 1"],
+        &["row 4, column 'y': 'nan' is not a finite number"],
+    );
+}

@@ -792,20 +792,29 @@ fn locate_columns<R: std::io::Read>(
     })
 }
 
-/// A cell as a finite number that its squares cannot overflow, or the error naming it.
-fn parse_cell(s: &str, label: &str, row: usize, col: &str) -> Result<f64> {
+/// A cell as a finite number that its squares cannot overflow, or the error naming it (by its
+/// run too where the file has a run column: a row number alone left the run to be looked up).
+fn parse_cell(s: &str, label: &str, (row, run): (usize, Option<&str>), col: &str) -> Result<f64> {
+    // Formatted only for an error: this runs once per cell.
+    let run = || {
+        run.map_or(String::new(), |r| {
+            format!(" (run '{}')", crate::util::clip(r, 40))
+        })
+    };
     match s.parse::<f64>() {
         Ok(v) if first_unusable(&[v]).is_none() => Ok(v),
         // Squares and low powers of larger values overflow f64.
         Ok(v) if v.is_finite() => Err(Error::ValueTooLarge {
             path: label.into(),
             row,
+            run: run(),
             column: col.into(),
             value: v,
         }),
         _ => Err(Error::NonFinite {
             path: label.into(),
             row,
+            run: run(),
             column: col.into(),
             value: crate::util::clip(s, 60),
         }),
@@ -866,11 +875,12 @@ fn read_rows<R: std::io::Read>(
             runs.len() - 1
         });
         let acc = &mut runs[k];
+        let at_row = (row, at.run.map(|_| id.as_str()));
         for (c, &col) in at.channels.iter().enumerate() {
-            acc.channels[c].push(parse_cell(&rec[col], label, row, &spec.columns[c])?);
+            acc.channels[c].push(parse_cell(&rec[col], label, at_row, &spec.columns[c])?);
         }
         if let (Some(tc), Some(tname)) = (at.time, spec.time_column.as_deref()) {
-            acc.times.push(parse_cell(&rec[tc], label, row, tname)?);
+            acc.times.push(parse_cell(&rec[tc], label, at_row, tname)?);
         }
         acc.rows.push(row);
     }
