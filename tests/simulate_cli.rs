@@ -229,7 +229,7 @@ fn errors_are_one_line() {
     std::fs::write(&nan, s.replacen("0,0,1,0\n", "0,0,1,abc\n", 1)).unwrap();
     fails(
         &["simulate", m, nan.to_str().unwrap(), "--run-column", "run"],
-        &["row 2, column 'y'"],
+        &["row 2 (run '0'), column 'y'"],
     );
     // No tau anywhere.
     let notau = d.join("notau.json");
