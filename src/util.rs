@@ -87,6 +87,18 @@ pub fn channel_name_fault(name: &str) -> Option<&'static str> {
     None
 }
 
+/// [`channel_name_fault`] as the error of the setting `what` that names the channel, which the
+/// user is told to rename (`channel`, `column`).
+pub fn check_channel_name(name: &str, what: &str, rename: &str) -> crate::Result<()> {
+    match channel_name_fault(name) {
+        Some(why) => Err(crate::Error::param(
+            what,
+            format!("'{}' {why}; rename the {rename}", clip(name, 40)),
+        )),
+        None => Ok(()),
+    }
+}
+
 /// A file written whole or not at all: the bytes go to a temporary file in the target's folder
 /// (`.ctsid-PID-N.tmp`, short whatever the target's name), renamed over the target by
 /// [`AtomicFile::commit`]. Dropped without a commit (an error on the way), the temporary file is

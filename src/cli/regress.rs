@@ -132,13 +132,7 @@ fn check_columns(a: &RegressArgs) -> Result<()> {
         }
     }
     for f in &a.features {
-        if let Some(why) = ctsid::util::channel_name_fault(f) {
-            let f = ctsid::util::clip(f, 40);
-            return Err(Error::param(
-                "features",
-                format!("'{f}' {why}; rename the column"),
-            ));
-        }
+        ctsid::util::check_channel_name(f, "features", "column")?;
     }
     Ok(())
 }

@@ -53,14 +53,21 @@ impl SamplingArgs {
     }
 }
 
+/// What follows `t` or `time` in a column named like time (`t`, `time`, `t_s`, `time [ms]`, not
+/// `temp` or `throttle`), lowercase; `None` for any other name.
+pub fn time_like(name: &str) -> Option<String> {
+    let n = name.trim().to_ascii_lowercase();
+    ["time", "t"].iter().find_map(|p| {
+        n.strip_prefix(p)
+            .filter(|r| r.is_empty() || r.starts_with(['_', ' ', '[', '(']))
+            .map(str::to_string)
+    })
+}
+
 /// The unit a column named like time says it is in, where that is not seconds: `time_ms`,
 /// `t [ms]`, `t_us`, `time (min)`, `t_h`.
 fn time_unit(name: &str) -> Option<&'static str> {
-    let n = name.trim().to_ascii_lowercase();
-    let rest = ["time", "t"].iter().find_map(|p| {
-        n.strip_prefix(p)
-            .filter(|r| r.starts_with(['_', ' ', '[', '(']))
-    })?;
+    let rest = time_like(name)?;
     let unit = rest.trim_matches(|c: char| "_ [()]".contains(c));
     [
         ("ms", "ms"),

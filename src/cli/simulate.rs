@@ -377,15 +377,10 @@ fn check_time_like_columns(
     let Ok(header) = rdr.headers() else {
         return Ok(());
     };
-    let time_like = |name: &str| {
-        let n = name.trim().to_ascii_lowercase();
-        ["t", "time"].iter().any(|t| {
-            n == *t
-                || n.strip_prefix(t)
-                    .is_some_and(|rest| rest.starts_with(['_', ' ', '[', '(']))
-        })
-    };
-    for name in header.iter().filter(|n| time_like(n)) {
+    for name in header
+        .iter()
+        .filter(|n| super::runs::time_like(n).is_some())
+    {
         if spec.columns.iter().any(|c| c == name) || spec.run_column.as_deref() == Some(name) {
             continue;
         }

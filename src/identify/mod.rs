@@ -334,13 +334,7 @@ impl Settings {
         // setting, which identify does not have).
         for (list, what) in [(&self.outputs, "output"), (&self.inputs, "input")] {
             for v in list.iter() {
-                if let Some(why) = crate::util::channel_name_fault(v) {
-                    let v = crate::util::clip(v, 40);
-                    return Err(Error::param(
-                        what,
-                        format!("'{v}' {why}; rename the channel"),
-                    ));
-                }
+                crate::util::check_channel_name(v, what, "channel")?;
             }
         }
         // A channel named like an output's derivative (`y_d1` beside output `y`) would be taken
