@@ -100,6 +100,12 @@ fn derive_bad_input_is_one_line_and_non_zero() {
             vec!["--column", "y", "--order", "1"],
             "--tau",
         ),
+        // `-o -` is refused, and derive says where its output goes without -o.
+        (
+            "y\n1\n2\n3\n",
+            vec!["--column", "y", "--order", "1", "--tau", "0.1", "-o", "-"],
+            "derive writes to standard output when -o is left out",
+        ),
     ];
     for (i, (text, args, want)) in cases.iter().enumerate() {
         let input = temp(&format!("bad{i}.csv"), text);

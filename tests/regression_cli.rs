@@ -119,7 +119,7 @@ fn regress_errors_are_one_line() {
                 "--degree",
                 "20",
             ],
-            "invalid setting 'degree'",
+            "invalid setting '--degree'",
         ),
     ];
     for (args, want) in cases {
@@ -192,7 +192,22 @@ fn regress_refuses_what_read_wrong_before() {
         v.push(data);
         v.into_iter().map(String::from).collect::<Vec<_>>()
     };
+    // Twelve rows, three of positive weight, C constant: too few samples, not a constant
+    // feature (the constant check counted the rows of zero weight).
+    let weighted = d.join("weighted.csv");
+    let mut text = String::from("A,B,C,L,W\n");
+    for i in 0..12 {
+        let w = if i < 3 { 1 } else { 0 };
+        text += &format!("{i},{},5,{},{w}\n", i * i % 7, 2 * i + 1);
+    }
+    std::fs::write(&weighted, text).unwrap();
+    let w = weighted.to_str().unwrap();
     let cases: Vec<(Vec<String>, &[&str], &str)> = vec![
+        (
+            base(w, ""),
+            &["--weights", "W"],
+            "3 samples of positive weight are too few",
+        ),
         (
             base(o, "A,B^2"),
             &[],
@@ -219,6 +234,8 @@ fn regress_refuses_what_read_wrong_before() {
             &["--max-terms", "0"],
             "invalid setting '--max-terms'",
         ),
+        // Every option is named as a flag (a feature's was named as a field).
+        (base(o, "A,B^2"), &[], "invalid setting '--features'"),
     ];
     for (mut args, extra, want) in cases {
         args.extend(extra.iter().map(|s| s.to_string()));

@@ -346,6 +346,29 @@ fn a_time_column_that_disagrees_with_the_models_tau_is_refused() {
             assert!(ok, "{err}");
         }
     }
+    // A column in ms at another sampling than the model's: `--time-column` refuses a column
+    // named in ms, so the error suggests --tau in seconds (it suggested the refused column).
+    let data = d.join("ms20.csv");
+    let mut s = String::from("time_ms,u,y\n");
+    for k in 0..200 {
+        let t = k as f64 * 0.02;
+        s += &format!(
+            "{},{},{}\n",
+            1e3 * t,
+            (3.0 * t).sin(),
+            0.1 * (2.0 * t).cos()
+        );
+    }
+    std::fs::write(&data, &s).unwrap();
+    let dp = data.to_str().unwrap();
+    let (ok, _, err) = ctsid(&["simulate", m, dp]);
+    assert!(
+        !ok && err.contains("steps by 20 ms = 0.02 s: give --tau 0.02")
+            && !err.contains("--time-column"),
+        "{err}"
+    );
+    let (ok, _, err) = ctsid(&["simulate", m, dp, "--tau", "0.02"]);
+    assert!(ok, "{err}");
     // A column named like time that is not uniform is not taken for time.
     let data = d.join("jitter.csv");
     let mut s = String::from("t,u,y\n");
@@ -477,11 +500,16 @@ fn input_readings_and_time_units_are_pointed_out() {
     let common = "--output y --input u --run-column run --tau 0.05";
     let split = "--train 0-1 --validation 2 --test 3 --degree 1 --quiet";
     let id = |extra: &str| ctsid(&["identify", s, common, split, extra]);
-    let (ok, _, err) = id("--order 1");
-    assert!(
-        ok && err.contains("--input-interpolation hold reads it so"),
-        "{err}"
-    );
+    // Read by straight lines or by a spline, the held input is noted (the spline was not:
+    // `simulate` of the same model then suggested hold).
+    for reading in ["linear", "cubic"] {
+        let (ok, _, err) = id(&format!("--order 1 --input-interpolation {reading}"));
+        assert!(
+            ok && err.contains("--input-interpolation hold reads it so")
+                && err.contains(&format!("({reading} interpolation ramps")),
+            "{reading}: {err}"
+        );
+    }
     let (ok, _, err) = ctsid(&[
         "identify",
         s,
@@ -525,33 +553,40 @@ fn input_readings_and_time_units_are_pointed_out() {
         ],
         &["'y' is given as both an output and an input"],
     );
-    let short: String = std::fs::read_to_string(&steps)
-        .unwrap()
-        .lines()
-        .enumerate()
-        .filter(|(i, l)| {
-            *i == 0
-                || l.split(',')
-                    .nth(1)
-                    .and_then(|t| t.parse::<f64>().ok())
-                    .is_some_and(|t| t < 0.74)
-        })
-        .map(|(_, l)| format!("{l}\n"))
-        .collect();
-    let short_csv = d.join("short.csv");
-    std::fs::write(&short_csv, short).unwrap();
-    fails(
-        &[
+    // A run of 15 samples derives order 2 (14) but cannot start its free run (16); one of 20
+    // derives order 4 (18) but starts free runs up to order 3 only (20; order 4 needs 24).
+    let cut = |name: &str, t_end: f64| {
+        let short: String = std::fs::read_to_string(&steps)
+            .unwrap()
+            .lines()
+            .enumerate()
+            .filter(|(i, l)| {
+                *i == 0
+                    || l.split(',')
+                        .nth(1)
+                        .and_then(|t| t.parse::<f64>().ok())
+                        .is_some_and(|t| t < t_end)
+            })
+            .map(|(_, l)| format!("{l}\n"))
+            .collect();
+        let path = d.join(name);
+        std::fs::write(&path, short).unwrap();
+        path.to_str().unwrap().to_string()
+    };
+    for (name, t_end, n, fits) in [("short.csv", 0.74, "15", 1), ("twenty.csv", 0.99, "20", 3)] {
+        let (ok, _, err) = ctsid(&["identify", &cut(name, t_end), common, "--degree 1"]);
+        assert!(!ok && err.contains(&format!("{n} samples")), "{err}");
+        let needle = format!("the highest order searched (orders up to {fits} fit this run)");
+        assert!(err.contains(&needle), "{err}");
+        // What the message says fits does fit.
+        let (ok, _, err) = ctsid(&[
             "identify",
-            short_csv.to_str().unwrap(),
+            &cut(name, t_end),
             common,
-            "--degree 1",
-        ],
-        &[
-            "15 samples",
-            "the highest order searched (orders up to 2 fit this run)",
-        ],
-    );
+            &format!("--degree 1 --orders 1..{fits}"),
+        ]);
+        assert!(ok, "{name}: {err}");
+    }
     // discover on a two-output model says what to do instead.
     let two = d.join("two.json");
     std::fs::write(
@@ -569,7 +604,10 @@ fn input_readings_and_time_units_are_pointed_out() {
             two.to_str().unwrap(),
             "--run-column run --tau 0.05",
         ],
-        &["identify the output in question alone"],
+        &[
+            "identify the output in question alone",
+            "(for 'y': `identify --output y --input u,t`)",
+        ],
     );
     std::fs::remove_dir_all(&d).ok();
 }

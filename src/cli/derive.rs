@@ -47,6 +47,13 @@ pub fn run(a: DeriveArgs) -> Result<()> {
         .map(|k| format!("{}_d{k}", a.column))
         .collect();
     names.extend((0..=a.order).map(|k| format!("{}_sigma{k}", a.column)));
+    // `-o -` is refused by every command; derive writes to standard output without `-o`.
+    if a.output.as_deref() == Some(std::path::Path::new("-")) {
+        return Err(Error::Io {
+            path: "-".into(),
+            message: "derive writes to standard output when -o is left out; give -o a file name (./- for a file named '-')".into(),
+        });
+    }
     super::csvout::check(&a.input, a.output.as_deref(), &[], &names, "derive")?;
     let spec = a
         .sampling

@@ -94,13 +94,15 @@ fn read_columns(path: &std::path::Path, wanted: &[String]) -> Result<Vec<Vec<f64
     Ok(rs.runs.remove(0).channels)
 }
 
-/// The builder's setting named as the option that sets it (`'max_terms'` read as a field).
+/// The library's setting named as the option that sets it (`'max_terms'` read as a field).
 fn as_flag(e: Error) -> Error {
     match e {
         Error::InvalidParameter { name, reason } => {
             let flag = match name.as_str() {
                 "max_terms" => "--max-terms",
                 "epsilon" => "--epsilon",
+                "degree" => "--degree",
+                "weights" => "--weights",
                 _ => return Error::InvalidParameter { name, reason },
             };
             Error::param(flag, reason)
@@ -114,7 +116,7 @@ fn as_flag(e: Error) -> Error {
 fn check_columns(a: &RegressArgs) -> Result<()> {
     if let Some(dup) = a.features.iter().find(|f| **f == a.label) {
         return Err(Error::param(
-            "features",
+            "--features",
             format!("'{dup}' is also the label"),
         ));
     }
@@ -132,7 +134,7 @@ fn check_columns(a: &RegressArgs) -> Result<()> {
         }
     }
     for f in &a.features {
-        ctsid::util::check_channel_name(f, "features", "column")?;
+        ctsid::util::check_channel_name(f, "--features", "column")?;
     }
     Ok(())
 }
@@ -169,21 +171,26 @@ pub fn run(a: RegressArgs) -> Result<()> {
     let mut cols = read_columns(&a.data, &wanted)?;
     let weights = a.weights.as_ref().map(|_| cols.pop().unwrap());
     if let Some(w) = &weights {
-        ctsid::regression::check_weight_span(w)?;
+        ctsid::regression::check_weight_span(w).map_err(as_flag)?;
     }
     let label = cols.pop().unwrap();
     // A constant feature makes every monomial with it a multiple of one without it: the model
     // read `l = 0.4*a*k` for `l = 2*a` with `k` = 5 throughout (identify refuses a constant
     // channel the same way). Too few rows are the fit's error, not a constant (one row was
     // called a constant feature).
-    let enough = label.len() >= ctsid::regression::MIN_SAMPLES;
+    // Rows of zero weight take no part in the fit (the library counts only the others).
+    let used: Vec<usize> = (0..label.len())
+        .filter(|&i| weights.as_ref().is_none_or(|w| w[i] > 0.0))
+        .collect();
+    let enough = used.len() >= ctsid::regression::MIN_SAMPLES;
     for (name, c) in a.features.iter().zip(&cols).filter(|_| enough) {
-        if c.iter().all(|v| *v == c[0]) {
+        let first = c[used[0]];
+        if used.iter().all(|&i| c[i] == first) {
             return Err(Error::param(
-                "features",
+                "--features",
                 format!(
                     "'{name}' is constant ({}) over the data; a constant feature only rescales other terms, so leave it out",
-                    ctsid::util::short(c[0])
+                    ctsid::util::short(first)
                 ),
             ));
         }

@@ -67,22 +67,27 @@ pub fn time_like(name: &str) -> Option<String> {
 /// The unit a column named like time says it is in, where that is not seconds: `time_ms`,
 /// `t [ms]`, `t_us`, `time (min)`, `t_h`.
 fn time_unit(name: &str) -> Option<&'static str> {
+    time_unit_seconds(name).map(|(u, _)| u)
+}
+
+/// [`time_unit`] and how many seconds one of that unit is.
+pub(super) fn time_unit_seconds(name: &str) -> Option<(&'static str, f64)> {
     let rest = time_like(name)?;
     let unit = rest.trim_matches(|c: char| "_ [()]".contains(c));
     [
-        ("ms", "ms"),
-        ("msec", "ms"),
-        ("us", "us"),
-        ("usec", "us"),
-        ("min", "minutes"),
-        ("minutes", "minutes"),
-        ("h", "hours"),
-        ("hr", "hours"),
-        ("hours", "hours"),
+        ("ms", "ms", 1e-3),
+        ("msec", "ms", 1e-3),
+        ("us", "us", 1e-6),
+        ("usec", "us", 1e-6),
+        ("min", "minutes", 60.0),
+        ("minutes", "minutes", 60.0),
+        ("h", "hours", 3600.0),
+        ("hr", "hours", 3600.0),
+        ("hours", "hours", 3600.0),
     ]
     .iter()
-    .find(|(k, _)| *k == unit)
-    .map(|(_, u)| *u)
+    .find(|(k, _, _)| *k == unit)
+    .map(|&(_, u, s)| (u, s))
 }
 
 #[cfg(test)]

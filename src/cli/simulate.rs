@@ -326,7 +326,6 @@ fn file_place(run: &ctsid::records::Run, t: f64, tau: f64, time_known: bool) -> 
 /// identified on held steps scored a multisine record at 3 % against truth, 0.1 % read
 /// linearly, and nothing said why).
 fn note_input_shape(model: &Model, rs: &ctsid::records::RecordSet) {
-    use ctsid::model::Interpolation;
     let all: Vec<usize> = (0..rs.runs.len()).collect();
     for name in &model.inputs {
         let Some(shape) = rs
@@ -336,22 +335,16 @@ fn note_input_shape(model: &Model, rs: &ctsid::records::RecordSet) {
         else {
             continue;
         };
-        let held = shape.held > ctsid::identify::HELD_SHARE;
-        let smooth = shape.held < 0.05 && shape.roughness < 0.5;
-        let suggest = match model.input_interpolation {
-            Interpolation::Hold if smooth => Some("linear"),
-            Interpolation::Linear | Interpolation::Cubic if held => Some("hold"),
-            _ => None,
-        };
-        if let Some(s) = suggest {
+        if let Some(s) = shape.suggests(model.input_interpolation) {
             eprintln!(
-                "note: the model reads input '{name}' by {} between samples, but in these data it {}: --input-interpolation {s} reads them so",
+                "note: the model reads input '{name}' by {} between samples, but in these data it {}: --input-interpolation {} reads them so",
                 model.input_interpolation.name(),
-                if held {
+                if shape.is_held() {
                     format!("keeps its value over {:.0} % of the steps", 100.0 * shape.held)
                 } else {
                     "varies smoothly from sample to sample".to_string()
-                }
+                },
+                s.name()
             );
         }
     }
@@ -392,6 +385,24 @@ fn check_time_like_columns(
         let Ok(rs) = ctsid::records::RecordSet::from_csv(data, &as_time) else {
             continue;
         };
+        // A column named in ms (or us, min, h) cannot be the time column (`--time-column`
+        // refuses it): its step in seconds is what to compare, and `--tau` what to suggest.
+        if let Some((unit, seconds)) = super::runs::time_unit_seconds(name) {
+            let step = rs.tau * seconds;
+            if (step / mt - 1.0).abs() > 0.01 {
+                return Err(Error::param(
+                    "tau",
+                    format!(
+                        "the model was identified at tau = {} s, but column '{name}' of {data} steps by {} {unit} = {} s: give --tau {} to simulate at the data's sampling",
+                        num4(mt),
+                        seven(rs.tau),
+                        seven(step),
+                        seven(step)
+                    ),
+                ));
+            }
+            continue;
+        }
         // A column in ms (or us, min, h) beside a model in seconds is the model's sampling in
         // another unit (`time_ms` stepping by 1 at tau = 1 ms simulated right before).
         let ratio = rs.tau / mt;
@@ -410,6 +421,12 @@ fn check_time_like_columns(
         }
     }
     Ok(())
+}
+
+/// `x` to seven significant digits, as short as they allow (a mean step of 20.000000000000004 ms
+/// reads 20).
+fn seven(x: f64) -> String {
+    ctsid::util::short(format!("{x:.6e}").parse().unwrap_or(x))
 }
 
 /// NRMSE in percent for the table: '-' where it is undefined (a constant measurement that the

@@ -281,12 +281,18 @@ fn monomial_exponents(t: &Term, vars: &[String]) -> Vec<(usize, u32)> {
 fn check_setup(rs: &RecordSet, nominal: &Model, o: &Options) -> Result<(usize, Vec<usize>)> {
     nominal.validate()?;
     if nominal.outputs.len() != 1 {
+        // The command for the first output with the model's own names (a placeholder `Y2`
+        // beside `--output y2` read as the output on both sides).
+        let o = nominal.outputs.first().map_or("Y", |q| q.name.as_str());
+        let others: Vec<&str> = (nominal.inputs.iter().map(String::as_str))
+            .chain(nominal.outputs.iter().skip(1).map(|q| q.name.as_str()))
+            .collect();
         return Err(Error::param(
             "nominal",
             format!(
-                "has {} outputs; discover handles one output per model: identify the output in question alone, with the outputs it depends on as inputs (`identify --output {o} --input U1,...,Y2,...`), then discover on that model",
+                "has {} outputs; discover handles one output per model: identify the output in question alone, with the outputs it depends on as inputs (for '{o}': `identify --output {o} --input {}`), then discover on that model",
                 nominal.outputs.len(),
-                o = nominal.outputs.last().map_or("Y", |q| q.name.as_str())
+                others.join(",")
             ),
         ));
     }

@@ -1061,22 +1061,29 @@ fn checked_channels(
         }
     }
     let max_order = settings.max_order();
+    // A run the split names also starts free runs (below); one it leaves out is only derived.
+    let named = |id: &str| split.runs().any(|r| rs.runs[r].id == id);
     rs.require_derivable(max_order)
-        .map_err(|e| highest_searched(e, settings))?;
+        .map_err(|e| highest_searched(e, settings, named))?;
     // Every run is simulated free from an initial state fitted on its first samples (the gate
     // and test runs' scores): a run long enough for derivatives but not for that fit gave NaN
     // scores and a refinement judged `inf -> inf`.
-    split.require_free_runs(
-        rs,
-        max_order,
-        &format!("a free run's initial state (order {max_order})"),
-    )?;
+    split
+        .require_free_runs(
+            rs,
+            max_order,
+            &format!("a free run's initial state (order {max_order})"),
+        )
+        .map_err(|e| highest_searched(e, settings, |_| true))?;
     Ok((outputs, inputs))
 }
 
 /// A run too short for the highest order of a search (orders 1 to 4 by default, which the user
-/// may never have named) says so, and which orders the run allows.
-fn highest_searched(e: Error, settings: &Settings) -> Error {
+/// may never have named) says so, and which orders the run allows: derivatives up to the order
+/// and, where `free_run(run id)`, a free run's initial state (the stricter of the two from order
+/// 1 on; counting the derivatives alone told a 15-sample run that order 2 fits, which then
+/// failed on the initial state's 16).
+fn highest_searched(e: Error, settings: &Settings, free_run: impl Fn(&str) -> bool) -> Error {
     match (e, &settings.orders) {
         (
             Error::RunTooShort {
@@ -1087,8 +1094,12 @@ fn highest_searched(e: Error, settings: &Settings) -> Error {
             },
             Orders::Search(_),
         ) => {
+            let starts = free_run(&run);
             let fits = (1..)
-                .take_while(|&n| crate::derivatives::min_samples(n) <= len)
+                .take_while(|&n| {
+                    crate::derivatives::min_samples(n) <= len
+                        && (!starts || crate::simulate::initial_window(n) <= len)
+                })
                 .last();
             let allows = fits.map_or("no order fits it".to_string(), |n| {
                 format!("orders up to {n} fit this run")
@@ -1312,17 +1323,14 @@ fn fast_modes(
     )]
 }
 
-/// Share of an input's sample-to-sample steps with no change above which it looks held between
-/// samples (steps a generator or a controller holds for several samples).
-pub const HELD_SHARE: f64 = 0.5;
+pub use crate::records::HELD_SHARE;
 
-/// A note for each input read linearly between samples that holds its value over most steps of
-/// the training runs: a zero-order-hold record read as ramps cost a 2 % model 0.5-1 % of error
+/// A note for each input read by straight lines or a spline between samples that holds its
+/// value over most steps of the training runs ([`crate::records::StepShape::suggests`], the rule
+/// `simulate` uses too): a zero-order-hold record read as ramps cost a 2 % model 0.5-1 % of error
 /// against truth that `hold` does not (a MIMO test rig, 2026-11-30), and nothing said so.
 fn held_inputs(settings: &Settings, rs: &RecordSet, split: &Split) -> Vec<String> {
-    if settings.input_interpolation != crate::model::Interpolation::Linear {
-        return Vec::new();
-    }
+    let hold = Some(crate::model::Interpolation::Hold);
     let mut notes = Vec::new();
     for name in &settings.inputs {
         let Ok(c) = rs.channel_index(name) else {
@@ -1331,10 +1339,11 @@ fn held_inputs(settings: &Settings, rs: &RecordSet, split: &Split) -> Vec<String
         let Some(shape) = rs.step_shape(c, &split.train) else {
             continue;
         };
-        if shape.held > HELD_SHARE {
+        if shape.suggests(settings.input_interpolation) == hold {
             notes.push(format!(
-                "input '{name}' keeps its value over {:.0} % of the training steps: if it is held between samples (steps, a digital controller), --input-interpolation hold reads it so (linear interpolation ramps each change over one sample)",
-                100.0 * shape.held
+                "input '{name}' keeps its value over {:.0} % of the training steps: if it is held between samples (steps, a digital controller), --input-interpolation hold reads it so ({} interpolation ramps each change over one sample)",
+                100.0 * shape.held,
+                settings.input_interpolation.name()
             ));
         }
     }

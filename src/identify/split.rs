@@ -241,6 +241,15 @@ impl Split {
         Split::new(list(train, "train")?, validation, list(test, "test")?, &ids)
     }
 
+    /// Every run the split names: training, validation, test.
+    pub fn runs(&self) -> impl Iterator<Item = usize> + '_ {
+        self.train
+            .iter()
+            .chain(self.validation.iter().flatten())
+            .chain(&self.test)
+            .copied()
+    }
+
     /// Refuses a named run (training, validation or test) shorter than the fit of a free run's
     /// initial state at `order` needs ([`crate::simulate::initial_window`]): every run is
     /// simulated from such a state for the scores and gates, and a shorter one scored NaN or
@@ -253,13 +262,8 @@ impl Split {
         what: &str,
     ) -> Result<()> {
         let min = crate::simulate::initial_window(order);
-        let named = self
-            .train
-            .iter()
-            .chain(self.validation.iter().flatten())
-            .chain(&self.test);
-        match named.into_iter().find(|&&r| rs.runs[r].len() < min) {
-            Some(&r) => Err(Error::RunTooShort {
+        match self.runs().find(|&r| rs.runs[r].len() < min) {
+            Some(r) => Err(Error::RunTooShort {
                 run: rs.runs[r].id.clone(),
                 len: rs.runs[r].len(),
                 min,

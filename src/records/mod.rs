@@ -8,6 +8,7 @@
 //! line naming the file, the row (1-based, the header is row 1) and the column.
 
 use crate::error::{Error, Result};
+use crate::model::Interpolation;
 use std::path::Path;
 
 /// Relative tolerance on the sampling period.
@@ -191,6 +192,32 @@ pub struct StepShape {
     /// Sum of |second differences| over the sum of |first differences|: near 0 for a signal
     /// that varies smoothly between samples, near 1 or above for one that jumps.
     pub roughness: f64,
+}
+
+/// Share of a channel's sample-to-sample steps with no change above which it looks held between
+/// samples (steps a generator or a controller holds for several samples).
+pub const HELD_SHARE: f64 = 0.5;
+
+impl StepShape {
+    /// Whether the channel keeps its value over more than [`HELD_SHARE`] of its steps.
+    pub fn is_held(&self) -> bool {
+        self.held > HELD_SHARE
+    }
+
+    /// The reading between samples these steps suggest where `reading` does not suit them:
+    /// `hold` for a held signal read by straight lines or a spline (which ramp each change over
+    /// a sample), `linear` for a signal that varies smoothly read as held; `None` otherwise.
+    /// `identify`'s note and `simulate`'s use this one rule.
+    pub fn suggests(&self, reading: Interpolation) -> Option<Interpolation> {
+        let smooth = self.held < 0.05 && self.roughness < 0.5;
+        match reading {
+            Interpolation::Hold if smooth => Some(Interpolation::Linear),
+            Interpolation::Linear | Interpolation::Cubic if self.is_held() => {
+                Some(Interpolation::Hold)
+            }
+            _ => None,
+        }
+    }
 }
 
 /// A set of runs sharing tau and channel names.
