@@ -370,6 +370,12 @@ fn mimo_plant_at_three_percent_noise_gets_the_true_orders() {
         "{found} / 18, extra {extras:?}\n{}",
         id.model
     );
+    // Its search settled: (4, 3, 3), then (3, 3, 3) twice.
+    assert!(
+        !id.notes.iter().any(|n| n.contains("did not settle")),
+        "{:?}",
+        id.notes
+    );
 }
 
 /// The plant's truth, its runs (the demo's 40, 3 % noise, `seed`) and identify's model at d = 4
@@ -417,6 +423,16 @@ fn mimo_plant_at_three_percent_noise_seed_three_gets_the_true_orders() {
         );
     }
     assert!(found >= 17, "{found} / 18\n{}", id.model);
+    // Its search ended in the third sweep on a change, (4, 3, 4) -> (3, 3, 3): right by the
+    // truth, and said, with the orders before to compare.
+    assert!(
+        id.notes
+            .iter()
+            .any(|n| n.contains("did not settle in 3 sweeps")
+                && n.contains("--order 4,3,4 fits the orders before")),
+        "{:?}",
+        id.notes
+    );
 }
 
 /// A two-output record with Coulomb friction on the first output, identified with

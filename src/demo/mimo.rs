@@ -159,6 +159,11 @@ pub fn run(o: &MimoOptions) -> Result<String> {
                     nr[i].clone(),
                 ]);
             }
+            // What identify notes (an order search that did not settle, say) is part of the
+            // demo's answer, as `identify` prints it.
+            for n in &id.notes {
+                let _ = writeln!(out, "\nnote: {n}");
+            }
             let orders: Vec<String> = id
                 .model
                 .outputs

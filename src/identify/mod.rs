@@ -1161,6 +1161,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
 
     // Order selection.
     let mut candidates: Vec<Vec<Candidate>> = vec![Vec::new(); ny];
+    let mut search_note = None;
     let ord: Vec<usize> = match &settings.orders {
         Orders::Fixed(c) => {
             for i in 0..ny {
@@ -1169,8 +1170,9 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
             c.clone()
         }
         Orders::Search(cands) => {
-            let (ord, lists) = search_orders(settings, &outputs, split, cands, &prep_for)?;
+            let (ord, lists, note) = search_orders(settings, &outputs, split, cands, &prep_for)?;
             candidates = lists;
+            search_note = note;
             ord
         }
     };
@@ -1246,6 +1248,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         "all samples weighted equally".into()
     };
     let notes = [
+        search_note.into_iter().collect(),
         unused_terms(settings, &ord),
         held_inputs(settings, rs, split),
         fast_modes(&model, rs, split, (&outputs, &inputs)),
@@ -1372,12 +1375,7 @@ fn provenance(settings: &Settings, rs: &RecordSet, split: &Split) -> serde_json:
 /// without a word (fixed orders that lack its state are refused by [`Settings::validate`]).
 fn unused_terms(settings: &Settings, ord: &[usize]) -> Vec<String> {
     let names = settings.names_at(ord);
-    let orders: Vec<String> = settings
-        .outputs
-        .iter()
-        .zip(ord)
-        .map(|(o, n)| format!("'{o}' {n}"))
-        .collect();
+    let orders = orders_text(&settings.outputs, ord);
     settings
         .terms
         .iter()
@@ -1386,23 +1384,27 @@ fn unused_terms(settings: &Settings, ord: &[usize]) -> Vec<String> {
             format!(
                 "the term '{}' was a candidate at no chosen order (orders {}): it reads a state those orders lack",
                 crate::util::clip(t, 60),
-                orders.join(", ")
+                orders
             )
         })
         .collect()
 }
 
+/// The orders an order search chose, every output's candidates at the final orders of the
+/// others, and a note where the search did not settle.
+type SearchResult = (Vec<usize>, Vec<Vec<Candidate>>, Option<String>);
+
 /// The coordinate search over candidate orders (see the module docs): every output starts at
 /// the smallest candidate, then each in turn takes the order the eta-rule picks with the others
-/// fixed, until a sweep changes nothing (at most three sweeps). Returns the orders and every
-/// output's candidates at the final orders of the others.
+/// fixed, until a sweep changes nothing (at most three sweeps). A search whose last sweep still
+/// changed an order ends there with a note ([`unsettled`]).
 fn search_orders<'p, 'a: 'p>(
     settings: &Settings,
     outputs: &[usize],
     split: &Split,
     cands: &[usize],
     prep_for: &(dyn Fn(&[usize]) -> &'p Prepared<'a> + Sync),
-) -> Result<(Vec<usize>, Vec<Vec<Candidate>>)> {
+) -> Result<SearchResult> {
     let ny = outputs.len();
     // Lowest order first: the parsimonious rule takes the first of near-equals.
     let mut cands = cands.to_vec();
@@ -1412,7 +1414,9 @@ fn search_orders<'p, 'a: 'p>(
     // Candidates already scored, by output and orders: a sweep that revisits an output whose
     // neighbours kept their orders asks for the same fits again.
     let mut scored: std::collections::HashMap<(usize, Vec<usize>), Candidate> = Default::default();
-    for sweep in 0..3 {
+    let mut note = None;
+    for sweep in 0..SWEEPS {
+        let before = ord.clone();
         let mut changed = false;
         for i in 0..ny {
             let orders: Vec<Vec<usize>> = cands
@@ -1466,11 +1470,51 @@ fn search_orders<'p, 'a: 'p>(
             }
             candidates[i] = list;
         }
-        if !changed || ny == 1 || sweep == 2 {
+        if ny > 1 {
+            if let Some(p) = &settings.progress {
+                p.say(&format!(
+                    "order search, sweep {}: orders {}",
+                    sweep + 1,
+                    orders_text(&settings.outputs, &ord)
+                ));
+            }
+        }
+        if changed && ny > 1 && sweep + 1 == SWEEPS {
+            note = Some(unsettled(&settings.outputs, &before, &ord));
+        }
+        if !changed || ny == 1 {
             break;
         }
     }
-    Ok((ord, candidates))
+    Ok((ord, candidates, note))
+}
+
+/// The most sweeps of a MIMO order search.
+const SWEEPS: usize = 3;
+
+/// `'y1' 3, 'y2' 4`.
+fn orders_text(outputs: &[String], ord: &[usize]) -> String {
+    let named: Vec<String> = outputs
+        .iter()
+        .zip(ord)
+        .map(|(o, n)| format!("'{o}' {n}"))
+        .collect();
+    named.join(", ")
+}
+
+/// The note of a search whose last sweep still changed an order: each output's order was chosen
+/// beside the others' orders of that moment, and the later outputs of the last sweep beside the
+/// change, so the orders before it are as plausible (`demo mimo --degrees 6 --noise 0.03`, seeds
+/// 1-3: (4, 3, 1) -> (3, 3, 3), (3, 3, 3) -> (4, 3, 3), (3, 3, 3) -> (4, 3, 1) in the third
+/// sweep; the first right by the truth, the others not).
+fn unsettled(outputs: &[String], before: &[usize], after: &[usize]) -> String {
+    let list = |o: &[usize]| o.iter().map(usize::to_string).collect::<Vec<_>>().join(",");
+    format!(
+        "the order search did not settle in {SWEEPS} sweeps: its last changed orders {} to {} (each output's order is chosen beside the others' of the moment); --order {} fits the orders before for comparison on test runs",
+        orders_text(outputs, before),
+        orders_text(outputs, after),
+        list(before)
+    )
 }
 
 /// How far (a factor on the free-run p95 before refinement) a MIMO candidate may be from the
