@@ -378,6 +378,39 @@ fn mimo_plant_at_three_percent_noise_gets_the_true_orders() {
     );
 }
 
+/// Seed 4 at d = 6, 3 % noise (`demo mimo --degrees 6 --noise 0.03 --seed 4`): the sweeps
+/// settle at (3, 3, 1) (y3's order 1, 13 terms, within eta of order 3's 6 and taken as the lower)
+/// after (3, 3, 3) was scored in full with the smaller sum of free-run p95 (5.33 against 5.66):
+/// the search takes the configuration scored best in full (`identify::best_configuration`). Its
+/// final fits carry every coefficient at about half the truth's and do not follow the outputs in
+/// free run; refined from their linear part (as before) the model was 101 / 42 / 34 % from the
+/// truth, from their terms up to degree 5 (`RefineOptions::every_lower_start`) it is
+/// 0.66 / 0.78 / 1.30 %, 17 / 18 true terms and none other (docs/method/identification.md).
+#[test]
+fn mimo_plant_at_three_percent_noise_degree_six_seed_four_gets_the_true_orders() {
+    let (truth, runs, id) = mimo_fit_with((40, 25), 0.03, 4, |s| {
+        s.degree = 6;
+        s.orders = Orders::Search(vec![1, 2, 3, 4]);
+    });
+    let orders: Vec<usize> = id.model.outputs.iter().map(|o| o.order).collect();
+    assert_eq!(orders, vec![3, 3, 3], "{}", id.model);
+    let (mut found, mut extras) = (0, 0);
+    for i in 0..3 {
+        let (rows, extra) = coefficient_errors(&id.model, &truth, i);
+        found += rows.iter().filter(|r| r.2 != 0.0).count();
+        extras += extra.len();
+        let (_, _, pooled, diverged) = nrmse_vs_truth(&id, &runs, i);
+        eprintln!("seed 4, d = 6, output {i}: NRMSE vs truth {pooled}");
+        assert_eq!(diverged, 0);
+        assert!(pooled < 0.02, "output {i}: {pooled}\n{}", id.model);
+    }
+    assert!(
+        found >= 17 && extras <= 1,
+        "{found} / 18, {extras} others\n{}",
+        id.model
+    );
+}
+
 /// The plant's truth, its runs (the demo's 40, 3 % noise, `seed`) and identify's model at d = 4
 /// with the orders searched 1..4 on the CPU engine.
 fn searched_at_three_percent(
