@@ -719,7 +719,7 @@ fn regress_edge_cases_found_by_the_sixth_reading() {
             &file("w13.csv", &spread(1e13, 2)),
             "--features x,z --label y --degree 3 --weights w --engine cpu",
         ],
-        &["'weights'", "they span 1e13", "rescale them or drop rows"],
+        &["'--weights'", "they span 1e13", "rescale them or drop rows"],
     );
     let (ok, out, err) = ctsid(&[
         "regress",
