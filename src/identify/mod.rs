@@ -28,6 +28,11 @@
 //! (the default) each candidate of output i is fitted once, on the gate's fit runs, and
 //! simulated free-run on its own, the other outputs' variables fed from their smoothed
 //! measurements ([`Selection::Simulation`]); the derivative-domain profiles are reported beside.
+//! After the sweeps, the configuration of orders whose every output was scored beside exactly
+//! its orders with the smallest sum of free-run p95 is taken (the sweeps' own orders scored in
+//! full first): two configurations can each be a fixed point of the sweeps, and a search that
+//! ends on its sweep limit chose its last outputs beside orders that then changed (a note says
+//! so).
 //!
 //! # Refinement
 //! With the selected structure fixed, [`refine`] fits the nonzero coefficients and the initial
@@ -1390,14 +1395,19 @@ fn unused_terms(settings: &Settings, ord: &[usize]) -> Vec<String> {
         .collect()
 }
 
+/// The candidates an order search scored, by output and the orders of every output they were
+/// fitted beside.
+type Scored = std::collections::HashMap<(usize, Vec<usize>), Candidate>;
+
 /// The orders an order search chose, every output's candidates at the final orders of the
 /// others, and a note where the search did not settle.
 type SearchResult = (Vec<usize>, Vec<Vec<Candidate>>, Option<String>);
 
 /// The coordinate search over candidate orders (see the module docs): every output starts at
 /// the smallest candidate, then each in turn takes the order the eta-rule picks with the others
-/// fixed, until a sweep changes nothing (at most three sweeps). A search whose last sweep still
-/// changed an order ends there with a note ([`unsettled`]).
+/// fixed, until a sweep changes nothing (at most three sweeps; a search whose last sweep still
+/// changed an order ends there with a note, [`unsettled`]); then the configuration scored in
+/// full with the smallest sum of free-run p95 ([`joint_choice`]).
 fn search_orders<'p, 'a: 'p>(
     settings: &Settings,
     outputs: &[usize],
@@ -1413,7 +1423,7 @@ fn search_orders<'p, 'a: 'p>(
     let mut candidates: Vec<Vec<Candidate>> = vec![Vec::new(); ny];
     // Candidates already scored, by output and orders: a sweep that revisits an output whose
     // neighbours kept their orders asks for the same fits again.
-    let mut scored: std::collections::HashMap<(usize, Vec<usize>), Candidate> = Default::default();
+    let mut scored: Scored = Default::default();
     let mut note = None;
     for sweep in 0..SWEEPS {
         let before = ord.clone();
@@ -1491,34 +1501,51 @@ fn search_orders<'p, 'a: 'p>(
     if ny > 1 && settings.selection == Selection::Simulation {
         let joint = joint_choice(&mut scored, outputs, &ord, split, prep_for)?;
         if joint != ord {
-            let line = format!(
-                "order search: orders {} by the sum of the outputs' free-run p95 over the configurations scored in full (the sweeps ended at {})",
-                orders_text(&settings.outputs, &joint),
-                orders_text(&settings.outputs, &ord)
+            take_joint(
+                settings,
+                (&scored, &cands),
+                (&ord, &joint),
+                &mut candidates,
+                &mut note,
             );
-            if let Some(p) = &settings.progress {
-                p.say(&line);
-            }
-            for (i, list) in candidates.iter_mut().enumerate() {
-                *list = cands
-                    .iter()
-                    .filter_map(|&n| {
-                        let mut o = joint.clone();
-                        o[i] = n;
-                        scored.get(&(i, o)).cloned()
-                    })
-                    .collect();
-            }
-            if let Some(n) = note.as_mut() {
-                n.push_str(&format!(
-                    "; the orders {} were then taken by the comparison of the configurations scored in full",
-                    orders_text(&settings.outputs, &joint)
-                ));
-            }
             ord = joint;
         }
     }
     Ok((ord, candidates, note))
+}
+
+/// The search's orders replaced by the joint choice `joint` (from the sweeps' `ord`): a progress
+/// line, each output's candidates at the others' orders of `joint` (those scored), and the
+/// unsettled search's note completed.
+fn take_joint(
+    settings: &Settings,
+    (scored, cands): (&Scored, &[usize]),
+    (ord, joint): (&[usize], &[usize]),
+    candidates: &mut [Vec<Candidate>],
+    note: &mut Option<String>,
+) {
+    let taken = orders_text(&settings.outputs, joint);
+    if let Some(p) = &settings.progress {
+        p.say(&format!(
+            "order search: orders {taken} by the sum of the outputs' free-run p95 over the configurations scored in full (the sweeps ended at {})",
+            orders_text(&settings.outputs, ord)
+        ));
+    }
+    for (i, list) in candidates.iter_mut().enumerate() {
+        *list = cands
+            .iter()
+            .filter_map(|&n| {
+                let mut o = joint.to_vec();
+                o[i] = n;
+                scored.get(&(i, o)).cloned()
+            })
+            .collect();
+    }
+    if let Some(n) = note.as_mut() {
+        n.push_str(&format!(
+            "; the orders {taken} were then taken by the comparison of the configurations scored in full"
+        ));
+    }
 }
 
 /// The configuration of orders, among those whose every output was scored beside exactly the
@@ -1531,7 +1558,7 @@ fn search_orders<'p, 'a: 'p>(
 /// taken as the lower) after (3, 3, 3) was scored in full with the smaller sum, 5.33 against
 /// 5.66 (docs/method/identification.md).
 fn joint_choice<'p, 'a: 'p>(
-    scored: &mut std::collections::HashMap<(usize, Vec<usize>), Candidate>,
+    scored: &mut Scored,
     outputs: &[usize],
     ord: &[usize],
     split: &Split,
@@ -1558,11 +1585,7 @@ fn joint_choice<'p, 'a: 'p>(
 
 /// Of the configurations whose `ny` outputs were all scored beside exactly its orders, the one
 /// with the smallest finite sum of free-run p95; `ord` on a tie and where none has one.
-fn best_configuration(
-    scored: &std::collections::HashMap<(usize, Vec<usize>), Candidate>,
-    ny: usize,
-    ord: &[usize],
-) -> Vec<usize> {
+fn best_configuration(scored: &Scored, ny: usize, ord: &[usize]) -> Vec<usize> {
     let configs: std::collections::BTreeSet<&Vec<usize>> = scored.keys().map(|(_, o)| o).collect();
     let mut best = (f64::INFINITY, ord.to_vec());
     for c in configs {
