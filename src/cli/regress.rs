@@ -178,10 +178,8 @@ pub fn run(a: RegressArgs) -> Result<()> {
     // read `l = 0.4*a*k` for `l = 2*a` with `k` = 5 throughout (identify refuses a constant
     // channel the same way). Too few rows are the fit's error, not a constant (one row was
     // called a constant feature).
-    // Rows of zero weight take no part in the fit (the library counts only the others).
-    let used: Vec<usize> = (0..label.len())
-        .filter(|&i| weights.as_ref().is_none_or(|w| w[i] > 0.0))
-        .collect();
+    // Rows of zero weight take no part in the fit: the library's count of samples.
+    let used = ctsid::regression::rows_that_count(weights.as_deref(), label.len());
     let enough = used.len() >= ctsid::regression::MIN_SAMPLES;
     for (name, c) in a.features.iter().zip(&cols).filter(|_| enough) {
         let first = c[used[0]];

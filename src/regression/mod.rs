@@ -81,6 +81,17 @@ pub fn check_weight_span(w: &[f64]) -> Result<()> {
 /// Fewest samples a fit accepts: below this, selection among candidates means nothing.
 pub const MIN_SAMPLES: usize = 10;
 
+/// The rows of `all` that count as samples under `weights`: those of positive weight, or every
+/// row without weights or where the weights are of another length or hold a value that is not
+/// finite or is negative (left to the path's own checks). Rows of zero weight are not samples:
+/// counted, they let three weighted rows pass [`MIN_SAMPLES`] and fit three terms exactly.
+pub fn rows_that_count(weights: Option<&[f64]>, all: usize) -> Vec<usize> {
+    match weights.filter(|w| w.len() == all && w.iter().all(|x| x.is_finite() && *x >= 0.0)) {
+        Some(w) => (0..all).filter(|&i| w[i] > 0.0).collect(),
+        None => (0..all).collect(),
+    }
+}
+
 /// Unchecked settings; [`RegressionBuilder::build`] validates them into a [`Regression`].
 #[derive(Debug, Clone)]
 
@@ -686,10 +697,7 @@ impl Regression {
         // Rows of zero weight are not samples: counted, they let three weighted rows pass the
         // minimum and fit three terms exactly (R^2 1, eBIC at its floor).
         // (Weights of another length or with bad values are left to the path's own checks.)
-        let all = engine.n_samples();
-        let n_rows = weights
-            .filter(|w| w.len() == all && w.iter().all(|x| x.is_finite() && *x >= 0.0))
-            .map_or(all, |w| w.iter().filter(|&&x| x > 0.0).count());
+        let n_rows = rows_that_count(weights, engine.n_samples()).len();
         if n_rows < MIN_SAMPLES {
             return Err(Error::InvalidData(format!(
                 "{n_rows} samples{} are too few to select terms (at least {MIN_SAMPLES}); give more data",
