@@ -468,6 +468,41 @@ fn mimo_plant_at_three_percent_noise_seed_three_gets_the_true_orders() {
     );
 }
 
+/// Seed 6 of the same (d = 4, 3 %): the search settles at (4, 3, 3), y1's order 3 kept out by
+/// its free-run p100 (4.24 against order 4's 3.50, over eta = 1.2) although its p95 is within 2 %
+/// (1.4591 against 1.4318). The near-equal lower order is fitted and refined as a whole model
+/// beside the search's own and the coupled free runs of the gate runs compared
+/// (`identify::near_configurations`): sums of p95 5.7915 for (4, 3, 3), 5.4476 for (3, 3, 3).
+/// Measured: (3, 3, 3), 17 / 18, one other, 0.73 / 0.57 / 1.60 % against the truth (before:
+/// (4, 3, 3), 15 / 18, 7.13 / 0.75 / 1.23 %; docs/method/identification.md, session 26).
+#[test]
+fn mimo_plant_at_three_percent_noise_seed_six_gets_the_true_orders_from_near_equals() {
+    let (truth, runs, id) = searched_at_three_percent(6);
+    let orders: Vec<usize> = id.model.outputs.iter().map(|o| o.order).collect();
+    assert_eq!(orders, vec![3, 3, 3], "{}", id.model);
+    let (mut found, mut extras) = (0, 0);
+    for i in 0..3 {
+        let (rows, extra) = coefficient_errors(&id.model, &truth, i);
+        found += rows.iter().filter(|r| r.2 != 0.0).count();
+        extras += extra.len();
+        let (_, _, pooled, diverged) = nrmse_vs_truth(&id, &runs, i);
+        eprintln!("seed 6, output {i}: NRMSE vs truth {pooled}");
+        assert_eq!(diverged, 0);
+        assert!(pooled < 0.025, "output {i}: {pooled}\n{}", id.model);
+    }
+    assert!(
+        found >= 17 && extras <= 1,
+        "{found} / 18, {extras} others\n{}",
+        id.model
+    );
+    assert!(
+        id.notes.iter().any(|n| n.contains("near-equal orders")
+            && n.contains("orders 'y1' 3, 'y2' 3, 'y3' 3 taken")),
+        "{:?}",
+        id.notes
+    );
+}
+
 /// A two-output record with Coulomb friction on the first output, identified with
 /// `--term 'sign(a_d1)'`: each output's candidate order is scored as a model of its own, and the
 /// sign's smoothing width was looked up with the whole search's orders for a one-output model
