@@ -104,19 +104,21 @@ fn data(nz: usize, n: usize, seed: u64) -> Features {
     Features::new(names, cols).unwrap()
 }
 
-/// A sweep's time beside the limit: `reps` rounds, each a measurement of the single-core FMA
-/// rate (`fma` keeps the fastest rate seen) and then three sweeps, each timed. On a shared
-/// machine both the limit and the sweep are disturbed from moment to moment, and a limit measured
-/// once at a slow moment (seen: 1.7e10 against 4.4e10/s on the same host) makes any ratio
-/// meaningless. Returns the fastest first sweep of a round (`cold`: the second core has idled
-/// through the one-core FMA loop) and the fastest of the two after it (`warm`: sweeps as a path
-/// runs them, one every few milliseconds; 2026-11-30: cold 4.2-4.6 ms, warm 3.7-4.3 ms, three
-/// rounds alternated on this host).
+/// A sweep's fastest time, cold and warm (seconds; see [`time_beside_fma`]).
 struct SweepTime {
     cold: f64,
     warm: f64,
 }
 
+/// A sweep's time beside the limit: `reps` rounds, each a measurement of the single-core FMA
+/// rate (`fma` keeps the fastest rate seen) and then three sweeps, each timed. On a shared
+/// machine both the limit and the sweep are disturbed from moment to moment, and a limit measured
+/// once at a slow moment (seen: 1.7e10 against 4.4e10/s on the same host) makes any ratio
+/// meaningless. Returns the fastest first sweep of the rounds (`cold`: the second core has idled
+/// through the one-core FMA loop) and the fastest of the two after it (`warm`: sweeps as a path
+/// runs them, one every few milliseconds; 2026-11-30: cold 4.2-4.6 ms, warm 3.7-4.3 ms, three
+/// rounds alternated on this host). `warm` is the fastest of twice as many sweeps as `cold`,
+/// which alone puts it a little lower: both are printed.
 fn time_beside_fma<F: FnMut()>(reps: usize, fma: &mut f64, mut f: F) -> SweepTime {
     f();
     let mut timed = || {

@@ -1198,15 +1198,25 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
     } else {
         Vec::new()
     };
-    let mut done = finish(&mut prep, (&outputs, split), &ord, candidates.clone())?;
+    let own = if rivals.is_empty() {
+        std::mem::take(&mut candidates)
+    } else {
+        candidates.clone()
+    };
+    let mut done = finish(&prep, (&outputs, split), &ord, own, "")?;
     if !rivals.is_empty() {
         let mut finished = vec![(ord.clone(), done)];
         for o in rivals {
-            let f = finish(&mut prep, (&outputs, split), &o, candidates.clone())?;
+            // The report's candidate lists stay the search's: what it scored, beside its orders.
+            let who = format!("near-equal orders {}: ", orders_text(&settings.outputs, &o));
+            let f = finish(&prep, (&outputs, split), &o, candidates.clone(), &who)?;
             finished.push((o, f));
         }
         let (o, f, note) = take_finished(&prep, &outputs, split, finished)?;
-        say(note.clone());
+        say(format!(
+            "order search: orders {} taken after the near-equal orders were refined as whole models (see the note)",
+            orders_text(&settings.outputs, &o)
+        ));
         notes_extra.push(note);
         ord = o;
         done = f;
@@ -1258,12 +1268,13 @@ struct Finished {
 }
 
 /// Fits and refines the configuration `ord` from the search's `candidates` (the final fits reuse
-/// a candidate fitted at exactly `ord`).
+/// a candidate fitted at exactly `ord`); `who` starts its progress lines.
 fn finish(
-    prep: &mut Prepared,
+    prep: &Prepared,
     (outputs, split): (&[usize], &Split),
     ord: &[usize],
     mut candidates: Vec<Vec<Candidate>>,
+    who: &str,
 ) -> Result<Finished> {
     let settings = prep.settings;
     let say = |msg: String| {
@@ -1277,11 +1288,10 @@ fn finish(
     let mut fits = Vec::new();
     // The outputs' fits are independent: in parallel, so that one fit's sequential work (the
     // path's active-set algebra between sweeps) overlaps another's.
-    let shared: &Prepared = prep;
     let finals: Vec<_> = candidates
         .par_iter_mut()
         .enumerate()
-        .map(|(i, list)| final_fit(shared, i, ord, split, list))
+        .map(|(i, list)| final_fit(prep, i, ord, split, list))
         .collect::<Result<_>>()?;
     for (i, (m, report)) in finals.into_iter().enumerate() {
         equations.push(equation_of(&m, &settings.outputs[i], ord[i]));
@@ -1312,7 +1322,7 @@ fn finish(
             model = m;
             if let Some(r) = &report {
                 say(format!(
-                    "{} (from scoring, {} runs)",
+                    "{who}{} (from scoring, {} runs)",
                     r.message,
                     r.fit_runs.len()
                 ));
@@ -1321,7 +1331,7 @@ fn finish(
         }
         _ if settings.refine => {
             let (refined, report) = refine_selected(&model, prep, outputs, split)?;
-            say(format!("{} ({:.2} s)", report.message, report.seconds));
+            say(format!("{who}{} ({:.2} s)", report.message, report.seconds));
             model = refined;
             Some(report)
         }
@@ -1364,11 +1374,15 @@ const RIVALS: usize = 1;
 fn near_configurations(candidates: &[Vec<Candidate>], ord: &[usize], eta: f64) -> Vec<Vec<usize>> {
     let mut near: Vec<(f64, Vec<usize>)> = Vec::new();
     for (i, list) in candidates.iter().enumerate() {
-        let Some(own) = list.iter().find(|c| c.order == ord[i]) else {
+        // Each list is from the sweep that last scored the output: a search ended by its sweep
+        // limit scored it beside orders that then changed, and those candidates say nothing of
+        // `ord`.
+        let beside = |c: &&Candidate| (0..ord.len()).all(|j| j == i || c.orders[j] == ord[j]);
+        let Some(own) = list.iter().filter(beside).find(|c| c.order == ord[i]) else {
             continue;
         };
         let p = own.chosen_on().p95();
-        for c in list.iter().filter(|c| c.order < ord[i]) {
+        for c in list.iter().filter(beside).filter(|c| c.order < ord[i]) {
             let ratio = c.chosen_on().p95() / p;
             if ratio.is_finite() && ratio <= eta {
                 let mut o = ord.to_vec();
@@ -1424,7 +1438,7 @@ fn smallest_finite(v: &[f64]) -> usize {
 }
 
 /// The sum over outputs of the coupled model's free-run p95 on runs `gate` (infinite where a run
-/// does not simulate), from the one initial-state convention.
+/// does not simulate or there is none), from the one initial-state convention.
 fn coupled_p95_sum(
     model: &ModelFile,
     prep: &Prepared,
@@ -1440,10 +1454,16 @@ fn coupled_p95_sum(
         let Ok(sim) = simulate::free_run(&compiled, &run, INIT_WINDOW, &opts) else {
             return Ok(f64::INFINITY);
         };
+        if sim.iter().flatten().any(|v| !v.is_finite()) {
+            return Ok(f64::INFINITY);
+        }
         for o in 0..ny {
             e[o].extend(sim[o].iter().zip(&run.y[o]).map(|(a, b)| a - b));
             l[o].extend(run.y[o].iter().copied());
         }
+    }
+    if e.iter().any(Vec::is_empty) {
+        return Ok(f64::INFINITY);
     }
     Ok((0..ny).map(|o| Profile::new(&e[o], &l[o]).p95()).sum())
 }
