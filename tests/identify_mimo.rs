@@ -392,21 +392,40 @@ fn mimo_plant_at_three_percent_noise_degree_six_seed_four_gets_the_true_orders()
         s.degree = 6;
         s.orders = Orders::Search(vec![1, 2, 3, 4]);
     });
+    assert_true_orders((&truth, &runs, &id), "seed 4, d = 6", 0.02, (17, 1));
+}
+
+/// Orders (3, 3, 3), at least `found_min` of the 18 true terms with at most `extras_max` others,
+/// and every output's free run on the test runs within `nrmse_max` of the truth, none diverged.
+fn assert_true_orders(
+    (truth, runs, id): (
+        &Model,
+        &[ctsid::plants::Run],
+        &ctsid::identify::Identification,
+    ),
+    what: &str,
+    nrmse_max: f64,
+    (found_min, extras_max): (usize, usize),
+) {
     let orders: Vec<usize> = id.model.outputs.iter().map(|o| o.order).collect();
-    assert_eq!(orders, vec![3, 3, 3], "{}", id.model);
+    assert_eq!(orders, vec![3, 3, 3], "{what}: {}", id.model);
     let (mut found, mut extras) = (0, 0);
     for i in 0..3 {
-        let (rows, extra) = coefficient_errors(&id.model, &truth, i);
+        let (rows, extra) = coefficient_errors(&id.model, truth, i);
         found += rows.iter().filter(|r| r.2 != 0.0).count();
         extras += extra.len();
-        let (_, _, pooled, diverged) = nrmse_vs_truth(&id, &runs, i);
-        eprintln!("seed 4, d = 6, output {i}: NRMSE vs truth {pooled}");
-        assert_eq!(diverged, 0);
-        assert!(pooled < 0.02, "output {i}: {pooled}\n{}", id.model);
+        let (_, _, pooled, diverged) = nrmse_vs_truth(id, runs, i);
+        eprintln!("{what}, output {i}: NRMSE vs truth {pooled}");
+        assert_eq!(diverged, 0, "{what}");
+        assert!(
+            pooled < nrmse_max,
+            "{what}, output {i}: {pooled}\n{}",
+            id.model
+        );
     }
     assert!(
-        found >= 17 && extras <= 1,
-        "{found} / 18, {extras} others\n{}",
+        found >= found_min && extras <= extras_max,
+        "{what}: {found} / 18, {extras} others\n{}",
         id.model
     );
 }
@@ -478,23 +497,7 @@ fn mimo_plant_at_three_percent_noise_seed_three_gets_the_true_orders() {
 #[test]
 fn mimo_plant_at_three_percent_noise_seed_six_gets_the_true_orders_from_near_equals() {
     let (truth, runs, id) = searched_at_three_percent(6);
-    let orders: Vec<usize> = id.model.outputs.iter().map(|o| o.order).collect();
-    assert_eq!(orders, vec![3, 3, 3], "{}", id.model);
-    let (mut found, mut extras) = (0, 0);
-    for i in 0..3 {
-        let (rows, extra) = coefficient_errors(&id.model, &truth, i);
-        found += rows.iter().filter(|r| r.2 != 0.0).count();
-        extras += extra.len();
-        let (_, _, pooled, diverged) = nrmse_vs_truth(&id, &runs, i);
-        eprintln!("seed 6, output {i}: NRMSE vs truth {pooled}");
-        assert_eq!(diverged, 0);
-        assert!(pooled < 0.025, "output {i}: {pooled}\n{}", id.model);
-    }
-    assert!(
-        found >= 17 && extras <= 1,
-        "{found} / 18, {extras} others\n{}",
-        id.model
-    );
+    assert_true_orders((&truth, &runs, &id), "seed 6", 0.025, (17, 1));
     assert!(
         id.notes.iter().any(|n| n.contains("near-equal orders")
             && n.contains("orders 'y1' 3, 'y2' 3, 'y3' 3 taken")),
