@@ -1438,34 +1438,21 @@ fn smallest_finite(v: &[f64]) -> usize {
 }
 
 /// The sum over outputs of the coupled model's free-run p95 on runs `gate` (infinite where a run
-/// does not simulate or there is none), from the one initial-state convention.
+/// does not simulate or there is none: never taken).
 fn coupled_p95_sum(
     model: &ModelFile,
     prep: &Prepared,
     outputs: &[usize],
     gate: &[usize],
 ) -> Result<f64> {
-    let compiled = model.compile()?;
-    let opts = SimOptions::fitting();
-    let ny = outputs.len();
-    let (mut e, mut l) = (vec![Vec::new(); ny], vec![Vec::new(); ny]);
-    for &r in gate {
-        let run = refine_run(model, prep, outputs, r);
-        let Ok(sim) = simulate::free_run(&compiled, &run, INIT_WINDOW, &opts) else {
-            return Ok(f64::INFINITY);
-        };
-        if sim.iter().flatten().any(|v| !v.is_finite()) {
-            return Ok(f64::INFINITY);
-        }
-        for o in 0..ny {
-            e[o].extend(sim[o].iter().zip(&run.y[o]).map(|(a, b)| a - b));
-            l[o].extend(run.y[o].iter().copied());
-        }
-    }
-    if e.iter().any(Vec::is_empty) {
-        return Ok(f64::INFINITY);
-    }
-    Ok((0..ny).map(|o| Profile::new(&e[o], &l[o]).p95()).sum())
+    let runs: Vec<refine::RunData> = gate
+        .iter()
+        .map(|&r| refine_run(model, prep, outputs, r))
+        .collect();
+    Ok(free_run_profiles(model, &runs)?
+        .iter()
+        .map(Profile::p95)
+        .sum())
 }
 
 /// A mode this many times faster than 1/tau is beyond what the samples can show.
@@ -2699,22 +2686,33 @@ fn scoring_run(
 }
 
 /// The free-run error profile of a single-output `model` on `runs` (infinite where a run
-/// diverges), from the one initial-state convention ([`simulate::free_run`]).
+/// diverges or there is none), from the one initial-state convention ([`simulate::free_run`]).
 fn free_run_profile(model: &ModelFile, runs: &[refine::RunData]) -> Result<Profile> {
+    Ok(free_run_profiles(model, runs)?[0])
+}
+
+/// Each output's free-run error profile of `model` on `runs` (all infinite where a run diverges
+/// or there is none; a diverging run ends the simulation with an error, so what comes back is
+/// finite).
+fn free_run_profiles(model: &ModelFile, runs: &[refine::RunData]) -> Result<Vec<Profile>> {
     let compiled = model.compile()?;
     let opts = SimOptions::fitting();
-    let (mut e, mut l) = (Vec::new(), Vec::new());
+    let ny = model.outputs.len();
+    let diverged = vec![Profile([f64::INFINITY; 7]); ny];
+    let (mut e, mut l) = (vec![Vec::new(); ny], vec![Vec::new(); ny]);
     for run in runs {
         let Ok(sim) = simulate::free_run(&compiled, run, INIT_WINDOW, &opts) else {
-            return Ok(Profile([f64::INFINITY; 7]));
+            return Ok(diverged);
         };
-        e.extend(sim[0].iter().zip(&run.y[0]).map(|(a, b)| a - b));
-        l.extend(run.y[0].iter().copied());
+        for o in 0..ny {
+            e[o].extend(sim[o].iter().zip(&run.y[o]).map(|(a, b)| a - b));
+            l[o].extend(run.y[o].iter().copied());
+        }
     }
-    Ok(if e.is_empty() {
-        Profile([f64::INFINITY; 7])
+    Ok(if e.iter().any(Vec::is_empty) {
+        diverged
     } else {
-        Profile::new(&e, &l)
+        e.iter().zip(&l).map(|(e, l)| Profile::new(e, l)).collect()
     })
 }
 
