@@ -349,27 +349,7 @@ fn mimo_plant_at_one_percent_noise_finds_every_true_term() {
 #[test]
 fn mimo_plant_at_three_percent_noise_gets_the_true_orders() {
     let (truth, runs, id) = searched_at_three_percent(1);
-    let orders: Vec<usize> = id.model.outputs.iter().map(|o| o.order).collect();
-    assert_eq!(orders, vec![3, 3, 3], "{}", id.model);
-    let (mut found, mut extras) = (0, Vec::new());
-    for i in 0..3 {
-        let (rows, extra) = coefficient_errors(&id.model, &truth, i);
-        found += rows.iter().filter(|r| r.2 != 0.0).count();
-        extras.extend(extra);
-        let (_, _, pooled, diverged) = nrmse_vs_truth(&id, &runs, i);
-        eprintln!("output {i}: {rows:?}, NRMSE vs truth {pooled}");
-        assert_eq!(diverged, 0);
-        assert!(
-            pooled < 0.025,
-            "output {i}: NRMSE vs truth {pooled}\n{}",
-            id.model
-        );
-    }
-    assert!(
-        found >= 16 && extras.len() <= 2,
-        "{found} / 18, extra {extras:?}\n{}",
-        id.model
-    );
+    assert_true_orders((&truth, &runs, &id), "seed 1", 0.025, (16, 2));
     // Its search settled: (4, 3, 3), then (3, 3, 3) twice.
     assert!(
         !id.notes.iter().any(|n| n.contains("did not settle")),
@@ -459,22 +439,7 @@ fn searched_at_three_percent(
 #[test]
 fn mimo_plant_at_three_percent_noise_seed_three_gets_the_true_orders() {
     let (truth, runs, id) = searched_at_three_percent(3);
-    let orders: Vec<usize> = id.model.outputs.iter().map(|o| o.order).collect();
-    assert_eq!(orders, vec![3, 3, 3], "{}", id.model);
-    let mut found = 0;
-    for i in 0..3 {
-        let (rows, _) = coefficient_errors(&id.model, &truth, i);
-        found += rows.iter().filter(|r| r.2 != 0.0).count();
-        let (_, _, pooled, diverged) = nrmse_vs_truth(&id, &runs, i);
-        eprintln!("seed 3, output {i}: NRMSE vs truth {pooled}");
-        assert_eq!(diverged, 0);
-        assert!(
-            pooled < 0.025,
-            "output {i}: NRMSE vs truth {pooled}\n{}",
-            id.model
-        );
-    }
-    assert!(found >= 17, "{found} / 18\n{}", id.model);
+    assert_true_orders((&truth, &runs, &id), "seed 3", 0.025, (17, usize::MAX));
     // Its search ended in the third sweep on a change, (4, 3, 4) -> (3, 3, 3): right by the
     // truth, and said, with the orders before to compare.
     assert!(

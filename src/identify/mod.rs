@@ -1377,7 +1377,7 @@ fn near_configurations(candidates: &[Vec<Candidate>], ord: &[usize], eta: f64) -
         // Each list is from the sweep that last scored the output: a search ended by its sweep
         // limit scored it beside orders that then changed, and those candidates say nothing of
         // `ord`.
-        let beside = |c: &&Candidate| (0..ord.len()).all(|j| j == i || c.orders[j] == ord[j]);
+        let beside = |c: &&Candidate| c.orders == with_order(ord, i, c.order);
         let Some(own) = list.iter().filter(beside).find(|c| c.order == ord[i]) else {
             continue;
         };
@@ -1385,9 +1385,7 @@ fn near_configurations(candidates: &[Vec<Candidate>], ord: &[usize], eta: f64) -
         for c in list.iter().filter(beside).filter(|c| c.order < ord[i]) {
             let ratio = c.chosen_on().p95() / p;
             if ratio.is_finite() && ratio <= eta {
-                let mut o = ord.to_vec();
-                o[i] = c.order;
-                near.push((ratio, o));
+                near.push((ratio, with_order(ord, i, c.order)));
             }
         }
     }
@@ -1613,14 +1611,7 @@ fn search_orders<'p, 'a: 'p>(
         let before = ord.clone();
         let mut changed = false;
         for i in 0..ny {
-            let orders: Vec<Vec<usize>> = cands
-                .iter()
-                .map(|&n| {
-                    let mut o = ord.clone();
-                    o[i] = n;
-                    o
-                })
-                .collect();
+            let orders: Vec<Vec<usize>> = cands.iter().map(|&n| with_order(&ord, i, n)).collect();
             // Candidate orders are independent fits: score them in parallel, report in order.
             let fresh: Vec<Candidate> = orders
                 .par_iter()
@@ -1718,11 +1709,7 @@ fn take_joint(
     for (i, list) in candidates.iter_mut().enumerate() {
         *list = cands
             .iter()
-            .filter_map(|&n| {
-                let mut o = joint.to_vec();
-                o[i] = n;
-                scored.get(&(i, o)).cloned()
-            })
+            .filter_map(|&n| scored.get(&(i, with_order(joint, i, n))).cloned())
             .collect();
     }
     if let Some(n) = note.as_mut() {
@@ -1783,6 +1770,13 @@ fn best_configuration(scored: &Scored, ny: usize, ord: &[usize]) -> Vec<usize> {
         }
     }
     best.1
+}
+
+/// The orders `ord` with output `i`'s order set to `n`.
+fn with_order(ord: &[usize], i: usize, n: usize) -> Vec<usize> {
+    let mut o = ord.to_vec();
+    o[i] = n;
+    o
 }
 
 /// The most sweeps of a MIMO order search.
