@@ -30,11 +30,12 @@ fn cascaded_tanks_select_order_two_and_simulate_the_test_record() {
     ) else {
         return;
     };
-    // Measured: test RMS 0.585 V at degree 2 (0.590 V with --init-window 5), 0.532 V at 3.
+    // Measured: test RMS 0.592 V at degree 2 (0.591 V with --init-window 5), 0.478 V at 3, with
+    // the lower tank's overflow at 10 V read as a limit (0.585, 0.590 and 0.532 V before it).
     for (degree, window, lo, hi) in [
-        (2, None, 0.57, 0.60),
+        (2, None, 0.57, 0.61),
         (2, Some("5"), 0.575, 0.605),
-        (3, None, 0.52, 0.545),
+        (3, None, 0.46, 0.50),
     ] {
         let model = temp_file("real", &format!("tanks_{degree}.json"), "");
         let (ok, _, err) = ctsid(&[

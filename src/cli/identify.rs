@@ -69,6 +69,10 @@ pub struct IdentifyArgs {
     /// (zero-order hold); written into the model file.
     #[arg(long, default_value = "linear", value_parser = parse_interpolation)]
     pub input_interpolation: Interpolation,
+    /// Leave out the hard limits read from an output the training runs hold at its extreme
+    /// value (an overflowing level, an end stop) for five samples or more.
+    #[arg(long)]
+    pub no_limits: bool,
 }
 
 fn parse_interpolation(text: &str) -> std::result::Result<Interpolation, String> {
@@ -237,6 +241,7 @@ fn settings(a: &IdentifyArgs) -> Result<Settings> {
     s.progress = super::show_progress(a.quiet);
     s.terms = a.term.clone();
     s.input_interpolation = a.input_interpolation;
+    s.limits = !a.no_limits;
     s.validate()?;
     Ok(s)
 }

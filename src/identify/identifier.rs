@@ -97,6 +97,13 @@ impl Identifier {
         self
     }
 
+    /// Whether an output the training runs hold at its extreme value is modelled with a hard
+    /// limit there (default: yes; [`Settings::limits`](super::Settings::limits)).
+    pub fn limits(mut self, on: bool) -> Self {
+        self.settings.limits = on;
+        self
+    }
+
     /// Which engine runs the sparse regression's sweeps (default: automatic).
     pub fn engine(mut self, engine: EngineChoice) -> Self {
         self.settings.engine = engine;

@@ -232,6 +232,10 @@ pub struct Settings {
     /// [`crate::model::expr`] (`sign(y_d1)`, `abs(y_d1)*y_d1`), for every output; a term that
     /// reads a derivative at or above an equation's order is left out of that equation.
     pub terms: Vec<String>,
+    /// Read hard limits of the outputs from the training runs (an output held at its extreme
+    /// value, [`RecordSet::held_extremes`]) into the model, so that its simulations (refinement,
+    /// scoring, the model file) keep them; on by default.
+    pub limits: bool,
 }
 
 /// The error profile the eta-rule compares across candidate orders.
@@ -269,6 +273,7 @@ impl Settings {
             refine_options: refine::RefineOptions::default(),
             terms: Vec::new(),
             input_interpolation: crate::model::Interpolation::Linear,
+            limits: true,
         }
     }
 
@@ -893,6 +898,21 @@ impl Prepared<'_> {
         }
     }
 
+    /// Each output's hard limits read from the training runs `train` (where
+    /// [`Settings::limits`]), for a model whose output m is the record's channel `channels[m]`.
+    fn limits(&self, model: &mut ModelFile, channels: &[usize], train: &[usize]) {
+        if !self.settings.limits {
+            return;
+        }
+        for (o, &c) in model.outputs.iter_mut().zip(channels) {
+            let [lo, hi] = self.rs.held_extremes(c, train);
+            o.limits = crate::model::Limits {
+                min: lo.map(|h| h.value),
+                max: hi.map(|h| h.value),
+            };
+        }
+    }
+
     /// Residuals and labels of a model on some runs (only samples with a usable label).
     fn residuals(
         &self,
@@ -1242,6 +1262,7 @@ pub fn identify(rs: &RecordSet, split: &Split, settings: &Settings) -> Result<Id
         notes_extra,
         unused_terms(settings, &ord),
         held_inputs(settings, rs, split),
+        held_outputs(settings, rs, split),
         fast_modes(&model, rs, split, (&outputs, &inputs)),
     ]
     .concat();
@@ -1303,6 +1324,7 @@ fn finish(
     model.degree = settings.degree;
     model.input_interpolation = settings.input_interpolation;
     prep.sign_smoothing(&mut model, &split.train);
+    prep.limits(&mut model, outputs, &split.train);
     model.validate()?;
     // A single-output search already refined the selected order while scoring it (on at most
     // SCORE_RUNS training runs, gated on the same held-out runs): that model is the result, and
@@ -1535,6 +1557,30 @@ fn held_inputs(settings: &Settings, rs: &RecordSet, split: &Split) -> Vec<String
                 100.0 * shape.held,
                 settings.input_interpolation.name()
             ));
+        }
+    }
+    notes
+}
+
+/// A note for each output the training runs hold at an extreme value, read as a hard limit
+/// ([`Settings::limits`]).
+fn held_outputs(settings: &Settings, rs: &RecordSet, split: &Split) -> Vec<String> {
+    if !settings.limits {
+        return Vec::new();
+    }
+    let mut notes = Vec::new();
+    for name in &settings.outputs {
+        let Ok(c) = rs.channel_index(name) else {
+            continue;
+        };
+        let [lo, hi] = rs.held_extremes(c, &split.train);
+        for (side, h) in [("smallest", lo), ("largest", hi)] {
+            if let Some(h) = h {
+                notes.push(format!(
+                    "output '{name}' holds its {side} value {} for {} consecutive samples of the training runs: read as a hard limit (an overflow, an end stop) that the model's simulations keep (the model file's \"limits\"; --no-limits to leave it out)",
+                    h.value, h.samples
+                ));
+            }
         }
     }
     notes
@@ -2584,7 +2630,7 @@ fn simulation_score(
     refine: bool,
 ) -> Result<()> {
     let Some(m) = &c.model else { return Ok(()) };
-    let (model, exogenous) = scoring_model(prep, m, i, &c.orders, &split.train)?;
+    let (model, exogenous) = scoring_model(prep, m, (i, outputs[i]), &c.orders, &split.train)?;
     // Scoring refines every candidate: on at most SCORE_RUNS training runs, to keep the search
     // affordable; the selected structure is refined again on all of them.
     let split = &Split {
@@ -2617,7 +2663,7 @@ fn simulation_score(
 fn scoring_model(
     prep: &Prepared,
     m: &crate::regression::Model,
-    i: usize,
+    (i, channel): (usize, usize),
     ord: &[usize],
     train: &[usize],
 ) -> Result<(ModelFile, Vec<(usize, usize)>)> {
@@ -2646,6 +2692,7 @@ fn scoring_model(
     model.degree = prep.settings.degree;
     model.input_interpolation = prep.settings.input_interpolation;
     prep.sign_smoothing_of(&mut model, &[i], ord, train);
+    prep.limits(&mut model, &[channel], train);
     model.validate()?;
     Ok((model, exogenous))
 }

@@ -10,7 +10,7 @@
 
 use super::expr::Expr;
 use super::tape::Tape;
-use super::{Interpolation, Model, Var};
+use super::{Interpolation, Limits, Model, Var};
 use crate::error::{Error, Result};
 
 /// What a compiled term computes, without its coefficient.
@@ -94,6 +94,8 @@ pub struct CompiledModel {
     /// Smoothing width of `sign` per slot of z (0: exact).
     eps: Vec<f64>,
     interpolation: Interpolation,
+    /// Each output's hard limits ([`Limits`]).
+    limits: Vec<Limits>,
 }
 
 impl CompiledModel {
@@ -160,7 +162,39 @@ impl CompiledModel {
             names,
             eps,
             interpolation: m.input_interpolation,
+            limits: m.outputs.iter().map(|o| o.limits).collect(),
         })
+    }
+
+    /// Sets every output that `x` carries beyond one of its [`Limits`] back onto it, with its
+    /// derivatives that point beyond it at zero, and appends the state indices it set to
+    /// `pinned` (their values no longer depend on the coefficients or the initial state).
+    pub fn project(&self, x: &mut [f64], pinned: &mut Vec<usize>) {
+        for (i, lim) in self.limits.iter().enumerate() {
+            let (off, n) = (self.offsets[i], self.orders[i]);
+            // The side crossed and the sign that points beyond it.
+            let crossed = match (lim.min, lim.max) {
+                (_, Some(hi)) if x[off] > hi => Some((hi, 1.0)),
+                (Some(lo), _) if x[off] < lo => Some((lo, -1.0)),
+                _ => None,
+            };
+            let Some((bound, out)) = crossed else {
+                continue;
+            };
+            x[off] = bound;
+            pinned.push(off);
+            for k in off + 1..off + n {
+                if x[k] * out > 0.0 {
+                    x[k] = 0.0;
+                    pinned.push(k);
+                }
+            }
+        }
+    }
+
+    /// Whether an output has [`Limits`].
+    pub fn has_limits(&self) -> bool {
+        self.limits.iter().any(|l| !l.is_none())
     }
 
     pub fn n_state(&self) -> usize {

@@ -172,6 +172,46 @@ pub struct OutputEquation {
     pub name: String,
     pub order: usize,
     pub terms: Vec<Term>,
+    /// Hard limits of the output's level (an overflowing tank, an end stop); none by default.
+    #[serde(skip_serializing_if = "Limits::is_none")]
+    pub limits: Limits,
+}
+
+/// Hard limits of an output's level: where a simulation would carry the output beyond one, the
+/// output stays on it and its derivatives that point beyond it are zero, as a tank that
+/// overflows keeps its level and a carriage against an end stop its position (what the record
+/// shows as its output held at one extreme value). The equation holds inside the limits.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Limits {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub min: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub max: Option<f64>,
+}
+
+impl Limits {
+    /// No limit on either side.
+    pub fn is_none(&self) -> bool {
+        self.min.is_none() && self.max.is_none()
+    }
+
+    /// Finite bounds, the lower below the upper; the message says what is wrong.
+    fn check(&self) -> std::result::Result<(), String> {
+        for (side, v) in [("min", self.min), ("max", self.max)] {
+            if v.is_some_and(|v| !v.is_finite()) {
+                return Err(format!("limits: {side} is not a finite number"));
+            }
+        }
+        if let (Some(lo), Some(hi)) = (self.min, self.max) {
+            if lo >= hi {
+                return Err(format!(
+                    "limits: min {lo} is not below max {hi}; give a range the output can move in"
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl OutputEquation {
@@ -180,6 +220,7 @@ impl OutputEquation {
             name: name.into(),
             order,
             terms,
+            limits: Limits::default(),
         }
     }
 
@@ -362,6 +403,8 @@ struct RawOutput {
     order: usize,
     // Required: a misspelt key would otherwise leave an equation without terms.
     terms: Option<Vec<RawTerm>>,
+    #[serde(default)]
+    limits: Limits,
     #[serde(flatten)]
     extra: Map<String, Value>,
 }
@@ -501,7 +544,7 @@ fn read_output(
             ""
         };
         return Err(format!(
-            "output '{}': unknown key \"{k}\"{hint} (known: name, order, terms)",
+            "output '{}': unknown key \"{k}\"{hint} (known: name, order, terms, limits)",
             o.name
         ));
     }
@@ -523,6 +566,7 @@ fn read_output(
         name: o.name,
         order: o.order,
         terms,
+        limits: o.limits,
     })
 }
 
@@ -831,6 +875,9 @@ impl Model {
         let names = self.variable_names();
         for o in &self.outputs {
             check_distinct_terms(o, &self.outputs, &names).map_err(err)?;
+            o.limits
+                .check()
+                .map_err(|m| err(format!("output '{}': {m}", o.name)))?;
             for (k, t) in o.terms.iter().enumerate() {
                 self.check_term(t, &table, &names)
                     .map_err(|m| err(format!("output '{}', term {}: {m}", o.name, k + 1)))?;

@@ -25,6 +25,8 @@
 //! `input_interpolation` (`linear` when absent, `cubic` or `hold`; [`Interpolation`]) says how
 //! the sampled inputs of a record are read between their samples when the model is simulated:
 //! the input coefficients were fitted through that reconstruction.
+//! An output may carry `"limits": {"max": 10.0}` (and/or `min`): hard limits of its level
+//! ([`Limits`]: an overflowing tank, an end stop), which every simulation keeps.
 //!
 //! What this module assumes and guarantees:
 //! - `tau` and `degree` may be omitted in a hand-written file (`degree` is then the largest
@@ -47,6 +49,6 @@ mod tape;
 pub use compiled::CompiledModel;
 pub use expr::Expr;
 pub use file::{
-    derivative_name, derivative_of, Interpolation, Model, Origin, OutputEquation, Term, Var,
-    FORMAT, FORMAT_V1, MAX_EXPONENT, MAX_ORDER, SECTIONS,
+    derivative_name, derivative_of, Interpolation, Limits, Model, Origin, OutputEquation, Term,
+    Var, FORMAT, FORMAT_V1, MAX_EXPONENT, MAX_ORDER, SECTIONS,
 };

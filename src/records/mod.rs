@@ -22,6 +22,22 @@ pub fn first_unusable(v: &[f64]) -> Option<usize> {
 }
 
 /// What is wrong with an unusable sample (see [`first_unusable`]), for messages.
+/// The longest stretch of consecutive samples of `x` equal to `v` that does not start at the
+/// first sample (0 where there is none).
+fn longest_entered_stretch(x: &[f64], v: f64) -> usize {
+    // `leading`: still in the samples the run starts with at `v`.
+    let (mut best, mut cur, mut leading) = (0usize, 0usize, true);
+    for &xk in x {
+        if xk != v {
+            (cur, leading) = (0, false);
+        } else if !leading {
+            cur += 1;
+            best = best.max(cur);
+        }
+    }
+    best
+}
+
 pub fn unusable_reason(v: f64) -> String {
     if v.is_finite() {
         format!(
@@ -193,6 +209,24 @@ pub struct StepShape {
     /// that varies smoothly between samples, near 1 or above for one that jumps.
     pub roughness: f64,
 }
+
+/// A channel held at its extreme value ([`RecordSet::held_extremes`]): the value and the longest
+/// stretch of consecutive samples at it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HeldExtreme {
+    pub value: f64,
+    pub samples: usize,
+}
+
+/// Consecutive samples at a channel's extreme value from which [`RecordSet::held_extremes`] reads
+/// a hard limit: a noisy sensor that moves never repeats its value five times, a level that
+/// overflows or a carriage against its stop does.
+pub const HELD_EXTREME_SAMPLES: usize = 5;
+
+/// Share of the steps away from the extremes that may repeat a value for
+/// [`RecordSet::held_extremes`]: a coarsely quantised sensor repeats values everywhere, and its
+/// value held at a turning point says nothing of a limit.
+const REPEATS_ELSEWHERE: f64 = 0.01;
 
 /// Share of a channel's sample-to-sample steps with no change above which it looks held between
 /// samples (steps a generator or a controller holds for several samples).
@@ -562,6 +596,45 @@ impl RecordSet {
         (d1 > 0.0).then(|| StepShape {
             held: held as f64 / steps.max(1) as f64,
             roughness: d2 / d1,
+        })
+    }
+
+    /// Where channel `c` sits at its smallest and at its largest value over `runs` for at
+    /// least [`HELD_EXTREME_SAMPLES`] consecutive samples, having moved there within a run (a
+    /// run that starts at rest on its extreme is no limit): the signature of a hard limit, an
+    /// overflowing tank's level or an end stop (the cascaded tanks' lower level held at 10 V for
+    /// 27 samples). Nothing where the channel repeats values elsewhere too (a coarse
+    /// quantisation, a held signal), since a dwell at a turning point looks the same there.
+    pub fn held_extremes(&self, c: usize, runs: &[usize]) -> [Option<HeldExtreme>; 2] {
+        let xs: Vec<&[f64]> = runs
+            .iter()
+            .filter_map(|&r| self.runs.get(r))
+            .map(|r| r.channels[c].as_slice())
+            .collect();
+        let (lo, hi) = xs
+            .iter()
+            .flat_map(|x| x.iter())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        if lo >= hi {
+            return [None, None];
+        }
+        let (mut steps, mut repeats) = (0usize, 0usize);
+        for x in &xs {
+            for w in x.windows(2) {
+                if w[0] != lo && w[0] != hi {
+                    steps += 1;
+                    repeats += usize::from(w[0] == w[1]);
+                }
+            }
+        }
+        if repeats as f64 > REPEATS_ELSEWHERE * steps as f64 {
+            return [None, None];
+        }
+        [lo, hi].map(|v| {
+            let samples = xs.iter().map(|x| longest_entered_stretch(x, v)).max()?;
+            (samples >= HELD_EXTREME_SAMPLES).then_some(HeldExtreme { value: v, samples })
         })
     }
 
@@ -1063,6 +1136,43 @@ mod tests {
             time_column: time.map(Into::into),
             tau,
             rows_independent: false,
+        }
+    }
+
+    #[test]
+    fn an_extreme_held_after_moving_there_reads_as_a_limit_and_a_dwell_of_a_quantised_one_not() {
+        let names = || vec!["y".to_string()];
+        // Noise-like samples rising to 10, held there for 6 samples, falling again.
+        let wave = |k: usize| 5.0 + 4.0 * (0.05 * k as f64).sin() + 0.01 * ((k * 7919) % 13) as f64;
+        let mut y: Vec<f64> = (0..200).map(wave).collect();
+        y[40..46].fill(10.0);
+        let rs = RecordSet::new(0.1, names(), vec![Run::new("a", vec![y.clone()])]).unwrap();
+        let [lo, hi] = rs.held_extremes(0, &[0]);
+        assert_eq!(
+            (lo, hi),
+            (
+                None,
+                Some(HeldExtreme {
+                    value: 10.0,
+                    samples: 6
+                })
+            )
+        );
+        // Four samples are not enough; a run that starts on its extreme is at rest, not held.
+        let mut short = y.clone();
+        short[44..46].copy_from_slice(&[9.9, 9.8]);
+        let mut rest = y.clone();
+        rest[40..46].copy_from_slice(&[9.0, 8.9, 9.1, 8.8, 9.05, 8.95]);
+        rest[..8].fill(-1.0);
+        // A quantised signal repeats values everywhere: its held top says nothing of a limit.
+        let quantised: Vec<f64> = y.iter().map(|v| (v * 2.0).round() / 2.0).collect();
+        for (what, x) in [
+            ("four samples", short),
+            ("at rest", rest),
+            ("quantised", quantised),
+        ] {
+            let rs = RecordSet::new(0.1, names(), vec![Run::new("a", vec![x])]).unwrap();
+            assert_eq!(rs.held_extremes(0, &[0]), [None, None], "{what}");
         }
     }
 

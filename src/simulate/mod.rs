@@ -104,6 +104,10 @@ pub trait System {
             }
         }
     }
+    /// Sets a state that `x` carries beyond a hard limit of the system back onto it (an
+    /// overflowing tank's level, an end stop) and appends the indices it set to `pinned`; called
+    /// after every accepted step. None by default.
+    fn project(&self, _x: &mut [f64], _pinned: &mut Vec<usize>) {}
 }
 
 impl System for CompiledModel {
@@ -136,6 +140,9 @@ impl System for CompiledModel {
     }
     fn jacobian(&self, x: &[f64], u: &[f64], jac: &mut [f64]) {
         self.state_jacobian_unchecked(x, u, jac);
+    }
+    fn project(&self, x: &mut [f64], pinned: &mut Vec<usize>) {
+        CompiledModel::project(self, x, pinned)
     }
 }
 
@@ -502,6 +509,8 @@ struct Integrator<'a, S: System + ?Sized, I: Input + ?Sized> {
     /// Newton also stops when the error its contraction rate bounds is below this many
     /// tolerances ([`newton_stop`]).
     fnewt: Option<f64>,
+    /// The states [`System::project`] set at the last step (reused).
+    pinned: Vec<usize>,
 }
 
 /// The factors one step size and Jacobian need: the simplified-Newton stage matrix and the
@@ -588,6 +597,20 @@ struct Sens<'a> {
 }
 
 impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
+    /// [`System::project`] on the state `x`; the sensitivities of the states it sets are zero
+    /// (a state on its limit depends on no parameter).
+    fn project(&mut self, x: &mut [f64]) {
+        let mut pinned = std::mem::take(&mut self.pinned);
+        pinned.clear();
+        self.sys.project(x, &mut pinned);
+        if let Some(sens) = self.sens.as_mut() {
+            for &k in &pinned {
+                sens.s[k * sens.q..(k + 1) * sens.q].fill(0.0);
+            }
+        }
+        self.pinned = pinned;
+    }
+
     fn scale(&self, x0: &[f64], x1: &[f64], k: usize) -> f64 {
         self.opts.atol + self.opts.rtol * x0[k].abs().max(x1[k].abs())
     }
@@ -951,6 +974,7 @@ impl<'a, S: System + ?Sized, I: Input + ?Sized> Integrator<'a, S, I> {
                 t = if last { b } else { t + hh };
                 let old = std::mem::replace(x, x1);
                 self.spare.push(old);
+                self.project(x);
                 if let Some(e) = self.diverged(t, x) {
                     return Err(e);
                 }
@@ -1413,8 +1437,10 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
         stage_u: Vec::new(),
         pool: Pool::default(),
         fnewt: newton_stop(opts.rtol),
+        pinned: Vec::new(),
     };
     let mut x = x0.to_vec();
+    it.project(&mut x);
     if let Some(e) = it.diverged(times[0], &x) {
         return Err(e);
     }
