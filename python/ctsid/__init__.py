@@ -447,6 +447,7 @@ def identify(
     engine: str = "auto",
     refine: bool = True,
     segment: Optional[float] = None,
+    limits: bool = True,
 ) -> Model:
     """Identifies a model, with the command line's defaults (``ctsid identify``).
 
@@ -456,7 +457,9 @@ def identify(
     output's order is searched over ``orders`` (default 1 to 4) by the eta-rule. ``terms`` adds
     named terms to the dictionary (``"sign(y_d1)"``). ``engine`` is ``"auto"``, ``"cpu"`` or
     ``"gpu"``. ``segment`` cuts long runs into pieces of that many seconds, each a run (named
-    as the module's docstring says). The returned model's ``summary`` holds the orders and test
+    as the module's docstring says). ``limits=False`` leaves out the hard limit read from an
+    output the training runs hold at its extreme value (an overflow, an end stop; a warning says
+    when one is read). The returned model's ``summary`` holds the orders and test
     NRMSE; its model file (:meth:`Model.save`, :meth:`Model.to_json`) has the ``training``
     section ``ctsid identify -o`` writes, with the fit's timings.
     """
@@ -483,6 +486,7 @@ def identify(
         engine=str(engine),
         refine=_flag("refine", refine),
         segment=_segment(segment),
+        limits=_flag("limits", limits),
     )
     summary = json.loads(summary)
     # What the command line notes on standard error (a named term no chosen order could use).

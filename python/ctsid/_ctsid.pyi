@@ -44,6 +44,7 @@ def identify(
     refine: bool = ...,
     eta: Optional[float] = ...,
     segment: Optional[float] = ...,
+    limits: bool = ...,
 ) -> Tuple[Model, str]: ...
 def derive(y: List[float], tau: float, order: int) -> Tuple[List[List[float]], List[List[float]]]: ...
 def discover(

@@ -295,7 +295,7 @@ impl PyModel {
 #[pyfunction]
 #[pyo3(signature = (tau, names, runs, outputs, inputs, degree, train=None, validation=None,
     test=None, order=None, orders=None, terms=Vec::new(), engine="auto", refine=true, eta=None,
-    segment=None))]
+    segment=None, limits=true))]
 #[allow(clippy::too_many_arguments)]
 fn identify(
     py: Python<'_>,
@@ -315,6 +315,7 @@ fn identify(
     refine: bool,
     eta: Option<f64>,
     segment: Option<f64>,
+    limits: bool,
 ) -> PyResult<(PyModel, String)> {
     let mut s = Settings::new(outputs, inputs, degree);
     if let Some(o) = order {
@@ -328,6 +329,7 @@ fn identify(
     s.engine = engine.parse::<EngineChoice>().map_err(err)?;
     s.terms = terms;
     s.refine = refine;
+    s.limits = limits;
     let pending = Pending::default();
     s.progress = Some(log_progress(pending.clone()));
     s.validate().map_err(err)?;

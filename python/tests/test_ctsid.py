@@ -356,3 +356,27 @@ def test_segment_cuts_runs_as_the_command_line_does(throttle, fitted, tmp_path):
     assert "| 10#1 | test |" in found.text, found.text
     with pytest.raises(TypeError, match="segment"):
         model.score(one, segment="1.5")
+
+
+def test_a_level_held_at_its_top_is_read_as_a_limit_unless_limits_is_false():
+    # y' = -y + u with the level held at 0.8 (an overflow), Euler at a tenth of the sampling.
+    tau, rng = 0.05, np.random.default_rng(3)
+    frames = []
+    for run in range(6):
+        t = np.arange(400) * tau
+        u = sum(a * np.sin(w * t + p) for a, w, p in rng.uniform([0.3, 0.3, 0], [0.7, 2.0, 6], (3, 3)))
+        y, x = np.empty(len(t)), 0.0
+        for k in range(len(t)):
+            y[k] = x
+            for _ in range(10):
+                x = min(x + tau / 10 * (-x + u[k]), 0.8)
+        frames.append(pd.DataFrame({"run": run, "y": y, "u": u}))
+    data = pd.concat(frames)
+    settings = dict(tau=tau, run_column="run", train="0-3", validation="4", test="5", degree=1, order=1)
+    with pytest.warns(UserWarning, match="holds its largest value 0.8"):
+        held = ctsid.identify(data, outputs=["y"], inputs=["u"], **settings)
+    assert json.loads(held.to_json())["outputs"][0]["limits"] == {"max": 0.8}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        free = ctsid.identify(data, outputs=["y"], inputs=["u"], limits=False, **settings)
+    assert "limits" not in json.loads(free.to_json())["outputs"][0]
