@@ -406,6 +406,7 @@ impl Tried {
             && self.validation_after <= SECOND_LOOK_RATIO * self.validation_before
             && (self.t_ratio >= opts.z
                 || (self.t_ratio > 0.0
+                    && self.validation_before.is_finite()
                     && self.validation_before > opts.gate_rise * self.validation_after))
     }
 }
@@ -606,8 +607,8 @@ fn last_term(m: &Model) -> String {
 /// one candidate discover's gates refused) refitted on the training runs' simulation error;
 /// the one with the lowest validation free-run NRMSE is kept when that is at most
 /// [`SECOND_LOOK_RATIO`] times the current model's and the candidate's coefficient lies at least
-/// [`PruneOptions::z`] standard errors from zero (the test step 3 drops terms by;
-/// [`Tried::passes`]). Validation errors here are step 3's (initial states fitted on each run's
+/// [`PruneOptions::z`] standard errors from zero (the test step 3 drops terms by), or its gain is
+/// one for which step 3 would keep it ([`PruneOptions::gate_rise`]; [`Tried::passes`]). Validation errors here are step 3's (initial states fitted on each run's
 /// first [`INIT_WINDOW`] samples, [`free_run_nrmse`]), not discover's per-run means the rounds
 /// print. A refit that fails refuses only its candidate; errs when the current model cannot be
 /// run on the validation runs.
@@ -718,7 +719,14 @@ mod tests {
         assert!(!two[2].passes());
         let tanks = tried("u^2*y", 0.1856, 0.1279, 1.1);
         assert!(tanks.passes());
-        assert!(!tried("u^2*y", 0.1856, 0.1500, 1.1).passes(), "0.81 of the error");
+        // So would EMPS's cos(q)^2 (0.0294 -> 0.0209 at 1.0 standard errors), which the rule
+        // refused before: simplify would keep it too (docs/benchmarks.md; the workflow's EMPS
+        // rounds never reach it).
+        assert!(tried("cos(q)^2", 0.0294, 0.0209, 1.0).passes());
+        assert!(
+            !tried("u^2*y", 0.1856, 0.1500, 1.1).passes(),
+            "0.81 of the error"
+        );
     }
 
     #[test]
@@ -728,6 +736,8 @@ mod tests {
         assert!(!tried("a", 0.01, f64::NAN, 5.0).passes());
         assert!(!tried("a", 0.01, 0.005, 0.0).passes());
         assert!(tried("a", f64::INFINITY, 0.5, 5.0).passes());
+        // Beside a diverging model the gain says nothing of how well the term is determined.
+        assert!(!tried("a", f64::INFINITY, 0.5, 1.0).passes());
         assert_eq!(best_passing(&[tried("a", 0.01, 0.0095, 9.0)]), None);
     }
 }

@@ -615,3 +615,41 @@ fn a_loop_that_strays_names_a_bandwidth_that_works() {
         "{err}"
     );
 }
+
+/// A plant whose level cannot rise above 0.6 (an overflow, `limits` in its model), driven toward
+/// a setpoint of 1.0: the closed loop keeps the plant on its limit (the loop's simulation keeps a
+/// plant's limits as every simulation does), where without the limit it reaches the setpoint.
+#[test]
+fn a_plant_with_a_limit_stays_on_it_in_closed_loop() {
+    let model = oscillator();
+    let mut o = DesignOptions::new(1.0, 0.01);
+    o.bandwidth = Some(3.0);
+    let d = control::design(&model, &o).unwrap();
+    let mut capped = oscillator();
+    capped.outputs[0].limits.max = Some(0.6);
+    let s = Scenario {
+        duration: 5.0,
+        noise_sd: 0.0,
+        seed: 0,
+        u_limits: None,
+    };
+    let run = |m: &Model| {
+        let (c, x0, u0) = control::model_at_rest(m, 0.0, 0.0).unwrap();
+        let plant = Plant {
+            system: &c,
+            output: 0,
+            x0,
+            u0,
+        };
+        control::run(&d, &plant, &s).unwrap()
+    };
+    let (free, held) = (run(&model), run(&capped));
+    let last = |y: &[f64]| y[y.len() - 1];
+    assert!((last(&free.y) - 1.0).abs() < 0.1, "free {}", last(&free.y));
+    let top = held.y.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b));
+    assert!(
+        top <= 0.6 && last(&held.y) == 0.6,
+        "held: top {top}, last {}",
+        last(&held.y)
+    );
+}

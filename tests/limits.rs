@@ -9,6 +9,9 @@ use ctsid::plants::rng::Rng;
 use ctsid::records::{RecordSet, Run};
 use ctsid::simulate::{simulate_model, simulate_model_sensitivities, SimOptions};
 
+mod common;
+use common::cli::{ctsid, temp_file};
+
 const TAU: f64 = 0.01;
 const N: usize = 800;
 const TOP: f64 = 0.8;
@@ -75,6 +78,13 @@ fn a_limit_in_the_model_file_is_read_written_and_checked() {
             .to_string();
         assert!(e.contains(needle) && !e.contains('\n'), "{e}");
     }
+    // The polynomial-only format of before has no limits.
+    let v1 = text.replace("ctsid-model/2", "ctsid-model/1");
+    let e = Model::from_json_str(&v1, "m.json").unwrap_err().to_string();
+    assert!(
+        e.contains("limits need \"format\": \"ctsid-model/2\""),
+        "{e}"
+    );
 }
 
 #[test]
@@ -218,4 +228,67 @@ fn identify_reads_the_held_level_as_a_limit_and_simulates_unseen_runs_with_it() 
         with < 0.01 && with < 0.5 * without,
         "with {with}, without {without}"
     );
+}
+
+#[test]
+fn a_lower_limit_of_an_order_three_output_beside_another_output_is_kept_from_the_start() {
+    // Output a (order 1) beside output b (order 3, states 1-3) with b at least -0.5: b is
+    // started below its limit and pulled down by its input; a is not limited and moves freely.
+    let mut b = OutputEquation::new(
+        "b",
+        3,
+        vec![
+            Term::new(&[("b", 1)], -1.0),
+            Term::new(&[("b_d1", 1)], -3.0),
+            Term::new(&[("b_d2", 1)], -3.0),
+            Term::new(&[("u", 1)], 1.0),
+        ],
+    );
+    b.limits = Limits {
+        min: Some(-0.5),
+        max: Some(5.0),
+    };
+    let a = OutputEquation::new("a", 1, vec![Term::new(&[("u", 1)], 1.0)]);
+    let c = Model::new(&["u"], vec![a, b], Some(TAU)).compile().unwrap();
+    let t = times();
+    let u = vec![-2.0; N];
+    let x0 = [0.0, -0.7, -0.1, 0.3];
+    let tr = simulate_model(&c, &x0, &t, std::slice::from_ref(&u), &accurate()).unwrap();
+    // From the start: b on its lower limit, its downward velocity at zero, the rest as given.
+    assert_eq!(tr.state(0).unwrap(), &[0.0, -0.5, 0.0, 0.3]);
+    let (a, b) = (tr.series(0).unwrap(), tr.series(1).unwrap());
+    assert!(b.iter().all(|&v| v >= -0.5), "below the limit");
+    assert_eq!(b[N - 1], -0.5, "the input holds b on its limit");
+    assert!(
+        (a[N - 1] + 2.0 * t[N - 1]).abs() < 1e-6,
+        "a is free: {}",
+        a[N - 1]
+    );
+}
+
+#[test]
+fn the_command_line_notes_the_limit_and_no_limits_leaves_it_out() {
+    let rs = record(4);
+    let mut csv = String::from("run,y,u\n");
+    for run in &rs.runs {
+        for k in 0..N {
+            csv += &format!(
+                "{},{:e},{:e}\n",
+                run.id, run.channels[0][k], run.channels[1][k]
+            );
+        }
+    }
+    let data = temp_file("limits", "held.csv", &csv);
+    let model = temp_file("limits", "held.json", "");
+    let args = "--output y --input u --run-column run --tau 0.01 --train 0,1 --validation 2 --test 3 --degree 1 --order 2 --quiet -o";
+    let (ok, out, err) = ctsid(&["identify", &data, args, &model]);
+    assert!(ok, "{err}");
+    assert!(
+        format!("{out}{err}").contains("holds its largest value 0.8 for"),
+        "{out}{err}"
+    );
+    assert_eq!(Model::read(&model).unwrap().outputs[0].limits, top());
+    let (ok, out, err) = ctsid(&["identify", &data, args, &model, "--no-limits"]);
+    assert!(ok && !format!("{out}{err}").contains("holds its"), "{err}");
+    assert!(Model::read(&model).unwrap().outputs[0].limits.is_none());
 }

@@ -247,6 +247,15 @@ impl System for Loop<'_> {
     fn dim(&self) -> usize {
         self.plant.dim() + self.model.n_state()
     }
+    /// The plant's limits on its states, the model's on the observer's estimate (a level the
+    /// model says overflows is not estimated above it).
+    fn project(&self, x: &mut [f64], pinned: &mut Vec<usize>) {
+        let np = self.plant.dim();
+        self.plant.project(&mut x[..np], pinned);
+        let from = pinned.len();
+        System::project(self.model, &mut x[np..], pinned);
+        pinned[from..].iter_mut().for_each(|k| *k += np);
+    }
     fn n_inputs(&self) -> usize {
         2
     }

@@ -192,11 +192,6 @@ impl CompiledModel {
         }
     }
 
-    /// Whether an output has [`Limits`].
-    pub fn has_limits(&self) -> bool {
-        self.limits.iter().any(|l| !l.is_none())
-    }
-
     pub fn n_state(&self) -> usize {
         self.n_state
     }

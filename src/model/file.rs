@@ -551,6 +551,12 @@ fn read_output(
     let Some(raw_terms) = o.terms else {
         return Err(format!("output '{}' has no \"terms\" list", o.name));
     };
+    if v1 && !o.limits.is_none() {
+        return Err(format!(
+            "output '{}': limits need \"format\": \"{FORMAT}\"",
+            o.name
+        ));
+    }
     let index = output_names.iter().position(|n| *n == o.name).unwrap_or(0);
     let terms = raw_terms
         .into_iter()

@@ -21,7 +21,6 @@ pub fn first_unusable(v: &[f64]) -> Option<usize> {
         .position(|x| x.is_nan() || x.abs() >= MAX_MAGNITUDE)
 }
 
-/// What is wrong with an unusable sample (see [`first_unusable`]), for messages.
 /// The longest stretch of consecutive samples of `x` equal to `v` that does not start at the
 /// first sample (0 where there is none).
 fn longest_entered_stretch(x: &[f64], v: f64) -> usize {
@@ -38,6 +37,7 @@ fn longest_entered_stretch(x: &[f64], v: f64) -> usize {
     best
 }
 
+/// What is wrong with an unusable sample (see [`first_unusable`]), for messages.
 pub fn unusable_reason(v: f64) -> String {
     if v.is_finite() {
         format!(
@@ -603,8 +603,9 @@ impl RecordSet {
     /// least [`HELD_EXTREME_SAMPLES`] consecutive samples, having moved there within a run (a
     /// run that starts at rest on its extreme is no limit): the signature of a hard limit, an
     /// overflowing tank's level or an end stop (the cascaded tanks' lower level held at 10 V for
-    /// 27 samples). Nothing where the channel repeats values elsewhere too (a coarse
-    /// quantisation, a held signal), since a dwell at a turning point looks the same there.
+    /// 27 samples). Nothing where the channel repeats a value in more than 1 % of its other
+    /// steps (a coarse quantisation, a held signal; the samples a run starts with at rest aside),
+    /// since a dwell at a turning point looks the same there.
     pub fn held_extremes(&self, c: usize, runs: &[usize]) -> [Option<HeldExtreme>; 2] {
         let xs: Vec<&[f64]> = runs
             .iter()
@@ -622,7 +623,9 @@ impl RecordSet {
         }
         let (mut steps, mut repeats) = (0usize, 0usize);
         for x in &xs {
-            for w in x.windows(2) {
+            // A run that starts settled at rest repeats its first value without any limit.
+            let settled = x.iter().take_while(|&&v| v == x[0]).count();
+            for w in x[settled.saturating_sub(1)..].windows(2) {
                 if w[0] != lo && w[0] != hi {
                     steps += 1;
                     repeats += usize::from(w[0] == w[1]);
