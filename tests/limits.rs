@@ -91,15 +91,9 @@ fn a_limit_in_the_model_file_is_read_written_and_checked() {
 fn the_simulation_stays_on_the_limit_while_pushed_and_leaves_it_when_the_input_turns() {
     // A unit input for 4 s drives the free level to 1.0: with the limit it rests on 0.8 with
     // zero velocity; the input then turns to -1 and the level falls away from the limit.
-    let t = times();
-    let u: Vec<f64> = t
-        .iter()
-        .map(|&t| if t < 4.0 { 1.0 } else { -1.0 })
-        .collect();
-    let c = plant(top()).compile().unwrap();
-    let tr = simulate_model(&c, &[0.0, 0.0], &t, std::slice::from_ref(&u), &accurate()).unwrap();
-    let y = tr.series(0).unwrap();
-    let v = tr.series(1).unwrap();
+    let (t, u) = pushed_then_pulled();
+    let tr = run(&plant(top()), &t, &u);
+    let (y, v) = (tr.series(0).unwrap(), tr.series(1).unwrap());
     assert!(y.iter().all(|&y| y <= TOP), "above the limit");
     assert_eq!(
         (y[390], v[390]),
@@ -113,25 +107,29 @@ fn the_simulation_stays_on_the_limit_while_pushed_and_leaves_it_when_the_input_t
         y[799]
     );
     // Without the limit the same run overshoots 0.8.
-    let free = plant(Limits::default()).compile().unwrap();
-    let tr = simulate_model(
-        &free,
-        &[0.0, 0.0],
-        &t,
-        std::slice::from_ref(&u),
-        &accurate(),
-    )
-    .unwrap();
-    assert!(tr.series(0).unwrap()[390] > TOP + 0.05);
+    let free = run(&plant(Limits::default()), &t, &u).series(0).unwrap();
+    assert!(free[390] > TOP + 0.05);
+}
+
+/// A unit input for 4 s, then -1: its times and samples.
+fn pushed_then_pulled() -> (Vec<f64>, Vec<f64>) {
+    let t = times();
+    let u = t
+        .iter()
+        .map(|&t| if t < 4.0 { 1.0 } else { -1.0 })
+        .collect();
+    (t, u)
+}
+
+/// The model's accurate simulation from rest under the input `u` at times `t`.
+fn run(model: &Model, t: &[f64], u: &[f64]) -> ctsid::simulate::Trajectory {
+    let c = model.compile().unwrap();
+    simulate_model(&c, &[0.0, 0.0], t, &[u.to_vec()], &accurate()).unwrap()
 }
 
 #[test]
 fn sensitivities_on_the_limit_are_zero_and_elsewhere_match_finite_differences() {
-    let t = times();
-    let u: Vec<f64> = t
-        .iter()
-        .map(|&t| if t < 4.0 { 1.0 } else { -1.0 })
-        .collect();
+    let (t, u) = pushed_then_pulled();
     let model = plant(top());
     let c = model.compile().unwrap();
     let inputs = std::slice::from_ref(&u);
@@ -147,15 +145,7 @@ fn sensitivities_on_the_limit_are_zero_and_elsewhere_match_finite_differences() 
     let mut bumped = model.clone();
     let h = 1e-6;
     bumped.outputs[0].terms[1].coefficient += h;
-    let tr1 = simulate_model(
-        &bumped.compile().unwrap(),
-        &[0.0, 0.0],
-        &t,
-        inputs,
-        &accurate(),
-    )
-    .unwrap();
-    let fd = (tr1.series(0).unwrap()[k] - y0) / h;
+    let fd = (run(&bumped, &t, &u).series(0).unwrap()[k] - y0) / h;
     assert!(
         (at(k, 0, 0) - fd).abs() <= 1e-3 * fd.abs().max(1e-3),
         "sensitivity {} against finite differences {fd}",
