@@ -278,6 +278,11 @@ fn the_command_line_notes_the_limit_and_no_limits_leaves_it_out() {
         "{out}{err}"
     );
     assert_eq!(Model::read(&model).unwrap().outputs[0].limits, top());
+    let (ok, shown, err) = ctsid(&["show", &model]);
+    assert!(
+        ok && shown.contains("limits: y at most 0.8 (held there"),
+        "{shown}{err}"
+    );
     let (ok, out, err) = ctsid(&["identify", &data, args, &model, "--no-limits"]);
     assert!(ok && !format!("{out}{err}").contains("holds its"), "{err}");
     assert!(Model::read(&model).unwrap().outputs[0].limits.is_none());

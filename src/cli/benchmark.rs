@@ -94,7 +94,12 @@ pub fn run(a: BenchmarkArgs) -> Result<()> {
     } else {
         outln!("simplify: {dropped} dropped ({:.1} s)", o.prune_seconds)?;
     }
-    outln!("final model: {}\n", o.model.outputs[0].to_text())?;
+    let eq = &o.model.outputs[0];
+    let limits = eq
+        .limits
+        .text()
+        .map_or(String::new(), |l| format!(", {} held {l}", eq.name));
+    outln!("final model: {}{limits}\n", eq.to_text())?;
     outln!("{}", table(&b, &o))?;
     outln!("time {:.1} s", o.seconds)?;
     if let Some(dir) = &a.out {

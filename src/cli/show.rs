@@ -32,6 +32,15 @@ pub fn run(a: ShowArgs) -> Result<()> {
             .collect();
         outln!("sign smoothing widths: {}", widths.join(", "))?;
     }
+    for o in &model.outputs {
+        // A limit changes every simulation as much as a term does.
+        if let Some(l) = o.limits.text() {
+            outln!(
+                "limits: {} {l} (held there while pushed beyond: an overflow, an end stop)",
+                o.name
+            )?;
+        }
+    }
     let mut unknown = false;
     let (mut no_interval, mut weak) = (false, 0usize);
     for o in &model.outputs {

@@ -196,6 +196,15 @@ impl Limits {
         self.min.is_none() && self.max.is_none()
     }
 
+    /// `at least 0 and at most 10` for people; `None` without limits.
+    pub fn text(&self) -> Option<String> {
+        let sides: Vec<String> = [("at least", self.min), ("at most", self.max)]
+            .into_iter()
+            .filter_map(|(side, v)| v.map(|v| format!("{side} {v}")))
+            .collect();
+        (!sides.is_empty()).then(|| sides.join(" and "))
+    }
+
     /// Finite bounds, the lower below the upper; the message says what is wrong.
     fn check(&self) -> std::result::Result<(), String> {
         for (side, v) in [("min", self.min), ("max", self.max)] {
