@@ -130,6 +130,7 @@ fn tanks_with_the_lower_tanks_overflow_beats_the_linear_baseline_and_its_model_f
         out.contains("u_V^2*y_V: validation NRMSE") && out.contains(": added"),
         "{out}"
     );
+    assert!(out.contains("u_V^2*y_V, y_V held at most 10\n"), "{out}");
     let model = std::fs::read_to_string(model_file).unwrap();
     let limits: serde_json::Value = serde_json::from_str(&model).unwrap();
     assert_eq!(
