@@ -1351,14 +1351,15 @@ pub fn simulate_sensitivities<S: System + ?Sized, I: Input + ?Sized>(
     integrate(sys, input, x0, times, opts, Some(sens)).map(|(tr, s)| (tr, s.unwrap_or_default()))
 }
 
-fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
-    sys: &'a S,
-    input: &'a I,
+/// The arguments of [`integrate`]: an initial state of the system's size, an input of its
+/// channels, finite increasing output times, positive tolerances and step limits.
+fn check_arguments<S: System + ?Sized, I: Input + ?Sized>(
+    sys: &S,
+    input: &I,
     x0: &[f64],
     times: &[f64],
-    opts: &'a SimOptions,
-    sens: Option<Sens<'a>>,
-) -> Result<(Trajectory, Option<Vec<f64>>)> {
+    opts: &SimOptions,
+) -> Result<()> {
     let n = sys.dim();
     if x0.len() != n {
         return Err(Error::param(
@@ -1403,6 +1404,19 @@ fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
     if opts.bound.is_nan() || opts.bound <= 0.0 {
         return Err(Error::param("bound", "must be positive"));
     }
+    Ok(())
+}
+
+fn integrate<'a, S: System + ?Sized, I: Input + ?Sized>(
+    sys: &'a S,
+    input: &'a I,
+    x0: &[f64],
+    times: &[f64],
+    opts: &'a SimOptions,
+    sens: Option<Sens<'a>>,
+) -> Result<(Trajectory, Option<Vec<f64>>)> {
+    let n = sys.dim();
+    check_arguments(sys, input, x0, times, opts)?;
     let mut scale = x0.iter().fold(1.0f64, |m, v| m.max(v.abs()));
     let mut u = vec![0.0; sys.n_inputs()];
     for &t in times {
