@@ -73,26 +73,41 @@ fn the_chain_observer_reports_its_own_poles() {
     assert_eq!((c.k.clone(), c.k_i), (d.k.clone(), d.k_i));
 }
 
-#[test]
-fn the_loop_around_its_own_model_follows_the_designed_response() {
-    let model = oscillator();
+/// The oscillator's design for a setpoint of 1.0 at bandwidth `w`, sampled at 0.01 s.
+fn oscillator_design(w: f64) -> control::Design {
     let mut o = DesignOptions::new(1.0, 0.01);
-    o.bandwidth = Some(3.0);
-    let d = control::design(&model, &o).unwrap();
-    let (c, x0, u0) = control::model_at_rest(&model, 0.0, 0.0).unwrap();
+    o.bandwidth = Some(w);
+    control::design(&oscillator(), &o).unwrap()
+}
+
+/// Five noise-free seconds, the input unlimited.
+fn five_quiet_seconds() -> Scenario {
+    Scenario {
+        duration: 5.0,
+        noise_sd: 0.0,
+        seed: 0,
+        u_limits: None,
+    }
+}
+
+/// The loop of design `d` around the plant `model`, started at rest at 0.
+fn run_at_rest(model: &Model, d: &control::Design, s: &Scenario) -> control::Trace {
+    let (c, x0, u0) = control::model_at_rest(model, 0.0, 0.0).unwrap();
     let plant = Plant {
         system: &c,
         output: 0,
         x0,
         u0,
     };
-    let s = Scenario {
-        duration: 5.0,
-        noise_sd: 0.0,
-        seed: 0,
-        u_limits: None,
-    };
-    let tr = control::run(&d, &plant, &s).unwrap();
+    control::run(d, &plant, s).unwrap()
+}
+
+#[test]
+fn the_loop_around_its_own_model_follows_the_designed_response() {
+    let model = oscillator();
+    let d = oscillator_design(3.0);
+    let s = five_quiet_seconds();
+    let tr = run_at_rest(&model, &d, &s);
     let m = control::metrics(&tr, &d, 0.0).unwrap();
     // Measured: 0.48 % off the continuous-time design (the controller is sampled), no overshoot.
     assert!(m.design_deviation < 1.0, "{m:?}");
@@ -102,14 +117,12 @@ fn the_loop_around_its_own_model_follows_the_designed_response() {
     // only what pulls the input back inside: the output still settles, without the overshoot of
     // a wound-up integrator and without stalling at the limit.
     let clipped = |lo: f64, hi: f64, w: f64| {
-        let mut o = DesignOptions::new(1.0, 0.01);
-        o.bandwidth = Some(w);
-        let d = control::design(&model, &o).unwrap();
+        let d = oscillator_design(w);
         let sc = Scenario {
             u_limits: Some((lo, hi)),
             ..s.clone()
         };
-        let tr = control::run(&d, &plant, &sc).unwrap();
+        let tr = run_at_rest(&model, &d, &sc);
         (control::metrics(&tr, &d, 0.0).unwrap(), tr)
     };
     let (m, tr) = clipped(0.5, 2.5, 3.0);
@@ -622,27 +635,11 @@ fn a_loop_that_strays_names_a_bandwidth_that_works() {
 #[test]
 fn a_plant_with_a_limit_stays_on_it_in_closed_loop() {
     let model = oscillator();
-    let mut o = DesignOptions::new(1.0, 0.01);
-    o.bandwidth = Some(3.0);
-    let d = control::design(&model, &o).unwrap();
+    let d = oscillator_design(3.0);
     let mut capped = oscillator();
     capped.outputs[0].limits.max = Some(0.6);
-    let s = Scenario {
-        duration: 5.0,
-        noise_sd: 0.0,
-        seed: 0,
-        u_limits: None,
-    };
-    let run = |m: &Model| {
-        let (c, x0, u0) = control::model_at_rest(m, 0.0, 0.0).unwrap();
-        let plant = Plant {
-            system: &c,
-            output: 0,
-            x0,
-            u0,
-        };
-        control::run(&d, &plant, &s).unwrap()
-    };
+    let s = five_quiet_seconds();
+    let run = |m: &Model| run_at_rest(m, &d, &s);
     let (free, held) = (run(&model), run(&capped));
     let last = |y: &[f64]| y[y.len() - 1];
     assert!((last(&free.y) - 1.0).abs() < 0.1, "free {}", last(&free.y));
